@@ -1,0 +1,643 @@
+"""Rational polynomial (RPC00B) sensor model with an image-space bias (Fraser & Hanley).
+
+Conventions
+-----------
+Image coordinates are ``(col, row)``, 0-based, pixel centres at integers (the centre of the
+top-left pixel is ``(0, 0)``). Ground is WGS84 lon/lat in degrees and ellipsoidal height ``h`` in
+metres.
+
+The projection (ground -> image) is the RPC00B rational function, written out as in the
+NITF / GDAL / OSSIM standard::
+
+    L = (lon - lon_off) / lon_scale      P = (lat - lat_off) / lat_scale
+    H = (h - alt_off) / alt_scale
+    col = col_num(L, P, H) / col_den(L, P, H) * col_scale + col_off
+    row = row_num(L, P, H) / row_den(L, P, H) * row_scale + row_off
+
+Each cubic has 20 coefficients in the RPC00B monomial order::
+
+    1, L, P, H, LP, LH, PH, L^2, P^2, H^2, PLH, L^3, LP^2, LH^2, L^2P, P^3, PH^2, L^2H, P^2H, H^3
+
+An optional inverse model (vendor "direct" model, image -> ground) uses the same order with the
+normalised column in place of ``L`` and the normalised row in place of ``P``::
+
+    lon = lon_num(C, R, H) / lon_den(C, R, H) * lon_scale + lon_off,  C = (col - col_off) / col_scale
+
+The inverse is only a starting point: :meth:`RPCModel.localize` always refines by Newton
+iteration on :meth:`RPCModel.project`, so localisation is exactly the inverse of projection.
+
+Pixel conventions of each source (all converted to ours by the named constructors):
+
+- OSSIM ``.geom`` keyword lists: 0-based, pixel centres at integers (ours; taken as is). Checked
+  on the Ventoux Pleiades image 690908101-001: the ``.geom`` offsets are exactly the DIMAP ones
+  minus 1 and the two models project identically.
+- GDAL RPC metadata domain (GeoTIFF RPC tag, ``_RPC.TXT``): 0-based, pixel centres at integers
+  (taken as is). GDAL's own RPC transformer reports pixel-corner coordinates, i.e. ours + 0.5.
+- Pleiades / SPOT 6-7 DIMAP v2 RPC XML: 1-based (top-left pixel centre is (1, 1));
+  ``from_dimap_xml`` subtracts 1 from ``SAMP_OFF`` and ``LINE_OFF``.
+
+Image-space bias (Fraser & Hanley 2003), applied after the rational function, with ``col, row``
+the unbiased RPC image coordinates (0-based, pixels)::
+
+    "none":   no parameters
+    "shift":  p = [a0, b0];              col += a0;                    row += b0
+    "affine": p = [a0, a1, a2, b0, b1, b2]
+              col += a0 + a1 * col + a2 * row;   row += b0 + b1 * col + b2 * row
+
+``a0, b0`` are pixels; ``a1, a2, b1, b2`` are dimensionless (pixels per pixel).
+"""
+
+from __future__ import annotations
+
+import math
+import xml.etree.ElementTree as ET
+from collections.abc import Mapping
+from dataclasses import dataclass, field, fields, replace
+from functools import cached_property
+from typing import Any
+
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+
+from core.dem import GeoDEM
+from core.errors import ConvergenceError, InputError
+from core.sensors import base
+
+FloatArray = NDArray[np.float64]
+
+BIAS_MODES: dict[str, int] = {"none": 0, "shift": 2, "affine": 6}
+"""Number of image-space bias parameters of each bias mode."""
+
+_SCALAR_FIELDS = (
+    "col_off", "col_scale", "row_off", "row_scale", "lon_off", "lon_scale",
+    "lat_off", "lat_scale", "alt_off", "alt_scale",
+)
+_FORWARD_FIELDS = ("col_num", "col_den", "row_num", "row_den")
+_INVERSE_FIELDS = ("lon_num", "lon_den", "lat_num", "lat_den")
+
+# GDAL RPC metadata keys of the scalar fields, and of the coefficient fields.
+_GDAL_SCALARS = {
+    "col_off": "SAMP_OFF", "col_scale": "SAMP_SCALE", "row_off": "LINE_OFF",
+    "row_scale": "LINE_SCALE", "lon_off": "LONG_OFF", "lon_scale": "LONG_SCALE",
+    "lat_off": "LAT_OFF", "lat_scale": "LAT_SCALE", "alt_off": "HEIGHT_OFF",
+    "alt_scale": "HEIGHT_SCALE",
+}
+_GDAL_COEFFS = {
+    "col_num": "SAMP_NUM_COEFF", "col_den": "SAMP_DEN_COEFF",
+    "row_num": "LINE_NUM_COEFF", "row_den": "LINE_DEN_COEFF",
+}
+# rpcm-style optional keys for the inverse polynomials (GDAL ignores them).
+_GDAL_INVERSE = {
+    "lon_num": "LON_NUM_COEFF", "lon_den": "LON_DEN_COEFF",
+    "lat_num": "LAT_NUM_COEFF", "lat_den": "LAT_DEN_COEFF",
+}
+
+_CHUNK = 65_536  # points per block when evaluating polynomials (keeps blocks in cache)
+
+
+def _monomials(x: FloatArray, y: FloatArray, z: FloatArray) -> FloatArray:
+    """The 20 RPC00B monomials of normalised (x=L, y=P, z=H), stacked as a (20, n) array."""
+    xx, yy, zz = x * x, y * y, z * z
+    xy, xz, yz = x * y, x * z, y * z
+    return np.stack([
+        np.ones_like(x), x, y, z, xy, xz, yz, xx, yy, zz,
+        xy * z, xx * x, x * yy, x * zz, xx * y, yy * y, y * zz, xx * z, yy * z, zz * z,
+    ])
+
+
+def _monomials_dxy(x: FloatArray, y: FloatArray, z: FloatArray) -> tuple[FloatArray, FloatArray]:
+    """Derivatives of the 20 monomials with respect to x and y, each (20, n)."""
+    zero, one = np.zeros_like(x), np.ones_like(x)
+    xx, yy, zz = x * x, y * y, z * z
+    xy, xz, yz = x * y, x * z, y * z
+    dx = np.stack([
+        zero, one, zero, zero, y, z, zero, 2 * x, zero, zero,
+        yz, 3 * xx, yy, zz, 2 * xy, zero, zero, 2 * xz, zero, zero,
+    ])
+    dy = np.stack([
+        zero, zero, one, zero, x, zero, z, zero, 2 * y, zero,
+        xz, zero, 2 * xy, zero, xx, 3 * yy, zz, zero, 2 * yz, zero,
+    ])
+    return dx, dy
+
+
+def _rational(coeffs: FloatArray, x: FloatArray, y: FloatArray, z: FloatArray) -> FloatArray:
+    """Evaluate rational functions sharing the monomials: ``coeffs`` is (2k, 20), rows paired
+    (num_0, den_0, num_1, den_1, ...); returns (k, n) ratios. x, y, z are 1-D, normalised."""
+    n = x.size
+    k = coeffs.shape[0] // 2
+    out = np.empty((k, n))
+    for s in range(0, n, _CHUNK):
+        e = min(s + _CHUNK, n)
+        v = coeffs @ _monomials(x[s:e], y[s:e], z[s:e])
+        out[:, s:e] = v[0::2] / v[1::2]
+    return out
+
+
+def _parse_number(key: str, value: Any) -> float:
+    """A float from a metadata value that may carry a unit ("1234.5 pixels")."""
+    if isinstance(value, (int, float, np.floating, np.integer)):
+        return float(value)
+    tokens = str(value).split()
+    if not tokens:
+        raise InputError(f"RPC key {key!r} is empty; give a number")
+    try:
+        return float(tokens[0])
+    except ValueError:
+        raise InputError(f"RPC key {key!r} is not a number: {value!r}; fix the RPC file") from None
+
+
+def _parse_coeffs(key: str, value: Any) -> FloatArray:
+    """20 coefficients from a space-separated string or a sequence."""
+    tokens = value.split() if isinstance(value, str) else list(np.ravel(value))
+    if len(tokens) != 20:
+        raise InputError(
+            f"RPC key {key!r} holds {len(tokens)} coefficients, expected 20; fix the RPC file"
+        )
+    try:
+        return np.array([float(t) for t in tokens], dtype=np.float64)
+    except (TypeError, ValueError):
+        raise InputError(f"RPC key {key!r} holds a non-numeric coefficient; fix the RPC file") from None
+
+
+def _get(d: Mapping[str, Any], key: str, source: str) -> Any:
+    if key not in d:
+        raise InputError(f"RPC key {key!r} is missing from the {source}; give a complete RPC")
+    return d[key]
+
+
+@dataclass(frozen=True, eq=False)
+class RPCModel:
+    """RPC00B sensor model with optional inverse polynomial and image-space bias.
+
+    See the module docstring for the formulas, the monomial order, the pixel conventions and
+    the bias parameters. Offsets and scales are in pixels, degrees and metres. Build it with
+    the named constructors (:meth:`from_geom`, :meth:`from_gdal_tags`, :meth:`from_dimap_xml`,
+    :meth:`from_dict`) or by keyword (an RPC fitter).
+    """
+
+    col_off: float
+    col_scale: float
+    row_off: float
+    row_scale: float
+    lon_off: float
+    lon_scale: float
+    lat_off: float
+    lat_scale: float
+    alt_off: float
+    alt_scale: float
+    col_num: FloatArray
+    col_den: FloatArray
+    row_num: FloatArray
+    row_den: FloatArray
+    lon_num: FloatArray | None = None
+    lon_den: FloatArray | None = None
+    lat_num: FloatArray | None = None
+    lat_den: FloatArray | None = None
+    bias_mode: str = "none"
+    bias: FloatArray = field(default_factory=lambda: np.zeros(0))
+
+    def __post_init__(self) -> None:
+        for name in _SCALAR_FIELDS:
+            v = _parse_number(name, getattr(self, name))
+            if not math.isfinite(v):
+                raise InputError(f"RPC {name} is {v}; it must be finite")
+            if name.endswith("_scale") and v == 0:
+                raise InputError(f"RPC {name} is zero; the RPC cannot be normalised, fix the file")
+            object.__setattr__(self, name, v)
+        for name in _FORWARD_FIELDS:
+            object.__setattr__(self, name, self._checked_coeffs(name, getattr(self, name)))
+        given = [getattr(self, n) is not None for n in _INVERSE_FIELDS]
+        if any(given) and not all(given):
+            missing = [n for n, g in zip(_INVERSE_FIELDS, given, strict=True) if not g]
+            raise InputError(f"inverse RPC incomplete: {missing} missing; give all four or none")
+        if all(given):
+            for name in _INVERSE_FIELDS:
+                object.__setattr__(self, name, self._checked_coeffs(name, getattr(self, name)))
+        if self.bias_mode not in BIAS_MODES:
+            raise InputError(f"bias_mode {self.bias_mode!r} unknown; use one of {list(BIAS_MODES)}")
+        bias = np.array(self.bias, dtype=np.float64).ravel()
+        n = BIAS_MODES[self.bias_mode]
+        if bias.size == 0 and n:
+            bias = np.zeros(n)
+        if bias.size != n:
+            raise InputError(
+                f"bias_mode {self.bias_mode!r} takes {n} parameters, got {bias.size}"
+            )
+        if not np.all(np.isfinite(bias)):
+            raise InputError("bias parameters must be finite")
+        bias.setflags(write=False)
+        object.__setattr__(self, "bias", bias)
+
+    @staticmethod
+    def _checked_coeffs(name: str, value: Any) -> FloatArray:
+        if value is None:
+            raise InputError(f"RPC coefficients {name!r} are missing; give 20 values")
+        a = np.array(value, dtype=np.float64).ravel()
+        if a.shape != (20,):
+            raise InputError(f"RPC coefficients {name!r} have {a.size} values, expected 20")
+        if not np.all(np.isfinite(a)):
+            raise InputError(f"RPC coefficients {name!r} are not all finite; fix the RPC file")
+        a.setflags(write=False)
+        return a
+
+    # ------------------------------------------------------------------ evaluation
+
+    @cached_property
+    def _forward(self) -> FloatArray:
+        return np.stack([self.col_num, self.col_den, self.row_num, self.row_den])
+
+    @property
+    def has_inverse(self) -> bool:
+        """Whether the model holds an (approximate) image -> ground polynomial."""
+        return self.lon_num is not None
+
+    def _bias_matrix(self) -> tuple[FloatArray, FloatArray]:
+        """(A, t) with biased = A @ unbiased + t, for 2-vectors (col, row)."""
+        p = self.bias
+        if self.bias_mode == "shift":
+            return np.eye(2), np.array([p[0], p[1]])
+        if self.bias_mode == "affine":
+            a = np.array([[1.0 + p[1], p[2]], [p[4], 1.0 + p[5]]])
+            return a, np.array([p[0], p[3]])
+        return np.eye(2), np.zeros(2)
+
+    def _apply_bias(self, col: FloatArray, row: FloatArray) -> tuple[FloatArray, FloatArray]:
+        if self.bias_mode == "none":
+            return col, row
+        a, t = self._bias_matrix()
+        return a[0, 0] * col + a[0, 1] * row + t[0], a[1, 0] * col + a[1, 1] * row + t[1]
+
+    def _remove_bias(self, col: FloatArray, row: FloatArray) -> tuple[FloatArray, FloatArray]:
+        if self.bias_mode == "none":
+            return col, row
+        a, t = self._bias_matrix()
+        det = a[0, 0] * a[1, 1] - a[0, 1] * a[1, 0]
+        if abs(det) < 1e-12:
+            raise InputError("the affine bias is singular; check the bias parameters")
+        dc, dr = col - t[0], row - t[1]
+        return (a[1, 1] * dc - a[0, 1] * dr) / det, (a[0, 0] * dr - a[1, 0] * dc) / det
+
+    def _project_norm(
+        self, x: FloatArray, y: FloatArray, z: FloatArray
+    ) -> tuple[FloatArray, FloatArray]:
+        """Unbiased image (col, row) in pixels from normalised 1-D (L, P, H)."""
+        v = _rational(self._forward, x, y, z)
+        return v[0] * self.col_scale + self.col_off, v[1] * self.row_scale + self.row_off
+
+    def project(
+        self, lon_deg: ArrayLike, lat_deg: ArrayLike, h_m: ArrayLike
+    ) -> tuple[FloatArray, FloatArray]:
+        """Ground (lon deg, lat deg, ellipsoidal h m) -> image (col, row) pixels, bias applied.
+
+        Inputs broadcast against each other; outputs have the broadcast shape (0-d for scalars).
+        """
+        lon, lat, h = np.broadcast_arrays(
+            np.asarray(lon_deg, dtype=np.float64),
+            np.asarray(lat_deg, dtype=np.float64),
+            np.asarray(h_m, dtype=np.float64),
+        )
+        shape = lon.shape
+        x = (lon.ravel() - self.lon_off) / self.lon_scale
+        y = (lat.ravel() - self.lat_off) / self.lat_scale
+        z = (h.ravel() - self.alt_off) / self.alt_scale
+        col, row = self._project_norm(x, y, z)
+        col, row = self._apply_bias(col, row)
+        return col.reshape(shape), row.reshape(shape)
+
+    def _jacobian_norm(
+        self, x: FloatArray, y: FloatArray, z: FloatArray
+    ) -> tuple[FloatArray, FloatArray, FloatArray]:
+        """Unbiased (col, row) pixels and their derivatives d(col,row)/d(x,y), shape (2, 2, n)."""
+        m = _monomials(x, y, z)
+        dx, dy = _monomials_dxy(x, y, z)
+        f = self._forward
+        v, vx, vy = f @ m, f @ dx, f @ dy
+        scales = (self.col_scale, self.row_scale)
+        jac = np.empty((2, 2, x.size))
+        out = []
+        for i in range(2):
+            num, den = v[2 * i], v[2 * i + 1]
+            for j, vd in enumerate((vx, vy)):
+                jac[i, j] = (vd[2 * i] * den - num * vd[2 * i + 1]) / (den * den) * scales[i]
+            out.append(num / den)
+        return out[0] * self.col_scale + self.col_off, out[1] * self.row_scale + self.row_off, jac
+
+    @cached_property
+    def _linear_inverse(self) -> FloatArray:
+        """Affine least-squares fit (3, 2): [C, R, H, 1] -> normalised (L, P), over the domain."""
+        g = np.linspace(-1.0, 1.0, 7)
+        x, y, z = (a.ravel() for a in np.meshgrid(g, g, np.linspace(-1.0, 1.0, 3)))
+        col, row = self._project_norm(x, y, z)
+        c = (col - self.col_off) / self.col_scale
+        r = (row - self.row_off) / self.row_scale
+        design = np.column_stack([c, r, z, np.ones_like(c)])
+        sol, *_ = np.linalg.lstsq(design, np.column_stack([x, y]), rcond=None)
+        return sol
+
+    def _initial_guess(
+        self, col: FloatArray, row: FloatArray, z: FloatArray
+    ) -> tuple[FloatArray, FloatArray]:
+        """Normalised (L, P) first guess from unbiased pixel coordinates."""
+        c = (col - self.col_off) / self.col_scale
+        r = (row - self.row_off) / self.row_scale
+        if self.has_inverse:
+            inv = np.stack([self.lon_num, self.lon_den, self.lat_num, self.lat_den])
+            v = _rational(inv, c, r, z)
+            # the vendor inverse is normalised with the same lon/lat offsets and scales
+            return v[0], v[1]
+        sol = self._linear_inverse
+        design = np.column_stack([c, r, z, np.ones_like(c)])
+        guess = design @ sol
+        return guess[:, 0], guess[:, 1]
+
+    def localize(
+        self,
+        col: ArrayLike,
+        row: ArrayLike,
+        h_m: ArrayLike,
+        *,
+        tol_px: float = 1e-8,
+        max_iter: int = 30,
+    ) -> tuple[FloatArray, FloatArray]:
+        """Image (col, row) pixels at ellipsoidal height h m -> ground (lon, lat) degrees.
+
+        Starts from the inverse polynomial when the model has one, else from an affine
+        approximation of the inverse, then runs Newton iterations on :meth:`project` (bias
+        included) until every point reprojects within ``tol_px`` pixels. NaN inputs give NaN.
+
+        Raises:
+            ConvergenceError: some points did not converge in ``max_iter`` iterations (e.g. far
+                outside the RPC validity domain); the message says how many.
+        """
+        c, r, h = np.broadcast_arrays(
+            np.asarray(col, dtype=np.float64),
+            np.asarray(row, dtype=np.float64),
+            np.asarray(h_m, dtype=np.float64),
+        )
+        shape = c.shape
+        tc, tr = self._remove_bias(c.ravel(), r.ravel())
+        z = (h.ravel() - self.alt_off) / self.alt_scale
+        x = np.full(tc.shape, np.nan)
+        y = np.full(tc.shape, np.nan)
+        ok = np.isfinite(tc) & np.isfinite(tr) & np.isfinite(z)
+        idx = np.flatnonzero(ok)
+        if idx.size:
+            xi, yi = self._initial_guess(tc[idx], tr[idx], z[idx])
+            xi, yi, failed = self._newton(tc[idx], tr[idx], z[idx], xi, yi, tol_px, max_iter)
+            if failed:
+                raise ConvergenceError(
+                    f"RPC localisation did not converge for {failed} of {idx.size} points "
+                    f"within {max_iter} iterations (tolerance {tol_px} px); check that the "
+                    "points and heights lie inside the RPC validity domain"
+                )
+            x[idx], y[idx] = xi, yi
+        lon = x * self.lon_scale + self.lon_off
+        lat = y * self.lat_scale + self.lat_off
+        return lon.reshape(shape), lat.reshape(shape)
+
+    def _newton(
+        self,
+        tc: FloatArray,
+        tr: FloatArray,
+        z: FloatArray,
+        x: FloatArray,
+        y: FloatArray,
+        tol_px: float,
+        max_iter: int,
+    ) -> tuple[FloatArray, FloatArray, int]:
+        """Solve unbiased project_norm(x, y, z) = (tc, tr) for normalised (x, y).
+
+        Returns the solution and the number of points that failed to converge.
+        """
+        x, y = x.copy(), y.copy()
+        todo = np.arange(x.size)
+        for _ in range(max_iter + 1):
+            pc, pr, jac = self._jacobian_norm(x[todo], y[todo], z[todo])
+            ec, er = tc[todo] - pc, tr[todo] - pr
+            done = np.hypot(ec, er) <= tol_px
+            keep = ~done
+            todo, ec, er, jac = todo[keep], ec[keep], er[keep], jac[:, :, keep]
+            if todo.size == 0:
+                return x, y, 0
+            det = jac[0, 0] * jac[1, 1] - jac[0, 1] * jac[1, 0]
+            with np.errstate(divide="ignore", invalid="ignore"):
+                dx = (jac[1, 1] * ec - jac[0, 1] * er) / det
+                dy = (jac[0, 0] * er - jac[1, 0] * ec) / det
+            x[todo] += dx
+            y[todo] += dy
+        return x, y, int(todo.size)
+
+    def localize_on_dem(
+        self, col: ArrayLike, row: ArrayLike, dem: GeoDEM
+    ) -> tuple[FloatArray, FloatArray, FloatArray]:
+        """Intersect lines of sight with a DEM (ellipsoidal heights): -> (lon, lat, h).
+
+        Delegates to :func:`core.sensors.base.localize_on_dem`; NaN where the ray misses.
+        """
+        return base.localize_on_dem(self, col, row, dem)
+
+    # ------------------------------------------------------------------ parameters
+
+    @property
+    def params(self) -> FloatArray:
+        """The image-space bias parameters (0, 2 or 6 values, see the module docstring)."""
+        return self.bias.copy()
+
+    def with_params(self, p: ArrayLike) -> RPCModel:
+        """A new model with the bias parameters set to ``p`` (same bias mode)."""
+        p = np.asarray(p, dtype=np.float64).ravel()
+        n = BIAS_MODES[self.bias_mode]
+        if p.size != n:
+            raise InputError(
+                f"bias_mode {self.bias_mode!r} takes {n} parameters, got {p.size}; "
+                "use with_bias_mode() first to change the mode"
+            )
+        return replace(self, bias=p)
+
+    def with_bias_mode(self, mode: str) -> RPCModel:
+        """A new model with bias mode ``mode``; the current bias is carried over when it can be
+        expressed exactly in the new mode (e.g. shift -> affine), else InputError."""
+        if mode not in BIAS_MODES:
+            raise InputError(f"bias_mode {mode!r} unknown; use one of {list(BIAS_MODES)}")
+        a, t = self._bias_matrix()
+        lin = a - np.eye(2)
+        if mode == "affine":
+            p = np.array([t[0], lin[0, 0], lin[0, 1], t[1], lin[1, 0], lin[1, 1]])
+        else:
+            if np.any(lin != 0) or (mode == "none" and np.any(t != 0)):
+                raise InputError(
+                    f"the current {self.bias_mode} bias cannot be expressed in mode {mode!r}; "
+                    "reset it with with_params(zeros) first"
+                )
+            p = t.copy() if mode == "shift" else np.zeros(0)
+        return replace(self, bias_mode=mode, bias=p)
+
+    def with_image_offset(self, col0: float, row0: float) -> RPCModel:
+        """The same model in the pixel coordinates of a crop whose pixel (0, 0) is pixel
+        (col0, row0) of this model's image: ``col_crop = col - col0``, ``row_crop = row - row0``.
+        """
+        col0, row0 = float(col0), float(row0)
+        new = replace(self, col_off=self.col_off - col0, row_off=self.row_off - row0)
+        if self.bias_mode == "affine":
+            p = self.bias.copy()
+            p[0] += p[1] * col0 + p[2] * row0
+            p[3] += p[4] * col0 + p[5] * row0
+            new = replace(new, bias=p)
+        return new
+
+    # ------------------------------------------------------------------ constructors
+
+    @classmethod
+    def from_geom(cls, text: str) -> RPCModel:
+        """From the text of an OSSIM keyword list (``.geom``, ``key: value`` lines).
+
+        Pixel convention: 0-based, pixel centres at integers (ours). Only the RPC00B
+        polynomial format ("B") is accepted. OSSIM ``adjustment_*`` parameters are ignored.
+        """
+        d: dict[str, str] = {}
+        for line in text.splitlines():
+            key, sep, value = line.partition(":")
+            if sep:
+                d[key.strip().lower()] = value.strip()
+        if not d:
+            raise InputError("the .geom text is empty or holds no 'key: value' lines")
+        fmt = d.get("polynomial_format", "B").strip().upper()
+        if fmt != "B":
+            raise InputError(f"RPC polynomial_format {fmt!r} is not supported; only RPC00B ('B')")
+        kw: dict[str, Any] = {}
+        for name, gkey in _GDAL_SCALARS.items():
+            key = gkey.lower()
+            kw[name] = _parse_number(key, _get(d, key, ".geom keyword list"))
+        for name, gkey in _GDAL_COEFFS.items():
+            prefix = gkey.lower()
+            kw[name] = np.array([
+                _parse_number(f"{prefix}_{i:02d}", _get(d, f"{prefix}_{i:02d}", ".geom keyword list"))
+                for i in range(20)
+            ])
+        return cls(**kw)
+
+    @classmethod
+    def from_gdal_tags(cls, tags: Mapping[str, Any]) -> RPCModel:
+        """From the GDAL RPC metadata domain (``rasterio`` ``src.tags(ns="RPC")``).
+
+        Values may carry a unit ("19999.5 pixels"). Pixel convention: 0-based, pixel centres at
+        integers (ours). The optional rpcm-style keys ``LON_NUM_COEFF``, ``LON_DEN_COEFF``,
+        ``LAT_NUM_COEFF``, ``LAT_DEN_COEFF`` give the inverse polynomial.
+        """
+        if not tags:
+            raise InputError("the RPC metadata is empty; the raster holds no RPC")
+        d = {str(k).upper(): v for k, v in tags.items()}
+        kw: dict[str, Any] = {}
+        for name, key in _GDAL_SCALARS.items():
+            kw[name] = _parse_number(key, _get(d, key, "GDAL RPC metadata"))
+        for name, key in _GDAL_COEFFS.items():
+            kw[name] = _parse_coeffs(key, _get(d, key, "GDAL RPC metadata"))
+        if any(k in d for k in _GDAL_INVERSE.values()):
+            for name, key in _GDAL_INVERSE.items():
+                kw[name] = _parse_coeffs(key, _get(d, key, "GDAL RPC metadata"))
+        return cls(**kw)
+
+    @classmethod
+    def from_dimap_xml(cls, text: str) -> RPCModel:
+        """From a Pleiades / SPOT 6-7 DIMAP v2 RPC XML document (``RPC_*.XML``).
+
+        ``Global_RFM/Inverse_Model`` (ground -> image) gives the projection polynomials and
+        ``Global_RFM/Direct_Model`` (image -> ground; its SAMP_* coefficients give lon, its
+        LINE_* give lat) the inverse. Offsets and scales come from ``RFM_Validity``. DIMAP pixel
+        coordinates are 1-based: 1 is subtracted from ``SAMP_OFF`` and ``LINE_OFF``.
+        """
+        if not text or not text.strip():
+            raise InputError("the DIMAP RPC XML is empty")
+        try:
+            root = ET.fromstring(text)
+        except ET.ParseError as exc:
+            raise InputError(f"the DIMAP RPC XML cannot be parsed: {exc}") from None
+        rfm = root if root.tag == "Global_RFM" else root.find(".//Global_RFM")
+        if rfm is None:
+            raise InputError("no <Global_RFM> element in the XML; is it a DIMAP v2 RPC file?")
+
+        def section(tag: str) -> ET.Element:
+            el = rfm.find(tag)
+            if el is None:
+                raise InputError(f"<{tag}> is missing from <Global_RFM>; give a complete RPC XML")
+            return el
+
+        def value(el: ET.Element, key: str) -> float:
+            sub = el.find(key)
+            if sub is None or sub.text is None:
+                raise InputError(f"DIMAP RPC key {key!r} is missing from <{el.tag}>")
+            return _parse_number(key, sub.text)
+
+        def coeffs(el: ET.Element, prefix: str) -> FloatArray:
+            return np.array([value(el, f"{prefix}_{i}") for i in range(1, 21)])
+
+        inv, direct, valid = section("Inverse_Model"), section("Direct_Model"), section("RFM_Validity")
+        kw: dict[str, Any] = {name: value(valid, key) for name, key in _GDAL_SCALARS.items()}
+        kw["col_off"] -= 1.0
+        kw["row_off"] -= 1.0
+        for name, key in _GDAL_COEFFS.items():
+            kw[name] = coeffs(inv, key)
+        kw["lon_num"] = coeffs(direct, "SAMP_NUM_COEFF")
+        kw["lon_den"] = coeffs(direct, "SAMP_DEN_COEFF")
+        kw["lat_num"] = coeffs(direct, "LINE_NUM_COEFF")
+        kw["lat_den"] = coeffs(direct, "LINE_DEN_COEFF")
+        return cls(**kw)
+
+    # ------------------------------------------------------------------ writers
+
+    def to_gdal_tags(self) -> dict[str, str]:
+        """The GDAL RPC metadata domain (for ``rasterio`` ``dst.update_tags(ns="RPC", ...)``).
+
+        The bias is folded into the RPC: a shift exactly (into ``SAMP_OFF``/``LINE_OFF``), an
+        affine bias only when it has no cross terms (a2 = b1 = 0: folded into offsets and
+        scales); otherwise InputError (refit the RPC to the adjusted model instead). The
+        inverse polynomial is not written (GDAL has no key for it). Pixel convention: ours.
+        """
+        col_off, col_scale, row_off, row_scale = (
+            self.col_off, self.col_scale, self.row_off, self.row_scale
+        )
+        if self.bias_mode != "none":
+            a, t = self._bias_matrix()
+            if a[0, 1] != 0 or a[1, 0] != 0:
+                raise InputError(
+                    "an affine bias with cross terms (a2, b1) cannot be folded into an RPC00B; "
+                    "refit the RPC to the adjusted model before writing it"
+                )
+            col_off, col_scale = a[0, 0] * col_off + t[0], a[0, 0] * col_scale
+            row_off, row_scale = a[1, 1] * row_off + t[1], a[1, 1] * row_scale
+        vals = {name: getattr(self, name) for name in _SCALAR_FIELDS}
+        vals.update(col_off=col_off, col_scale=col_scale, row_off=row_off, row_scale=row_scale)
+        tags = {key: repr(float(vals[name])) for name, key in _GDAL_SCALARS.items()}
+        for name, key in _GDAL_COEFFS.items():
+            tags[key] = " ".join(repr(float(v)) for v in getattr(self, name))
+        return tags
+
+    def to_dict(self) -> dict[str, Any]:
+        """A JSON-serialisable dict holding every field (arrays as lists, absent inverse None)."""
+        out: dict[str, Any] = {"type": "rpc", "version": 1}
+        for f in fields(self):
+            v = getattr(self, f.name)
+            out[f.name] = v.tolist() if isinstance(v, np.ndarray) else v
+        return out
+
+    @classmethod
+    def from_dict(cls, d: Mapping[str, Any]) -> RPCModel:
+        """Inverse of :meth:`to_dict`."""
+        if d.get("type", "rpc") != "rpc":
+            raise InputError(f"the dict describes a {d.get('type')!r} model, not an RPC model")
+        names = {f.name for f in fields(cls)}
+        required = set(_SCALAR_FIELDS) | set(_FORWARD_FIELDS)
+        missing = sorted(required - set(d))
+        if missing:
+            raise InputError(f"RPC dict lacks {missing}; give a dict written by to_dict()")
+        return cls(**{k: v for k, v in d.items() if k in names})
+
+    def __repr__(self) -> str:
+        inv = "with inverse" if self.has_inverse else "no inverse"
+        return (
+            f"RPCModel(col_off={self.col_off}, row_off={self.row_off}, lon_off={self.lon_off}, "
+            f"lat_off={self.lat_off}, {inv}, bias_mode={self.bias_mode!r}, "
+            f"bias={self.bias.tolist()})"
+        )
+
