@@ -60,8 +60,16 @@ def write_cog(
                 RESAMPLING=resampling.upper(),
                 BIGTIFF="IF_SAFER",
             )
+        _chmod_default(cog)
         os.replace(cog, out)
     return out
+
+
+def _chmod_default(path: Path | str) -> None:
+    """Give a temporary file the permissions a plain ``open(..., "w")`` would have."""
+    umask = os.umask(0)
+    os.umask(umask)
+    os.chmod(path, 0o666 & ~umask)
 
 
 def atomic_write_bytes(path: str | Path, data: bytes) -> Path:
@@ -72,6 +80,7 @@ def atomic_write_bytes(path: str | Path, data: bytes) -> Path:
     try:
         with os.fdopen(fd, "wb") as f:
             f.write(data)
+        _chmod_default(tmp)
         os.replace(tmp, path)
     except BaseException:
         Path(tmp).unlink(missing_ok=True)

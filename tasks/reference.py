@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import io
 import json
 import tempfile
 from dataclasses import asdict, dataclass
@@ -16,7 +17,7 @@ from prefect import task
 
 from core.geoid import GeoidGrid
 from tasks.geoid import load_geoid
-from tasks.raster_io import atomic_write_text, write_cog
+from tasks.raster_io import atomic_write_bytes, atomic_write_text, write_cog
 from tasks.srtm import BBox, SrtmTile, build_vrt, covered, find_tiles, mosaic_grid
 
 CHUNK = 1024
@@ -175,14 +176,10 @@ def render_hillshade(dem_path: Path, png_path: Path, max_px: int = 1600) -> Path
     ax.set_xlabel("longitude (deg)")
     ax.set_ylabel("latitude (deg)")
     ax.set_title(f"{Path(dem_path).name}: ellipsoidal heights {np.nanmin(zf):.0f}..{np.nanmax(zf):.0f} m")
-    png_path = Path(png_path)
-    with tempfile.NamedTemporaryFile(dir=png_path.parent, prefix=f".{png_path.name}", suffix=".png",
-                                     delete=False) as tmpf:
-        tmp = Path(tmpf.name)
+    buf = io.BytesIO()
     try:
-        fig.savefig(tmp, bbox_inches="tight")
-        tmp.replace(png_path)
+        fig.savefig(buf, format="png", bbox_inches="tight")
     finally:
         plt.close(fig)
-        tmp.unlink(missing_ok=True)
-    return png_path
+    atomic_write_bytes(png_path, buf.getvalue())
+    return Path(png_path)

@@ -203,7 +203,10 @@ class RPCModel:
             if not math.isfinite(v):
                 raise InputError(f"RPC {name} is {v}; it must be finite")
             if name.endswith("_scale") and v == 0:
-                raise InputError(f"RPC {name} is zero; the RPC cannot be normalised, fix the file")
+                raise InputError(
+                    f"RPC {name} (key {_GDAL_SCALARS[name]}) is zero; the RPC cannot be "
+                    "normalised, fix the RPC file"
+                )
             object.__setattr__(self, name, v)
         for name in _FORWARD_FIELDS:
             object.__setattr__(self, name, self._checked_coeffs(name, getattr(self, name)))
@@ -238,6 +241,12 @@ class RPCModel:
             raise InputError(f"RPC coefficients {name!r} have {a.size} values, expected 20")
         if not np.all(np.isfinite(a)):
             raise InputError(f"RPC coefficients {name!r} are not all finite; fix the RPC file")
+        if not np.any(a):
+            key = _GDAL_COEFFS.get(name) or _GDAL_INVERSE.get(name)
+            raise InputError(
+                f"RPC coefficients {name!r} (key {key}) are all zero, a degenerate RPC (GDAL "
+                "writes zeros for a malformed coefficient list); fix the RPC file"
+            )
         a.setflags(write=False)
         return a
 

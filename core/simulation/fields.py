@@ -37,6 +37,7 @@ _ANGLES = (np.arange(_N_GRAD) + 0.5) * (2.0 * np.pi / _N_GRAD)
 _GX = np.cos(_ANGLES)
 _GY = np.sin(_ANGLES)
 _S60 = np.uint64(60)
+_CORNERS = ((0, 0), (1, 0), (0, 1), (1, 1))
 _SQRT2 = float(np.sqrt(2.0))
 
 
@@ -58,26 +59,52 @@ def _fade(t: NDArray[np.float64]) -> NDArray[np.float64]:
     return t * t * t * (t * (t * 6.0 - 15.0) + 10.0)
 
 
-def _corner(seed: int, i: NDArray[np.int64], j: NDArray[np.int64],
-            dx: NDArray[np.float64], dy: NDArray[np.float64]) -> NDArray[np.float64]:
+def _node_gradients(seed: int, i: NDArray[np.int64],
+                    j: NDArray[np.int64]) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+    """Unit gradient (gx, gy) of lattice node (i, j): one of 16 directions, chosen by the hash."""
     k = (hash_u64(seed, i, j) >> _S60).astype(np.intp)
-    return _GX[k] * dx + _GY[k] * dy
+    return _GX[k], _GY[k]
+
+
+def _corner_gradients(seed: int, i0: NDArray[np.int64], j0: NDArray[np.int64]
+                      ) -> list[tuple[NDArray[np.float64], NDArray[np.float64]]]:
+    """Gradients at the four corners (00, 10, 01, 11) of the cells whose low corner is (i0, j0).
+
+    When the cells share nodes (coarse octaves), the nodes of the bounding box
+    are hashed once and looked up; the values are the same hashes either way.
+    """
+    if i0.size == 0:
+        empty = np.zeros(i0.shape)
+        return [(empty, empty)] * 4
+    imin, imax = int(i0.min()), int(i0.max()) + 1
+    jmin, jmax = int(j0.min()), int(j0.max()) + 1
+    ni, nj = imax - imin + 1, jmax - jmin + 1
+    if ni * nj > 2 * i0.size:
+        return [_node_gradients(seed, i0 + di, j0 + dj) for di, dj in _CORNERS]
+    gi = np.arange(imin, imax + 1, dtype=np.int64)
+    gj = np.arange(jmin, jmax + 1, dtype=np.int64)
+    gx, gy = _node_gradients(seed, gi[None, :], gj[:, None])
+    gx = gx.reshape(-1)
+    gy = gy.reshape(-1)
+    lin = (j0 - jmin) * ni + (i0 - imin)
+    return [(gx.take(lin + (dj * ni + di)), gy.take(lin + (dj * ni + di)))
+            for di, dj in _CORNERS]
 
 
 def _lattice_noise(u: NDArray[np.float64], v: NDArray[np.float64], seed: int) -> NDArray[np.float64]:
     """Gradient noise at lattice coordinates (u, v); values in [-1, 1]."""
     fu = np.floor(u)
     fv = np.floor(v)
-    i0 = fu.astype(np.int64)
-    j0 = fv.astype(np.int64)
     xf = u - fu
     yf = v - fv
-    i1 = i0 + 1
-    j1 = j0 + 1
-    n00 = _corner(seed, i0, j0, xf, yf)
-    n10 = _corner(seed, i1, j0, xf - 1.0, yf)
-    n01 = _corner(seed, i0, j1, xf, yf - 1.0)
-    n11 = _corner(seed, i1, j1, xf - 1.0, yf - 1.0)
+    (gx00, gy00), (gx10, gy10), (gx01, gy01), (gx11, gy11) = _corner_gradients(
+        seed, fu.astype(np.int64), fv.astype(np.int64))
+    xf1 = xf - 1.0
+    yf1 = yf - 1.0
+    n00 = gx00 * xf + gy00 * yf
+    n10 = gx10 * xf1 + gy10 * yf
+    n01 = gx01 * xf + gy01 * yf1
+    n11 = gx11 * xf1 + gy11 * yf1
     sx = _fade(xf)
     sy = _fade(yf)
     a = n00 + sx * (n10 - n00)

@@ -1,0 +1,102 @@
+"""Benchmark RPC projection of 1,000,000 points: gcpfree vs rpcm vs GDAL's RPC transformer.
+
+Run from the repository root::
+
+    .venv/bin/python bench/bench_rpc.py [--n 1000000] [--repeat 3]
+
+Prints best-of-``repeat`` wall times, ratios and the largest disagreement; asserts nothing.
+rpcm is optional (``pip install --no-deps rpcm``). Its package ``__init__`` imports ``srtm4``
+(which does not build here) and ``geojson``, so only its ``rpc_model`` module is loaded, through
+a bare package stub that skips that ``__init__``.
+"""
+
+from __future__ import annotations
+
+import argparse
+import importlib
+import importlib.util
+import sys
+import time
+import types
+from collections.abc import Callable
+from pathlib import Path
+
+import numpy as np
+from rasterio.rpc import RPC
+from rasterio.transform import RPCTransformer
+
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
+
+from core.sensors.rpc import RPCModel  # noqa: E402
+
+GEOM = Path(__file__).resolve().parents[1] / "tests" / "data" / "pleiades_ventoux" / "left_image.geom"
+
+
+def load_rpcm_model_module() -> types.ModuleType | None:
+    """``rpcm.rpc_model`` without running ``rpcm/__init__.py``; None when rpcm is absent."""
+    spec = importlib.util.find_spec("rpcm")
+    if spec is None or not spec.submodule_search_locations:
+        return None
+    if "rpcm" not in sys.modules:
+        stub = types.ModuleType("rpcm")
+        stub.__path__ = list(spec.submodule_search_locations)
+        sys.modules["rpcm"] = stub
+    try:
+        return importlib.import_module("rpcm.rpc_model")
+    except ImportError as exc:
+        print(f"rpcm.rpc_model could not be imported ({exc}); skipping rpcm")
+        return None
+
+
+def best_time(fn: Callable[[], object], repeat: int) -> tuple[float, object]:
+    best, out = float("inf"), None
+    for _ in range(repeat):
+        t0 = time.perf_counter()
+        out = fn()
+        best = min(best, time.perf_counter() - t0)
+    return best, out
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--n", type=int, default=1_000_000)
+    ap.add_argument("--repeat", type=int, default=3)
+    args = ap.parse_args()
+
+    model = RPCModel.from_geom(GEOM.read_text())
+    rng = np.random.default_rng(0)
+    n = args.n
+    lon = model.lon_off + model.lon_scale * rng.uniform(-1, 1, n)
+    lat = model.lat_off + model.lat_scale * rng.uniform(-1, 1, n)
+    h = model.alt_off + model.alt_scale * rng.uniform(-1, 1, n)
+    print(f"RPC: {GEOM.name}; projecting {n:,} points, best of {args.repeat}")
+
+    t_ours, (c_ours, r_ours) = best_time(lambda: model.project(lon, lat, h), args.repeat)
+    results = {"gcpfree": t_ours}
+
+    rpcm_mod = load_rpcm_model_module()
+    if rpcm_mod is not None:
+        rpcm_model = rpcm_mod.RPCModel(model.to_gdal_tags())
+        t, (c, r) = best_time(lambda: rpcm_model.projection(lon, lat, h), args.repeat)
+        results["rpcm"] = t
+        print(f"  max |gcpfree - rpcm|  = {max(np.max(np.abs(c - c_ours)), np.max(np.abs(r - r_ours))):.2e} px")
+
+    with RPCTransformer(RPC.from_gdal(model.to_gdal_tags())) as tr:
+        t, (r, c) = best_time(lambda: tr.rowcol(lon, lat, zs=h, op=np.positive), args.repeat)
+    results["GDAL RPCTransformer"] = t
+    err = max(np.max(np.abs(c - 0.5 - c_ours)), np.max(np.abs(r - 0.5 - r_ours)))
+    print(f"  max |gcpfree - (GDAL - 0.5)| = {err:.2e} px")
+
+    print(f"{'implementation':<22}{'time [s]':>10}{'M points/s':>12}{'time / gcpfree':>16}")
+    for name, t in results.items():
+        print(f"{name:<22}{t:>10.3f}{n / t / 1e6:>12.2f}{t / t_ours:>16.1f}")
+
+    # localisation, for information (Newton on project, from the affine first guess)
+    m = min(n, 200_000)
+    col, row = c_ours[:m], r_ours[:m]
+    t_loc, _ = best_time(lambda: model.localize(col, row, h[:m]), 1)
+    print(f"gcpfree localize of {m:,} points: {t_loc:.3f} s ({m / t_loc / 1e6:.2f} M points/s)")
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,237 @@
+"""Orbit (ECEF state vectors) and attitude (roll/pitch/yaw polynomials) of a pushbroom satellite.
+
+Times are seconds (``_s``) since the epoch the metadata names (``Orbit.epoch_utc``); keep them
+small (seconds since the first state vector, say) so float64 keeps microsecond resolution.
+
+Frames (all right-handed):
+
+- ECEF: WGS84 Earth-centred, Earth-fixed, metres.
+- Local orbital frame at time t, built from the ECEF position P and velocity V of the delivered
+  orbit: ``Z = -P/|P|`` (towards the Earth centre), ``Y = Z x V / |Z x V|`` (the negative orbit
+  normal: to the right of the track), ``X = Y x Z`` (along track, within a few degrees of V).
+  ECEF velocity is used, so the frame follows the ground track (no yaw steering needed).
+- Camera (body) frame: x forward, y right, z down along the boresight. The attitude rotates it
+  into the orbital frame: ``u_orbital = Rz(yaw) Ry(pitch) Rx(roll) u_camera`` with active
+  right-handed rotations. A positive roll turns the boresight to -Y (left of the track: east on a
+  descending pass), a positive pitch turns it forward (+X), a positive yaw turns +X towards +Y.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+
+from core.errors import InputError
+from core.sensors._dictio import get_float, get_float_array, get_float_tuple, get_str
+
+FloatArray = NDArray[np.float64]
+
+GM_EARTH_M3_S2 = 3.986004418e14
+OMEGA_EARTH_RAD_S = 7.2921150e-5
+LAGRANGE_POINTS = 8
+
+
+def _readonly(a: ArrayLike) -> FloatArray:
+    out = np.array(a, dtype=np.float64)
+    out.setflags(write=False)
+    return out
+
+
+def lagrange_weights(nodes: FloatArray, t: FloatArray) -> FloatArray:
+    """Lagrange interpolation weights, shape (m, k), of ``k`` nodes per row (m, k) at times t (m,)."""
+    diff = t[:, None] - nodes
+    k = nodes.shape[1]
+    w = np.ones_like(nodes)
+    for j in range(k):
+        for i in range(k):
+            if i != j:
+                w[:, j] *= diff[:, i] / (nodes[:, j] - nodes[:, i])
+    return w
+
+
+@dataclass(frozen=True, eq=False)
+class Orbit:
+    """ECEF state vectors, interpolated by Lagrange polynomials over 8 neighbouring samples.
+
+    ``times_s`` (n,) strictly increasing seconds since ``epoch_utc``; ``positions_m`` (n, 3) and
+    ``velocities_m_s`` (n, 3) ECEF. Positions and velocities are interpolated separately (the
+    SPOT practice). At least 2 vectors are needed; fewer than 8 lower the polynomial degree.
+    Times outside the sampled span are extrapolated, which loses accuracy quickly beyond one
+    sample spacing: deliver vectors that cover the acquisition with a few samples of margin.
+    """
+
+    times_s: FloatArray
+    positions_m: FloatArray
+    velocities_m_s: FloatArray
+    epoch_utc: str = ""
+
+    def __post_init__(self) -> None:
+        t = _readonly(self.times_s)
+        p = _readonly(self.positions_m)
+        v = _readonly(self.velocities_m_s)
+        if t.ndim != 1 or t.size < 2:
+            raise InputError(f"orbit times_s must be a 1-D array of >= 2 times, got shape {t.shape}")
+        if p.shape != (t.size, 3) or v.shape != (t.size, 3):
+            raise InputError(
+                f"orbit positions_m {p.shape} and velocities_m_s {v.shape} must both be "
+                f"({t.size}, 3), one ECEF vector per time"
+            )
+        if not (np.all(np.isfinite(t)) and np.all(np.isfinite(p)) and np.all(np.isfinite(v))):
+            raise InputError("orbit state vectors hold NaN or inf; remove the bad records")
+        if np.any(np.diff(t) <= 0):
+            raise InputError("orbit times_s must be strictly increasing; sort and deduplicate them")
+        object.__setattr__(self, "times_s", t)
+        object.__setattr__(self, "positions_m", p)
+        object.__setattr__(self, "velocities_m_s", v)
+
+    def interpolate(self, t_s: ArrayLike) -> tuple[FloatArray, FloatArray]:
+        """ECEF position (m, 3) metres and velocity (m, 3) m/s at times ``t_s`` (m,) seconds."""
+        t = np.atleast_1d(np.asarray(t_s, dtype=np.float64)).ravel()
+        n = self.times_s.size
+        k = min(LAGRANGE_POINTS, n)
+        start = np.searchsorted(self.times_s, t) - k // 2
+        start = np.clip(start, 0, n - k)
+        idx = start[:, None] + np.arange(k)
+        w = lagrange_weights(self.times_s[idx], t)
+        pos = np.einsum("mk,mkj->mj", w, self.positions_m[idx])
+        vel = np.einsum("mk,mkj->mj", w, self.velocities_m_s[idx])
+        return pos, vel
+
+    def to_dict(self) -> dict:
+        return {
+            "epoch_utc": self.epoch_utc,
+            "times_s": self.times_s.tolist(),
+            "positions_m": self.positions_m.tolist(),
+            "velocities_m_s": self.velocities_m_s.tolist(),
+        }
+
+    @classmethod
+    def from_dict(cls, d: object, path: str = "orbit") -> Orbit:
+        return cls(
+            times_s=get_float_array(d, "times_s", path, ndim=1),
+            positions_m=get_float_array(d, "positions_m", path, ndim=2),
+            velocities_m_s=get_float_array(d, "velocities_m_s", path, ndim=2),
+            epoch_utc=get_str(d, "epoch_utc", path, default=""),
+        )
+
+
+def orbital_frame(pos_m: FloatArray, vel_m_s: FloatArray) -> FloatArray:
+    """Local orbital frame (m, 3, 3): columns X (along track), Y (right), Z (to Earth centre)."""
+    z = -pos_m / np.linalg.norm(pos_m, axis=1, keepdims=True)
+    y = np.cross(z, vel_m_s)
+    y /= np.linalg.norm(y, axis=1, keepdims=True)
+    x = np.cross(y, z)
+    return np.stack([x, y, z], axis=2)
+
+
+def rotation_rpy(roll_rad: FloatArray, pitch_rad: FloatArray, yaw_rad: FloatArray) -> FloatArray:
+    """``Rz(yaw) Ry(pitch) Rx(roll)``, shape (m, 3, 3): camera frame -> local orbital frame."""
+    cr, sr = np.cos(roll_rad), np.sin(roll_rad)
+    cp, sp = np.cos(pitch_rad), np.sin(pitch_rad)
+    cy, sy = np.cos(yaw_rad), np.sin(yaw_rad)
+    r = np.empty(np.shape(roll_rad) + (3, 3))
+    r[..., 0, 0] = cy * cp
+    r[..., 0, 1] = cy * sp * sr - sy * cr
+    r[..., 0, 2] = cy * sp * cr + sy * sr
+    r[..., 1, 0] = sy * cp
+    r[..., 1, 1] = sy * sp * sr + cy * cr
+    r[..., 1, 2] = sy * sp * cr - cy * sr
+    r[..., 2, 0] = -sp
+    r[..., 2, 1] = cp * sr
+    r[..., 2, 2] = cp * cr
+    return r
+
+
+@dataclass(frozen=True)
+class Attitude:
+    """Roll, pitch, yaw (radians) as polynomials of ``t - t_ref_s``.
+
+    ``roll_rad = (c0, c1, c2, ...)`` means ``roll(t) = c0 + c1 (t - t_ref) + c2 (t - t_ref)^2 ...``
+    in rad, rad/s, rad/s^2... Angles rotate the camera frame into the local orbital frame (see the
+    module docstring). A side-looking SPOT scene carries its mirror angle in ``roll_rad[0]``, a
+    fore/aft stereo instrument its tilt in ``pitch_rad[0]``.
+    """
+
+    t_ref_s: float
+    roll_rad: tuple[float, ...] = (0.0,)
+    pitch_rad: tuple[float, ...] = (0.0,)
+    yaw_rad: tuple[float, ...] = (0.0,)
+    _coeffs: FloatArray = field(init=False, repr=False, compare=False)
+
+    def __post_init__(self) -> None:
+        object.__setattr__(self, "t_ref_s", float(self.t_ref_s))
+        polys = []
+        for name in ("roll_rad", "pitch_rad", "yaw_rad"):
+            c = tuple(float(v) for v in np.atleast_1d(getattr(self, name)))
+            if not c or not all(np.isfinite(c)):
+                raise InputError(f"attitude {name} needs >= 1 finite coefficient, got {c}")
+            object.__setattr__(self, name, c)
+            polys.append(c)
+        deg = max(3, *(len(c) for c in polys))
+        coeffs = np.zeros((3, deg))
+        for i, c in enumerate(polys):
+            coeffs[i, : len(c)] = c
+        coeffs.setflags(write=False)
+        object.__setattr__(self, "_coeffs", coeffs)
+
+    def angles(self, t_s: FloatArray, delta: FloatArray | None = None) -> FloatArray:
+        """(3, m) roll, pitch, yaw radians at times t (m,), with ``delta`` (3, 3) added to c0..c2."""
+        c = self._coeffs if delta is None else self._coeffs.copy()
+        if delta is not None:
+            c[:, :3] += delta
+        dt = np.asarray(t_s, dtype=np.float64) - self.t_ref_s
+        out = np.zeros((3,) + dt.shape)
+        for k in range(c.shape[1] - 1, -1, -1):  # Horner
+            out = out * dt + c[:, k].reshape((3,) + (1,) * dt.ndim)
+        return out
+
+    def to_dict(self) -> dict:
+        return {
+            "t_ref_s": self.t_ref_s,
+            "roll_rad": list(self.roll_rad),
+            "pitch_rad": list(self.pitch_rad),
+            "yaw_rad": list(self.yaw_rad),
+        }
+
+    @classmethod
+    def from_dict(cls, d: object, path: str = "attitude") -> Attitude:
+        return cls(
+            t_ref_s=get_float(d, "t_ref_s", path),
+            roll_rad=get_float_tuple(d, "roll_rad", path),
+            pitch_rad=get_float_tuple(d, "pitch_rad", path),
+            yaw_rad=get_float_tuple(d, "yaw_rad", path),
+        )
+
+
+def circular_orbit_ecef(
+    t_s: ArrayLike,
+    *,
+    radius_m: float,
+    inclination_rad: float,
+    raan_rad: float,
+    arg_lat0_rad: float,
+    t_c_s: float,
+) -> tuple[FloatArray, FloatArray]:
+    """Circular Keplerian orbit in ECEF: positions (m, 3) metres and velocities (m, 3) m/s.
+
+    The inertial frame coincides with ECEF at ``t_c_s``; ``raan_rad`` is the right ascension of
+    the ascending node in that frame and ``arg_lat0_rad`` the argument of latitude at ``t_c_s``.
+    The Earth turns at ``OMEGA_EARTH_RAD_S`` about ECEF Z; velocities are ECEF (Earth-relative).
+    """
+    t = np.atleast_1d(np.asarray(t_s, dtype=np.float64)) - t_c_s
+    n = np.sqrt(GM_EARTH_M3_S2 / radius_m**3)
+    u = arg_lat0_rad + n * t
+    co, so = np.cos(raan_rad), np.sin(raan_rad)
+    ci, si = np.cos(inclination_rad), np.sin(inclination_rad)
+    cu, su = np.cos(u), np.sin(u)
+    x = radius_m * np.stack([co * cu - so * su * ci, so * cu + co * su * ci, su * si], axis=1)
+    v = radius_m * n * np.stack([-co * su - so * cu * ci, -so * su + co * cu * ci, cu * si], axis=1)
+    th = OMEGA_EARTH_RAD_S * t
+    ct, st = np.cos(th), np.sin(th)
+    xe = np.stack([ct * x[:, 0] + st * x[:, 1], -st * x[:, 0] + ct * x[:, 1], x[:, 2]], axis=1)
+    ve = np.stack([ct * v[:, 0] + st * v[:, 1], -st * v[:, 0] + ct * v[:, 1], v[:, 2]], axis=1)
+    ve[:, 0] += OMEGA_EARTH_RAD_S * xe[:, 1]
+    ve[:, 1] -= OMEGA_EARTH_RAD_S * xe[:, 0]
+    return xe, ve
