@@ -92,45 +92,87 @@ _GDAL_INVERSE = {
     "lat_num": "LAT_NUM_COEFF", "lat_den": "LAT_DEN_COEFF",
 }
 
-_CHUNK = 65_536  # points per block when evaluating polynomials (keeps blocks in cache)
+_CHUNK = 8_192  # points per block when evaluating polynomials (blocks stay in cache)
 
 
-def _monomials(x: FloatArray, y: FloatArray, z: FloatArray) -> FloatArray:
-    """The 20 RPC00B monomials of normalised (x=L, y=P, z=H), stacked as a (20, n) array."""
-    xx, yy, zz = x * x, y * y, z * z
-    xy, xz, yz = x * y, x * z, y * z
-    return np.stack([
-        np.ones_like(x), x, y, z, xy, xz, yz, xx, yy, zz,
-        xy * z, xx * x, x * yy, x * zz, xx * y, yy * y, y * zz, xx * z, yy * z, zz * z,
-    ])
+def _derivative_matrices() -> tuple[FloatArray, FloatArray]:
+    """(DX, DY), 20x20: ``coeffs @ DX`` are the coefficients (same monomial basis) of the
+    derivative of the cubic with respect to x (= L or C), ``coeffs @ DY`` with respect to y."""
+    # d(monomial i)/dx = factor * monomial j, as (i, j, factor); basis order in the module doc
+    dx = [(1, 0, 1), (4, 2, 1), (5, 3, 1), (7, 1, 2), (10, 6, 1), (11, 7, 3), (12, 8, 1),
+          (13, 9, 1), (14, 4, 2), (17, 5, 2)]
+    dy = [(2, 0, 1), (4, 1, 1), (6, 3, 1), (8, 2, 2), (10, 5, 1), (12, 4, 2), (14, 7, 1),
+          (15, 8, 3), (16, 9, 1), (18, 6, 2)]
+    mats = []
+    for table in (dx, dy):
+        m = np.zeros((20, 20))
+        for i, j, f in table:
+            m[i, j] = f
+        mats.append(m)
+    return mats[0], mats[1]
 
 
-def _monomials_dxy(x: FloatArray, y: FloatArray, z: FloatArray) -> tuple[FloatArray, FloatArray]:
-    """Derivatives of the 20 monomials with respect to x and y, each (20, n)."""
-    zero, one = np.zeros_like(x), np.ones_like(x)
-    xx, yy, zz = x * x, y * y, z * z
-    xy, xz, yz = x * y, x * z, y * z
-    dx = np.stack([
-        zero, one, zero, zero, y, z, zero, 2 * x, zero, zero,
-        yz, 3 * xx, yy, zz, 2 * xy, zero, zero, 2 * xz, zero, zero,
-    ])
-    dy = np.stack([
-        zero, zero, one, zero, x, zero, z, zero, 2 * y, zero,
-        xz, zero, 2 * xy, zero, xx, 3 * yy, zz, zero, 2 * yz, zero,
-    ])
-    return dx, dy
+_DX, _DY = _derivative_matrices()
 
 
-def _rational(coeffs: FloatArray, x: FloatArray, y: FloatArray, z: FloatArray) -> FloatArray:
-    """Evaluate rational functions sharing the monomials: ``coeffs`` is (2k, 20), rows paired
-    (num_0, den_0, num_1, den_1, ...); returns (k, n) ratios. x, y, z are 1-D, normalised."""
+def _rational(
+    coeffs: FloatArray,
+    x: FloatArray,
+    y: FloatArray,
+    z: FloatArray,
+    offsets: tuple[float, float, float] = (0.0, 0.0, 0.0),
+    scales: tuple[float, float, float] = (1.0, 1.0, 1.0),
+    *,
+    divide: bool = True,
+) -> FloatArray:
+    """Evaluate rational functions (or plain cubics) that share the 20 monomials.
+
+    ``coeffs`` is (2k, 20) with rows paired (num_0, den_0, num_1, den_1, ...); x, y, z are 1-D
+    and are normalised here as ``(x - offsets[0]) / scales[0]`` etc. Returns the (k, n) ratios,
+    or with ``divide=False`` the (2k, n) values of every row of ``coeffs``.
+    Works block by block in a reused monomial buffer (one matrix product per block), which
+    keeps the work in cache and avoids temporaries.
+    """
     n = x.size
     k = coeffs.shape[0] // 2
-    out = np.empty((k, n))
-    for s in range(0, n, _CHUNK):
-        e = min(s + _CHUNK, n)
-        v = coeffs @ _monomials(x[s:e], y[s:e], z[s:e])
-        out[:, s:e] = v[0::2] / v[1::2]
+    out = np.empty((k if divide else coeffs.shape[0], n))
+    width = min(_CHUNK, max(n, 1))
+    buf = np.empty((20, width))
+    buf[0] = 1.0
+    vals = np.empty((coeffs.shape[0], width))
+    inv = [1.0 / s for s in scales]
+    mul = np.multiply
+    for s in range(0, n, width):
+        e = min(s + width, n)
+        w = e - s
+        m = buf[:, :w]
+        for row, src, off, iscale in zip((1, 2, 3), (x, y, z), offsets, inv, strict=True):
+            np.subtract(src[s:e], off, out=m[row])
+            m[row] *= iscale
+        mx, my, mz = m[1], m[2], m[3]
+        mul(mx, my, out=m[4])
+        mul(mx, mz, out=m[5])
+        mul(my, mz, out=m[6])
+        mul(mx, mx, out=m[7])
+        mul(my, my, out=m[8])
+        mul(mz, mz, out=m[9])
+        mul(m[4], mz, out=m[10])
+        mul(m[7], mx, out=m[11])
+        mul(mx, m[8], out=m[12])
+        mul(mx, m[9], out=m[13])
+        mul(m[7], my, out=m[14])
+        mul(m[8], my, out=m[15])
+        mul(my, m[9], out=m[16])
+        mul(m[7], mz, out=m[17])
+        mul(m[8], mz, out=m[18])
+        mul(m[9], mz, out=m[19])
+        if not divide:
+            np.matmul(coeffs, m, out=out[:, s:e])
+            continue
+        v = vals[:, :w]
+        np.matmul(coeffs, m, out=v)
+        for i in range(k):
+            np.divide(v[2 * i], v[2 * i + 1], out=out[i, s:e])
     return out
 
 
@@ -307,28 +349,38 @@ class RPCModel:
             np.asarray(h_m, dtype=np.float64),
         )
         shape = lon.shape
-        x = (lon.ravel() - self.lon_off) / self.lon_scale
-        y = (lat.ravel() - self.lat_off) / self.lat_scale
-        z = (h.ravel() - self.alt_off) / self.alt_scale
-        col, row = self._project_norm(x, y, z)
+        v = _rational(
+            self._forward, lon.ravel(), lat.ravel(), h.ravel(),
+            (self.lon_off, self.lat_off, self.alt_off),
+            (self.lon_scale, self.lat_scale, self.alt_scale),
+        )
+        col, row = v[0], v[1]
+        col *= self.col_scale
+        col += self.col_off
+        row *= self.row_scale
+        row += self.row_off
         col, row = self._apply_bias(col, row)
         return col.reshape(shape), row.reshape(shape)
+
+    @cached_property
+    def _forward_with_derivatives(self) -> FloatArray:
+        """(12, 20): the forward cubics, then their x-derivatives, then their y-derivatives."""
+        f = self._forward
+        return np.vstack([f, f @ _DX, f @ _DY])
 
     def _jacobian_norm(
         self, x: FloatArray, y: FloatArray, z: FloatArray
     ) -> tuple[FloatArray, FloatArray, FloatArray]:
         """Unbiased (col, row) pixels and their derivatives d(col,row)/d(x,y), shape (2, 2, n)."""
-        m = _monomials(x, y, z)
-        dx, dy = _monomials_dxy(x, y, z)
-        f = self._forward
-        v, vx, vy = f @ m, f @ dx, f @ dy
+        v = _rational(self._forward_with_derivatives, x, y, z, divide=False)
         scales = (self.col_scale, self.row_scale)
         jac = np.empty((2, 2, x.size))
         out = []
         for i in range(2):
             num, den = v[2 * i], v[2 * i + 1]
-            for j, vd in enumerate((vx, vy)):
-                jac[i, j] = (vd[2 * i] * den - num * vd[2 * i + 1]) / (den * den) * scales[i]
+            for j in range(2):
+                d_num, d_den = v[4 + 4 * j + 2 * i], v[4 + 4 * j + 2 * i + 1]
+                jac[i, j] = (d_num * den - num * d_den) / (den * den) * scales[i]
             out.append(num / den)
         return out[0] * self.col_scale + self.col_off, out[1] * self.row_scale + self.row_off, jac
 
@@ -345,12 +397,13 @@ class RPCModel:
         return sol
 
     def _initial_guess(
-        self, col: FloatArray, row: FloatArray, z: FloatArray
+        self, col: FloatArray, row: FloatArray, z: FloatArray, *, use_inverse: bool = True
     ) -> tuple[FloatArray, FloatArray]:
-        """Normalised (L, P) first guess from unbiased pixel coordinates."""
+        """Normalised (L, P) first guess from unbiased pixel coordinates: the inverse
+        polynomial when there is one (and ``use_inverse``), else the affine approximation."""
         c = (col - self.col_off) / self.col_scale
         r = (row - self.row_off) / self.row_scale
-        if self.has_inverse:
+        if self.has_inverse and use_inverse:
             inv = np.stack([self.lon_num, self.lon_den, self.lat_num, self.lat_den])
             v = _rational(inv, c, r, z)
             # the vendor inverse is normalised with the same lon/lat offsets and scales
@@ -393,7 +446,15 @@ class RPCModel:
         idx = np.flatnonzero(ok)
         if idx.size:
             xi, yi = self._initial_guess(tc[idx], tr[idx], z[idx])
-            xi, yi, failed = self._newton(tc[idx], tr[idx], z[idx], xi, yi, tol_px, max_iter)
+            xi, yi, bad = self._newton(tc[idx], tr[idx], z[idx], xi, yi, tol_px, max_iter)
+            if bad.size and self.has_inverse:
+                # the vendor inverse can be wild outside its domain: retry from the affine guess
+                k = idx[bad]
+                xb, yb = self._initial_guess(tc[k], tr[k], z[k], use_inverse=False)
+                xb, yb, still = self._newton(tc[k], tr[k], z[k], xb, yb, tol_px, max_iter)
+                xi[bad], yi[bad] = xb, yb
+                bad = bad[still]
+            failed = bad.size
             if failed:
                 raise ConvergenceError(
                     f"RPC localisation did not converge for {failed} of {idx.size} points "
@@ -414,10 +475,10 @@ class RPCModel:
         y: FloatArray,
         tol_px: float,
         max_iter: int,
-    ) -> tuple[FloatArray, FloatArray, int]:
+    ) -> tuple[FloatArray, FloatArray, NDArray[np.intp]]:
         """Solve unbiased project_norm(x, y, z) = (tc, tr) for normalised (x, y).
 
-        Returns the solution and the number of points that failed to converge.
+        Returns the solution and the indices of the points that did not converge.
         """
         x, y = x.copy(), y.copy()
         todo = np.arange(x.size)
@@ -428,14 +489,14 @@ class RPCModel:
             keep = ~done
             todo, ec, er, jac = todo[keep], ec[keep], er[keep], jac[:, :, keep]
             if todo.size == 0:
-                return x, y, 0
+                break
             det = jac[0, 0] * jac[1, 1] - jac[0, 1] * jac[1, 0]
             with np.errstate(divide="ignore", invalid="ignore"):
                 dx = (jac[1, 1] * ec - jac[0, 1] * er) / det
                 dy = (jac[0, 0] * er - jac[1, 0] * ec) / det
             x[todo] += dx
             y[todo] += dy
-        return x, y, int(todo.size)
+        return x, y, todo
 
     def localize_on_dem(
         self, col: ArrayLike, row: ArrayLike, dem: GeoDEM

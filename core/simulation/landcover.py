@@ -25,6 +25,7 @@ wavelengths wide; a scene of a few wavelengths varies more.
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass
 from enum import IntEnum
 
@@ -172,31 +173,55 @@ def _xy(x_m: ArrayLike, y_m: ArrayLike) -> tuple[NDArray[np.float64], NDArray[np
     return x, y
 
 
-def _block_urban(bi: NDArray[np.int64], bj: NDArray[np.int64], seed: int,
-                 config: LandCoverConfig) -> NDArray[np.bool_]:
-    """Whether each block is in an urban patch (fbm at the block centre above threshold).
+def _per_block(bi: NDArray[np.int64], bj: NDArray[np.int64],
+               fn: Callable[[NDArray[np.int64], NDArray[np.int64]], dict[str, NDArray]]
+               ) -> dict[str, NDArray]:
+    """Evaluate per-block attributes ``fn(i, j)`` once per block and spread them to the points.
 
-    Evaluated once per block of the bounding box when blocks are shared; the
-    centre coordinates, hence the values, are the same either way.
+    When the points share blocks, ``fn`` runs on the blocks of the bounding box
+    and the points look their block up; the values are the same either way,
+    because ``fn`` depends on the block indices only.
     """
-    b = config.block_m
-    thr = fbm_threshold(config.urban_fraction, config.patch_octaves)
-    useed = derive_seed(seed, "urban-patches")
-
-    def at(i: NDArray[np.int64], j: NDArray[np.int64]) -> NDArray[np.bool_]:
-        cx = (i.astype(np.float64) + 0.5) * b
-        cy = (j.astype(np.float64) + 0.5) * b
-        return fbm(cx, cy, useed, config.urban_patch_wavelength_m, config.patch_octaves) > thr
-
     if bi.size == 0:
-        return np.zeros(bi.shape, dtype=bool)
+        return fn(bi, bj)
     imin, jmin = int(bi.min()), int(bj.min())
     ni, nj = int(bi.max()) - imin + 1, int(bj.max()) - jmin + 1
     if ni * nj > bi.size:
-        return at(bi, bj)
-    grid = at(np.arange(imin, imin + ni, dtype=np.int64)[None, :],
-              np.arange(jmin, jmin + nj, dtype=np.int64)[:, None]).reshape(-1)
-    return grid.take((bj - jmin) * ni + (bi - imin))
+        return fn(bi, bj)
+    gi = np.broadcast_to(np.arange(imin, imin + ni, dtype=np.int64)[None, :], (nj, ni))
+    gj = np.broadcast_to(np.arange(jmin, jmin + nj, dtype=np.int64)[:, None], (nj, ni))
+    grid = fn(gi.reshape(-1), gj.reshape(-1))
+    lin = (bj - jmin) * ni + (bi - imin)
+    return {k: v.take(lin) for k, v in grid.items()}
+
+
+def _block_attributes(bi: NDArray[np.int64], bj: NDArray[np.int64], seed: int,
+                      config: LandCoverConfig) -> dict[str, NDArray]:
+    """Urban-patch membership and building of each block (pure function of its indices)."""
+    b = config.block_m
+    half = 0.5 * config.street_width_m
+    bseed = derive_seed(seed, "buildings")
+    extra = max(0.25 * (b - config.street_width_m) - config.min_setback_m, 0.0)
+    inner = half + config.min_setback_m
+    lo, hi = config.building_height_range_m
+    dark = hash_uniform(bseed, bi, bj, 6) < config.dark_roof_fraction
+    cx = (bi.astype(np.float64) + 0.5) * b
+    cy = (bj.astype(np.float64) + 0.5) * b
+    urban_thr = fbm_threshold(config.urban_fraction, config.patch_octaves)
+    urban = fbm(cx, cy, derive_seed(seed, "urban-patches"), config.urban_patch_wavelength_m,
+                config.patch_octaves) > urban_thr
+    return {
+        "west": inner + extra * hash_uniform(bseed, bi, bj, 0),
+        "east": b - inner - extra * hash_uniform(bseed, bi, bj, 1),
+        "south": inner + extra * hash_uniform(bseed, bi, bj, 2),
+        "north": b - inner - extra * hash_uniform(bseed, bi, bj, 3),
+        "present": hash_uniform(bseed, bi, bj, 4) < config.building_presence,
+        "height": lo + (hi - lo) * hash_uniform(bseed, bi, bj, 5),
+        "dark": dark,
+        "refl": np.where(dark, 0.05 + 0.05 * hash_uniform(bseed, bi, bj, 7),
+                         0.35 + 0.35 * hash_uniform(bseed, bi, bj, 8)),
+        "urban": urban,
+    }
 
 
 def sample_buildings(x_m: ArrayLike, y_m: ArrayLike, seed: int,
@@ -218,35 +243,20 @@ def sample_buildings(x_m: ArrayLike, y_m: ArrayLike, seed: int,
     ly = y - bj.astype(np.float64) * b
     half = 0.5 * config.street_width_m
     street = (lx < half) | (lx >= b - half) | (ly < half) | (ly >= b - half)
-
-    bseed = derive_seed(seed, "buildings")
-    lot = b - config.street_width_m
-    extra = 0.25 * lot - config.min_setback_m
-    extra = max(extra, 0.0)
-    west = half + config.min_setback_m + extra * hash_uniform(bseed, bi, bj, 0)
-    east = b - half - config.min_setback_m - extra * hash_uniform(bseed, bi, bj, 1)
-    south = half + config.min_setback_m + extra * hash_uniform(bseed, bi, bj, 2)
-    north = b - half - config.min_setback_m - extra * hash_uniform(bseed, bi, bj, 3)
-    present = hash_uniform(bseed, bi, bj, 4) < config.building_presence
-    urban_block = _block_urban(bi, bj, seed, config)
-    in_fp = present & (lx >= west) & (lx < east) & (ly >= south) & (ly < north)
-
-    lo, hi = config.building_height_range_m
-    height = lo + (hi - lo) * hash_uniform(bseed, bi, bj, 5)
-    dark = hash_uniform(bseed, bi, bj, 6) < config.dark_roof_fraction
-    refl = np.where(dark, 0.05 + 0.05 * hash_uniform(bseed, bi, bj, 7),
-                    0.35 + 0.35 * hash_uniform(bseed, bi, bj, 8))
-    base_x = bi.astype(np.float64) * b
-    base_y = bj.astype(np.float64) * b
+    at = _per_block(bi.reshape(-1), bj.reshape(-1),
+                    lambda i, j: _block_attributes(i, j, seed, config))
+    at = {k: v.reshape(x.shape) for k, v in at.items()}
+    in_fp = (at["present"] & (lx >= at["west"]) & (lx < at["east"])
+             & (ly >= at["south"]) & (ly < at["north"]))
     return BuildingSample(
-        urban_block=urban_block,
+        urban_block=at["urban"],
         street=street,
         in_footprint=in_fp,
-        height_m=np.where(in_fp, height, 0.0),
-        dark_roof=dark & in_fp,
-        roof_reflectance=np.where(in_fp, refl, 0.0),
-        centre_x_m=base_x + 0.5 * (west + east),
-        centre_y_m=base_y + 0.5 * (south + north),
+        height_m=np.where(in_fp, at["height"], 0.0),
+        dark_roof=at["dark"] & in_fp,
+        roof_reflectance=np.where(in_fp, at["refl"], 0.0),
+        centre_x_m=bi.astype(np.float64) * b + 0.5 * (at["west"] + at["east"]),
+        centre_y_m=bj.astype(np.float64) * b + 0.5 * (at["south"] + at["north"]),
     )
 
 

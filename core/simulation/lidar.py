@@ -88,7 +88,7 @@ class LidarReturns:
 
 
 def lidar_points(x_min_m: float, y_min_m: float, x_max_m: float, y_max_m: float, seed: int,
-                 spacing_m: float = 3.0, jitter: float = 0.5) -> LidarPoints:
+                 spacing_m: float = 3.0, jitter: float = 0.3) -> LidarPoints:
     """Lidar positions in the half-open box ``[x_min_m, x_max_m) x [y_min_m, y_max_m)``.
 
     Args:
@@ -96,8 +96,8 @@ def lidar_points(x_min_m: float, y_min_m: float, x_max_m: float, y_max_m: float,
         seed: lidar seed.
         spacing_m: lattice spacing; density is ``1 / spacing_m**2`` points per m^2.
         jitter: offsets are uniform in ``+-jitter/2 * spacing_m`` around the cell
-            centre (0 a regular grid, 1 anywhere in the cell). With the default 0.5
-            the mean nearest-neighbour distance is about 0.85 ``spacing_m``.
+            centre (0 a regular grid, 1 anywhere in the cell). With the default 0.3
+            the mean nearest-neighbour distance is about 0.87 ``spacing_m``.
 
     Returns:
         Points ordered by cell row ``j`` then cell column ``i``.

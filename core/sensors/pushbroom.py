@@ -1,0 +1,647 @@
+"""Rigorous SPOT-type pushbroom (linear-array) sensor model.
+
+A line ``row`` is acquired at ``t0_s + row * line_period_s``. At that time the satellite is at the
+interpolated ECEF position of :class:`~core.sensors.orbit.Orbit`, the camera is turned by the
+roll/pitch/yaw polynomials of :class:`~core.sensors.orbit.Attitude` relative to the local orbital
+frame, and detector ``col`` looks along the camera-frame vector ``(x_i, y_i, 1)`` given by
+:mod:`core.sensors.linear_array` (camera geometry + lens distortion). Frames and sign
+conventions are written out in the docstrings of those two modules.
+
+Adjustable parameters (:data:`PARAM_NAMES`, a selection of which is ``model.adjust``) are
+*corrections* added to the delivered model, zero for a model as delivered:
+
+- ``roll_bias, pitch_bias, yaw_bias`` (rad), ``*_rate`` (rad/s), ``*_quad`` (rad/s^2): added to
+  the coefficients c0, c1, c2 of the attitude polynomials (so around ``attitude.t_ref_s``);
+- ``orbit_along_m, orbit_across_m, orbit_radial_m``: a constant position offset along the
+  orbital frame axes X, Y and -Z (radial = up) of the delivered orbit (the frame itself is not
+  re-rotated);
+- ``focal_scale`` (focal length ``f (1 + focal_scale)``), ``k1, k3, p1, p2``: added to the
+  delivered lens distortion (see :mod:`core.sensors.linear_array`).
+
+JSON format (``to_json`` / ``from_json``; also what the scene simulator writes)::
+
+    {
+      "format": "gcpfree.pushbroom", "version": 1,
+      "image": {"n_cols": 6000, "n_rows": 6000},
+      "timing": {"t0_s": 115.6, "line_period_s": 0.00148},
+      "orbit": {"epoch_utc": "2024-06-01T10:30:00Z",  # times_s are seconds since this
+                "times_s": [t, ...], "positions_m": [[x, y, z], ...],
+                "velocities_m_s": [[vx, vy, vz], ...]},              # ECEF
+      "attitude": {"t_ref_s": 120.0, "roll_rad": [c0, c1, ...],
+                   "pitch_rad": [c0, ...], "yaw_rad": [c0, ...]},
+      "camera": {"type": "parametric", "focal_length_m": 1.08, "detector_pitch_m": 6.5e-6,
+                 "n_cols": 6000, "principal_col": 2999.5, "along_track_offset_m": 0.0,
+                 "rotation_rad": 0.0}
+             or {"type": "table", "psi_x_rad": [...], "psi_y_rad": [...]},  # one per column
+      "distortion": {"k1": 0.0, "k3": 0.0, "p1": 0.0, "p2": 0.0},
+      "adjust": ["roll_bias", "pitch_bias", "yaw_bias", "roll_rate", "pitch_rate", "yaw_rate"],
+      "corrections": {"roll_bias": 0.0, ...}   # optional; names of PARAM_NAMES, absent = 0
+    }
+
+Numbers are written with Python's shortest repr, so a round trip is exact. A missing key or a
+value of the wrong type raises :class:`~core.errors.InputError` naming the key path.
+"""
+
+from __future__ import annotations
+
+import json
+from dataclasses import dataclass, field, fields, replace
+from typing import Literal
+
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+
+from core.dem import GeoDEM
+from core.errors import ConvergenceError, GeometryError, InputError
+from core.geodesy import WGS84_A_M, WGS84_B_M, ecef_to_geodetic, geodetic_to_ecef
+from core.sensors import base
+from core.sensors._dictio import get_float, get_int, get_str, get_str_tuple
+from core.sensors.linear_array import (
+    Camera,
+    LensDistortion,
+    LookAngleTable,
+    ParametricCamera,
+    camera_from_dict,
+    ideal_dxy,
+    ideal_from_detector,
+    ideal_partials,
+)
+from core.sensors.orbit import GM_EARTH_M3_S2, Attitude, Orbit, orbital_frame, rotation_rpy
+
+FloatArray = NDArray[np.float64]
+
+FORMAT = "gcpfree.pushbroom"
+ATTITUDE_BIASES = ("roll_bias", "pitch_bias", "yaw_bias")
+ATTITUDE_RATES = ("roll_rate", "pitch_rate", "yaw_rate")
+ATTITUDE_QUADS = ("roll_quad", "pitch_quad", "yaw_quad")
+ORBIT_OFFSETS = ("orbit_along_m", "orbit_across_m", "orbit_radial_m")
+LENS = ("focal_scale", "k1", "k3", "p1", "p2")
+DEFAULT_ADJUST = ATTITUDE_BIASES + ATTITUDE_RATES
+_FD_TIME_S = 0.01  # time step of the finite differences in time (the motion is smooth)
+
+
+@dataclass(frozen=True)
+class Corrections:
+    """Corrections to the delivered model, one per adjustable parameter (units: module doc)."""
+
+    roll_bias: float = 0.0
+    pitch_bias: float = 0.0
+    yaw_bias: float = 0.0
+    roll_rate: float = 0.0
+    pitch_rate: float = 0.0
+    yaw_rate: float = 0.0
+    roll_quad: float = 0.0
+    pitch_quad: float = 0.0
+    yaw_quad: float = 0.0
+    orbit_along_m: float = 0.0
+    orbit_across_m: float = 0.0
+    orbit_radial_m: float = 0.0
+    focal_scale: float = 0.0
+    k1: float = 0.0
+    k3: float = 0.0
+    p1: float = 0.0
+    p2: float = 0.0
+
+    def values(self, names: tuple[str, ...]) -> FloatArray:
+        return np.array([getattr(self, n) for n in names], dtype=np.float64)
+
+    def attitude_delta(self) -> FloatArray:
+        """(3, 3): [roll, pitch, yaw] x [bias, rate, quad]."""
+        return np.array(
+            [[getattr(self, f"{a}_{k}") for k in ("bias", "rate", "quad")]
+             for a in ("roll", "pitch", "yaw")]
+        )
+
+
+PARAM_NAMES: tuple[str, ...] = tuple(f.name for f in fields(Corrections))
+
+
+def _check_adjust(names: tuple[str, ...]) -> tuple[str, ...]:
+    names = tuple(names)
+    bad = [n for n in names if n not in PARAM_NAMES]
+    if bad or len(set(names)) != len(names):
+        raise InputError(
+            f"adjust names {bad or names} are unknown or repeated; choose distinct names "
+            f"among {PARAM_NAMES}"
+        )
+    return names
+
+
+def _flat(*arrays: ArrayLike) -> tuple[tuple[int, ...], list[FloatArray]]:
+    b = np.broadcast_arrays(*(np.asarray(a, dtype=np.float64) for a in arrays))
+    return b[0].shape, [np.ascontiguousarray(a).ravel() for a in b]
+
+
+def enu_axes(lon_deg: FloatArray, lat_deg: FloatArray) -> tuple[FloatArray, ...]:
+    lo, la = np.radians(lon_deg), np.radians(lat_deg)
+    sl, cl, sp, cp = np.sin(lo), np.cos(lo), np.sin(la), np.cos(la)
+    e = np.stack([-sl, cl, np.zeros_like(sl)], axis=-1)
+    n = np.stack([-sp * cl, -sp * sl, cp], axis=-1)
+    u = np.stack([cp * cl, cp * sl, sp], axis=-1)
+    return e, n, u
+
+
+def intersect_ellipsoid(
+    pos_m: FloatArray, u: FloatArray, h_m: FloatArray, *, tol_m: float = 1e-6, max_iter: int = 10
+) -> tuple[FloatArray, FloatArray]:
+    """First point of rays ``pos + s u`` (s > 0) at ellipsoidal height h: (lon, lat) degrees.
+
+    Starts from the ellipsoid inflated by h (a + h, b + h) and corrects along the ray by Newton
+    on the geodetic height (its gradient is the ellipsoid normal), so the result is exact at h.
+    """
+    scale = np.stack([WGS84_A_M + h_m, WGS84_A_M + h_m, WGS84_B_M + h_m], axis=1)
+    ps, us = pos_m / scale, u / scale
+    qa = np.sum(us * us, axis=1)
+    qb = 2.0 * np.sum(ps * us, axis=1)
+    qc = np.sum(ps * ps, axis=1) - 1.0
+    disc = qb * qb - 4.0 * qa * qc
+    if np.any(disc < 0) or np.any(qc <= 0):
+        bad = int(np.sum((disc < 0) | (qc <= 0)))
+        raise GeometryError(
+            f"{bad} lines of sight miss the Earth at the requested height (or start below it); "
+            "check the image coordinates, the heights and the attitude"
+        )
+    s = (-qb - np.sqrt(disc)) / (2.0 * qa)
+    for _ in range(max_iter):
+        x = pos_m + s[:, None] * u
+        lon, lat, h = ecef_to_geodetic(x[:, 0], x[:, 1], x[:, 2])
+        err = h - h_m
+        if np.max(np.abs(err), initial=0.0) <= tol_m:
+            return lon, lat
+        up = enu_axes(lon, lat)[2]
+        s = s - err / np.sum(up * u, axis=1)
+    raise ConvergenceError(
+        f"ray-height intersection did not reach {tol_m} m in {max_iter} iterations; "
+        "the line of sight is probably grazing the Earth"
+    )
+
+
+@dataclass(frozen=True, eq=False)
+class PushbroomModel:
+    """Rigorous linear-array model: (col, row) <-> (lon, lat, h); see the module docstring.
+
+    ``n_rows`` lines starting at ``t0_s`` every ``line_period_s`` seconds; the number of columns
+    is the camera's. ``adjust`` selects which :data:`PARAM_NAMES` form ``params``;
+    ``corrections`` holds the current values of all of them.
+    """
+
+    orbit: Orbit
+    attitude: Attitude
+    camera: Camera
+    n_rows: int
+    t0_s: float
+    line_period_s: float
+    distortion: LensDistortion = field(default_factory=LensDistortion)
+    adjust: tuple[str, ...] = DEFAULT_ADJUST
+    corrections: Corrections = field(default_factory=Corrections)
+
+    def __post_init__(self) -> None:
+        if int(self.n_rows) < 1:
+            raise InputError(f"n_rows must be >= 1, got {self.n_rows}")
+        if not (np.isfinite(self.line_period_s) and self.line_period_s > 0):
+            raise InputError(f"line_period_s must be > 0 s, got {self.line_period_s}")
+        object.__setattr__(self, "n_rows", int(self.n_rows))
+        object.__setattr__(self, "t0_s", float(self.t0_s))
+        object.__setattr__(self, "line_period_s", float(self.line_period_s))
+        object.__setattr__(self, "adjust", _check_adjust(self.adjust))
+
+    # -- parameters ---------------------------------------------------------------------------
+    @property
+    def n_cols(self) -> int:
+        return self.camera.n_cols
+
+    @property
+    def param_names(self) -> tuple[str, ...]:
+        return self.adjust
+
+    @property
+    def params(self) -> FloatArray:
+        """Current corrections of the adjusted parameters (zeros for the delivered model)."""
+        return self.corrections.values(self.adjust)
+
+    def with_params(self, p: ArrayLike) -> PushbroomModel:
+        """A new model whose adjusted corrections are ``p`` (values, not increments)."""
+        p = np.asarray(p, dtype=np.float64).ravel()
+        if p.size != len(self.adjust) or not np.all(np.isfinite(p)):
+            raise InputError(
+                f"with_params needs {len(self.adjust)} finite values for {self.adjust}, "
+                f"got {p.size}"
+            )
+        new = replace(self.corrections, **dict(zip(self.adjust, map(float, p), strict=True)))
+        return replace(self, corrections=new)
+
+    def with_adjust(self, names: tuple[str, ...]) -> PushbroomModel:
+        """The same model with another selection of adjustable parameters (corrections kept)."""
+        return replace(self, adjust=tuple(names))
+
+    # -- geometry -------------------------------------------------------------------------------
+    def line_time_s(self, row: ArrayLike) -> FloatArray:
+        """Acquisition time (s since the orbit epoch) of (fractional) rows."""
+        return self.t0_s + np.asarray(row, dtype=np.float64) * self.line_period_s
+
+    def _lens(self) -> tuple[float, float, float, float, float]:
+        c, d = self.corrections, self.distortion
+        return d.k1 + c.k1, d.k3 + c.k3, d.p1 + c.p1, d.p2 + c.p2, c.focal_scale
+
+    def _ideal(self, col: FloatArray) -> tuple[FloatArray, FloatArray]:
+        return ideal_from_detector(*self.camera.detector_xy(col), *self._lens())
+
+    def _platform(self, t: FloatArray) -> tuple[FloatArray, FloatArray, FloatArray, FloatArray]:
+        """Position (m, 3), camera->ECEF (m, 3, 3), camera->orbital (m, 3, 3), angles (3, m)."""
+        pos, vel = self.orbit.interpolate(t)
+        frame = orbital_frame(pos, vel)
+        c = self.corrections
+        off = np.array([c.orbit_along_m, c.orbit_across_m, -c.orbit_radial_m])
+        if np.any(off):
+            pos = pos + frame @ off
+        ang = self.attitude.angles(t, c.attitude_delta())
+        rot = rotation_rpy(*ang)
+        return pos, frame @ rot, rot, ang
+
+    def _localize_t(self, col: FloatArray, t: FloatArray, h: FloatArray) -> tuple[FloatArray, ...]:
+        pos, cam2ecef, _, _ = self._platform(t)
+        xi, yi = self._ideal(col)
+        u = np.einsum("mij,mj->mi", cam2ecef, np.stack([xi, yi, np.ones_like(xi)], axis=1))
+        u /= np.linalg.norm(u, axis=1, keepdims=True)
+        return intersect_ellipsoid(pos, u, h)
+
+    def localize(
+        self, col: ArrayLike, row: ArrayLike, h_m: ArrayLike
+    ) -> tuple[FloatArray, FloatArray]:
+        """Image (col, row) at ellipsoidal height h (m) -> ground (lon, lat) degrees, exact at h."""
+        shape, (c, r, h) = _flat(col, row, h_m)
+        lon, lat = self._localize_t(c, self.line_time_s(r), h)
+        return lon.reshape(shape), lat.reshape(shape)
+
+    def localize_on_dem(
+        self, col: ArrayLike, row: ArrayLike, dem: GeoDEM, **kwargs: object
+    ) -> tuple[FloatArray, FloatArray, FloatArray]:
+        """Lines of sight met with a DEM: (lon, lat, h); see :func:`core.sensors.base.localize_on_dem`."""
+        return base.localize_on_dem(self, col, row, dem, **kwargs)  # type: ignore[arg-type]
+
+    def _observe(self, t: FloatArray, g: FloatArray) -> tuple[FloatArray, FloatArray, FloatArray]:
+        """Camera-frame vector to ground points g at times t: (x/z, y/z, z)."""
+        pos, cam2ecef, _, _ = self._platform(t)
+        v = np.einsum("mji,mj->mi", cam2ecef, g - pos)
+        return v[:, 0] / v[:, 2], v[:, 1] / v[:, 2], v[:, 2]
+
+    def _d_observe_dt(self, t: FloatArray, g: FloatArray) -> tuple[FloatArray, FloatArray]:
+        xp, yp, _ = self._observe(t + _FD_TIME_S, g)
+        xm, ym, _ = self._observe(t - _FD_TIME_S, g)
+        return (xp - xm) / (2 * _FD_TIME_S), (yp - ym) / (2 * _FD_TIME_S)
+
+    def _ideal_and_dcol(self, col: FloatArray) -> tuple[FloatArray, ...]:
+        x, y = self.camera.detector_xy(col)
+        lens = self._lens()
+        xi, yi = ideal_from_detector(x, y, *lens)
+        a, b, c, d = ideal_dxy(x, y, *lens)
+        dx, dy = self.camera.detector_xy_dcol(col)
+        return xi, yi, a * dx + b * dy, c * dx + d * dy
+
+    def _solve_time_col(
+        self, g: FloatArray, tol_px: float, max_iter: int
+    ) -> tuple[FloatArray, FloatArray]:
+        """Newton on (t, col) so that detector col sees ground points g (m, 3) at time t."""
+        m = g.shape[0]
+        t = np.full(m, self.t0_s + 0.5 * (self.n_rows - 1) * self.line_period_s)
+        c = np.full(m, 0.5 * (self.n_cols - 1))
+        todo = np.arange(m)
+        for _ in range(max_iter):
+            if todo.size == 0:
+                break
+            ga, ta, ca = g[todo], t[todo], c[todo]
+            ox, oy, vz = self._observe(ta, ga)
+            xp, yp, _ = self._observe(ta + _FD_TIME_S, ga)
+            dox, doy = (xp - ox) / _FD_TIME_S, (yp - oy) / _FD_TIME_S
+            xi, yi, dxi, dyi = self._ideal_and_dcol(ca)
+            fx, fy = xi - ox, yi - oy
+            det = dxi * doy - dox * dyi
+            step_t = (fx * dyi - dxi * fy) / det
+            step_c = (doy * fx - dox * fy) / det
+            t[todo] = ta - step_t
+            c[todo] = ca - step_c
+            done = (np.abs(step_c) <= tol_px) & (np.abs(step_t) <= tol_px * self.line_period_s)
+            if np.any(done & (vz <= 0)):
+                raise GeometryError(
+                    f"{int(np.sum(done & (vz <= 0)))} ground points lie behind the camera; "
+                    "they cannot be projected into this image"
+                )
+            todo = todo[~(done | ~np.isfinite(step_c))]
+        if todo.size:
+            raise ConvergenceError(
+                f"project did not converge to {tol_px} px for {todo.size} of {m} points in "
+                f"{max_iter} iterations; check that the points are near the scene and finite"
+            )
+        return t, c
+
+    def project(
+        self,
+        lon_deg: ArrayLike,
+        lat_deg: ArrayLike,
+        h_m: ArrayLike,
+        *,
+        tol_px: float = 1e-8,
+        max_iter: int = 30,
+    ) -> tuple[FloatArray, FloatArray]:
+        """Ground (lon, lat degrees, h metres) -> image (col, row) pixels.
+
+        Solves jointly, by vectorised Newton, for the acquisition time (the point lies in the
+        instantaneous plane of the detector line) and the column (distortion and CCD rotation
+        included). Raises ConvergenceError if a point does not converge to ``tol_px``.
+        """
+        shape, (lon, lat, h) = _flat(lon_deg, lat_deg, h_m)
+        if not (np.all(np.isfinite(lon)) and np.all(np.isfinite(lat)) and np.all(np.isfinite(h))):
+            raise InputError("project got NaN or inf coordinates; drop those points first")
+        g = np.stack(geodetic_to_ecef(lon, lat, h), axis=1)
+        t, c = self._solve_time_col(g, tol_px, max_iter)
+        row = (t - self.t0_s) / self.line_period_s
+        return c.reshape(shape), row.reshape(shape)
+
+    def viewing_geometry(
+        self, col: ArrayLike, row: ArrayLike, h_m: ArrayLike
+    ) -> tuple[FloatArray, FloatArray, FloatArray]:
+        """(incidence_deg, across_track_incidence_deg, slant_range_m) at image points.
+
+        Incidence is the angle at the ground between the local vertical and the direction to the
+        satellite; the across-track one is measured in the vertical plane across the ground track
+        and is positive when the satellite is west of the point (the view looks east).
+        """
+        shape, (c, r, h) = _flat(col, row, h_m)
+        t = self.line_time_s(r)
+        lon, lat = self._localize_t(c, t, h)
+        g = np.stack(geodetic_to_ecef(lon, lat, h), axis=1)
+        pos, vel = self.orbit.interpolate(t)
+        inc, across, rng = incidences(pos, vel, g, lon, lat)
+        return np.degrees(inc).reshape(shape), np.degrees(across).reshape(shape), rng.reshape(shape)
+
+    # -- Jacobians ----------------------------------------------------------------------------
+    def jacobian(
+        self,
+        lon_deg: ArrayLike,
+        lat_deg: ArrayLike,
+        h_m: ArrayLike,
+        *,
+        method: Literal["analytic", "numeric"] = "analytic",
+    ) -> FloatArray:
+        """d(col, row)/d(params) at ground points: shape (n, 2, len(adjust)), pixels per unit.
+
+        ``analytic`` differentiates the collinearity condition in closed form for every
+        parameter and solves the implicit-function system (only d/dt of the motion uses a
+        central difference); ``numeric`` takes central differences of ``project``.
+        """
+        _, (lon, lat, h) = _flat(lon_deg, lat_deg, h_m)
+        if method == "numeric":
+            return self._jacobian_numeric(lon, lat, h)
+        if method != "analytic":
+            raise InputError(f"jacobian method must be 'analytic' or 'numeric', got {method!r}")
+        g = np.stack(geodetic_to_ecef(lon, lat, h), axis=1)
+        t, col = self._solve_time_col(g, 1e-8, 30)
+        return self._jacobian_analytic(g, t, col)
+
+    def _jacobian_analytic(self, g: FloatArray, t: FloatArray, col: FloatArray) -> FloatArray:
+        pos, cam2ecef, rot, ang = self._platform(t)
+        v = np.einsum("mji,mj->mi", cam2ecef, g - pos)
+        dox, doy = self._d_observe_dt(t, g)
+        xd, yd = self.camera.detector_xy(col)
+        xi, yi, dxi, dyi = self._ideal_and_dcol(col)
+        cr, sr, cp, sp = np.cos(ang[0]), np.sin(ang[0]), np.cos(ang[1]), np.sin(ang[1])
+        zero, one = np.zeros_like(cr), np.ones_like(cr)
+        axes = {  # rotation axes of roll, pitch, yaw expressed in the camera frame
+            "roll": np.stack([one, zero, zero], axis=1),
+            "pitch": np.stack([zero, cr, -sr], axis=1),
+            "yaw": np.stack([-sp, sr * cp, cr * cp], axis=1),
+        }
+        lens = ideal_partials(xd, yd, xi, yi, self.corrections.focal_scale)
+        dt_ref = t - self.attitude.t_ref_s
+        order = {"bias": 0, "rate": 1, "quad": 2}
+        orbit_dir = {"orbit_along_m": (0, -1.0), "orbit_across_m": (1, -1.0),
+                     "orbit_radial_m": (2, 1.0)}
+        fp = np.empty((t.size, 2, len(self.adjust)))
+        for k, name in enumerate(self.adjust):
+            if name in lens:
+                fp[:, 0, k], fp[:, 1, k] = lens[name]
+                continue
+            if name in orbit_dir:
+                i, sign = orbit_dir[name]
+                dv = sign * rot[:, i, :]
+            else:
+                angle, kind = name.split("_")
+                dv = -np.cross(axes[angle], v) * (dt_ref ** order[kind])[:, None]
+            fp[:, 0, k] = -(dv[:, 0] * v[:, 2] - v[:, 0] * dv[:, 2]) / v[:, 2] ** 2
+            fp[:, 1, k] = -(dv[:, 1] * v[:, 2] - v[:, 1] * dv[:, 2]) / v[:, 2] ** 2
+        # F = ideal(col) - observed(t) = 0  =>  [dF/dt dF/dcol] d(t, col) = -dF/dp
+        a, b, c, d = -dox, dxi, -doy, dyi
+        det = (a * d - b * c)[:, None]
+        d_t = -(d[:, None] * fp[:, 0] - b[:, None] * fp[:, 1]) / det
+        d_col = -(a[:, None] * fp[:, 1] - c[:, None] * fp[:, 0]) / det
+        return np.stack([d_col, d_t / self.line_period_s], axis=1)
+
+    def numeric_steps(self) -> FloatArray:
+        """Central-difference steps of the adjusted parameters (each moves ~0.1 px at most)."""
+        ifov = 0.1 * self.camera.ifov_rad
+        half_s = max(0.5 * self.n_rows * self.line_period_s, 1.0)
+        x, y = self.camera.detector_xy(np.array([0.0, self.n_cols - 1.0]))
+        r = max(float(np.max(np.hypot(x, y))), 1e-3)
+        base_steps = {"bias": ifov, "rate": ifov / half_s, "quad": ifov / half_s**2}
+        lens = {"focal_scale": ifov / r, "k1": ifov / r, "k3": ifov / r**3,
+                "p1": ifov / r**2, "p2": ifov / r**2}
+        out = []
+        for name in self.adjust:
+            if name in lens:
+                out.append(lens[name])
+            elif name.startswith("orbit_"):
+                out.append(0.1)
+            else:
+                out.append(base_steps[name.split("_")[1]])
+        return np.array(out)
+
+    def _jacobian_numeric(self, lon: FloatArray, lat: FloatArray, h: FloatArray) -> FloatArray:
+        p0, steps = self.params, self.numeric_steps()
+        out = np.empty((lon.size, 2, p0.size))
+        for k in range(p0.size):
+            dp = np.zeros_like(p0)
+            dp[k] = steps[k]
+            cp, rp = self.with_params(p0 + dp).project(lon, lat, h)
+            cm, rm = self.with_params(p0 - dp).project(lon, lat, h)
+            out[:, 0, k] = (cp - cm) / (2 * steps[k])
+            out[:, 1, k] = (rp - rm) / (2 * steps[k])
+        return out
+
+    # -- serialisation ------------------------------------------------------------------------
+    def to_dict(self) -> dict:
+        """The whole model as a JSON-ready dict (format in the module docstring)."""
+        return {
+            "format": FORMAT,
+            "version": 1,
+            "image": {"n_cols": self.n_cols, "n_rows": self.n_rows},
+            "timing": {"t0_s": self.t0_s, "line_period_s": self.line_period_s},
+            "orbit": self.orbit.to_dict(),
+            "attitude": self.attitude.to_dict(),
+            "camera": self.camera.to_dict(),
+            "distortion": self.distortion.to_dict(),
+            "adjust": list(self.adjust),
+            "corrections": {n: getattr(self.corrections, n) for n in PARAM_NAMES},
+        }
+
+    @classmethod
+    def from_dict(cls, d: object) -> PushbroomModel:
+        """Read a model dict; InputError names any missing or mistyped key."""
+        fmt = get_str(d, "format", "")
+        if fmt != FORMAT:
+            raise InputError(f"key 'format' is {fmt!r}, not {FORMAT!r}: not a pushbroom model")
+        camera = camera_from_dict(get_dict(d, "camera"))
+        n_cols = get_int(get_dict(d, "image"), "n_cols", "image")
+        if n_cols != camera.n_cols:
+            raise InputError(
+                f"key 'image.n_cols' ({n_cols}) differs from the camera's {camera.n_cols} columns"
+            )
+        corr = d.get("corrections", {})  # type: ignore[union-attr]
+        if not isinstance(corr, dict) or any(k not in PARAM_NAMES for k in corr):
+            raise InputError(
+                f"key 'corrections' must map names among {PARAM_NAMES} to numbers, got {corr!r:.80}"
+            )
+        timing = get_dict(d, "timing")
+        return cls(
+            orbit=Orbit.from_dict(get_dict(d, "orbit")),
+            attitude=Attitude.from_dict(get_dict(d, "attitude")),
+            camera=camera,
+            n_rows=get_int(get_dict(d, "image"), "n_rows", "image"),
+            t0_s=get_float(timing, "t0_s", "timing"),
+            line_period_s=get_float(timing, "line_period_s", "timing"),
+            distortion=LensDistortion.from_dict(get_dict(d, "distortion")),
+            adjust=get_str_tuple(d, "adjust", ""),
+            corrections=Corrections(**{k: get_float(corr, k, "corrections") for k in corr}),
+        )
+
+    def to_json(self, indent: int | None = None) -> str:
+        return json.dumps(self.to_dict(), indent=indent)
+
+    @classmethod
+    def from_json(cls, text: str) -> PushbroomModel:
+        try:
+            d = json.loads(text)
+        except json.JSONDecodeError as exc:
+            raise InputError(f"pushbroom model JSON is not valid JSON: {exc}") from exc
+        return cls.from_dict(d)
+
+    # -- simulation ---------------------------------------------------------------------------
+    @classmethod
+    def synthetic(
+        cls,
+        center_lon_deg: float,
+        center_lat_deg: float,
+        *,
+        center_h_m: float = 0.0,
+        n_cols: int = 6000,
+        n_rows: int = 6000,
+        gsd_m: float = 10.0,
+        incidence_deg: float = 0.0,
+        pitch_deg: float = 0.0,
+        altitude_m: float = 822e3,
+        inclination_deg: float = 98.7,
+        ascending: bool = False,
+        detector_pitch_m: float = 6.5e-6,
+        along_track_offset_m: float = 0.0,
+        ccd_rotation_rad: float = 0.0,
+        distortion: LensDistortion | None = None,
+        state_vector_spacing_s: float = 30.0,
+        n_state_vectors: int | None = None,
+        epoch_utc: str = "2024-06-01T10:00:00Z",
+        adjust: tuple[str, ...] = DEFAULT_ADJUST,
+    ) -> PushbroomModel:
+        """A SPOT-like scene whose centre pixel sees (center_lon, center_lat, center_h_m).
+
+        Orbit: circular Keplerian, radius ``WGS84 a + altitude_m``, inclination
+        ``inclination_deg`` (98.7: near-polar, sun-synchronous like SPOT), descending over the
+        scene unless ``ascending``; Earth rotation included (ECEF state vectors every
+        ``state_vector_spacing_s`` s, by default enough to cover the acquisition with >= 4
+        samples of margin on each side; ``n_state_vectors`` overrides the count).
+        Pointing: ``incidence_deg`` is the across-track incidence at the scene centre (angle at
+        the ground from the vertical, in the plane across the track; positive = the satellite is
+        west of the scene, looking east), reached by rolling the camera (a mirror, as on SPOT);
+        ``pitch_deg`` tilts the camera forward (> 0) or aft (< 0) like HRS (+-20 deg stereo).
+        Camera: ``n_cols`` detectors of ``detector_pitch_m`` with the focal length that gives a
+        ground sample of ``gsd_m`` across track at the scene centre; the line period gives
+        ``gsd_m`` along track there too. ``along_track_offset_m``, ``ccd_rotation_rad`` and
+        ``distortion`` shape the focal plane (see ParametricCamera, LensDistortion). Times are
+        seconds since ``epoch_utc``, the first state vector. Valid for |lat| up to about 75 deg.
+        """
+        from core.sensors.pushbroom_synthetic import SyntheticGeometry, check_synthetic
+
+        dist = LensDistortion() if distortion is None else distortion
+        check_synthetic(center_lat_deg, n_cols, n_rows, gsd_m, incidence_deg, pitch_deg,
+                         altitude_m, inclination_deg, state_vector_spacing_s)
+        radius = WGS84_A_M + altitude_m
+        v_ground = np.sqrt(GM_EARTH_M3_S2 / radius) * WGS84_A_M / radius
+        duration = 1.5 * n_rows * gsd_m / v_ground
+        n_sv = int(np.ceil(duration / state_vector_spacing_s)) + 10
+        n_sv = n_sv if n_state_vectors is None else int(n_state_vectors)
+        times = np.arange(n_sv) * state_vector_spacing_s
+        t_c = 0.5 * (times[0] + times[-1])
+        geo = SyntheticGeometry(
+            target=(center_lon_deg, center_lat_deg, center_h_m), t_c=t_c, times=times,
+            radius=radius, inclination=np.radians(inclination_deg), ascending=ascending,
+            pitch=np.radians(pitch_deg), epoch_utc=epoch_utc, n_rows=n_rows, distortion=dist,
+            camera=ParametricCamera(
+                focal_length_m=detector_pitch_m * altitude_m / gsd_m,
+                detector_pitch_m=detector_pitch_m, n_cols=n_cols,
+                along_track_offset_m=along_track_offset_m, rotation_rad=ccd_rotation_rad,
+            ),
+        )
+        model = geo.solve(np.radians(incidence_deg), gsd_m)
+        model = replace(model, adjust=_check_adjust(adjust))
+        t_end = model.line_time_s(n_rows - 1)
+        if model.t0_s < times[min(3, n_sv - 1)] or t_end > times[max(n_sv - 4, 0)]:
+            raise InputError(
+                f"{n_sv} state vectors every {state_vector_spacing_s} s do not cover the "
+                f"acquisition ({model.t0_s:.1f}..{t_end:.1f} s) with 3 samples of margin; "
+                "leave n_state_vectors to its default or raise it"
+            )
+        return model
+
+
+def get_dict(d: object, key: str) -> dict:
+    """``d[key]`` that must be a JSON object."""
+    if not isinstance(d, dict):
+        raise InputError(f"a pushbroom model must be a JSON object, got {type(d).__name__}")
+    if key not in d:
+        raise InputError(f"pushbroom model: key '{key}' is missing; add it (format in pushbroom.py)")
+    if not isinstance(d[key], dict):
+        raise InputError(f"pushbroom model: key '{key}' must be a JSON object, got {d[key]!r:.80}")
+    return d[key]
+
+
+def incidences(
+    pos: FloatArray, vel: FloatArray, g: FloatArray, lon: FloatArray, lat: FloatArray
+) -> tuple[FloatArray, FloatArray, FloatArray]:
+    """(incidence, signed across-track incidence) radians and slant range m; see viewing_geometry."""
+    e, n, u = enu_axes(lon, lat)
+    s = pos - g
+    rng = np.linalg.norm(s, axis=1)
+    se, sn, su = (np.sum(s * a, axis=1) for a in (e, n, u))
+    ae, an = np.sum(vel * e, axis=1), np.sum(vel * n, axis=1)
+    norm = np.hypot(ae, an)
+    ce, cn = an / norm, -ae / norm  # horizontal, perpendicular to the track
+    flip = np.where(ce < 0, -1.0, 1.0)  # make it point east
+    across = np.arctan2(-(se * ce + sn * cn) * flip, su)
+    inc = np.arccos(np.clip(su / rng, -1.0, 1.0))
+    return inc, across, rng
+
+
+__all__ = [
+    "ATTITUDE_BIASES",
+    "ATTITUDE_QUADS",
+    "ATTITUDE_RATES",
+    "DEFAULT_ADJUST",
+    "LENS",
+    "ORBIT_OFFSETS",
+    "PARAM_NAMES",
+    "Attitude",
+    "Corrections",
+    "LensDistortion",
+    "LookAngleTable",
+    "Orbit",
+    "ParametricCamera",
+    "PushbroomModel",
+    "intersect_ellipsoid",
+]
