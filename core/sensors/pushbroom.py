@@ -387,7 +387,7 @@ class PushbroomModel:
 
         ``analytic`` differentiates the collinearity condition in closed form for every
         parameter and solves the implicit-function system (only d/dt of the motion uses a
-        central difference); ``numeric`` takes central differences of ``project``.
+        central difference); ``numeric`` takes 4th-order central differences of ``project``.
         """
         _, (lon, lat, h) = _flat(lon_deg, lat_deg, h_m)
         if method == "numeric":
@@ -437,8 +437,8 @@ class PushbroomModel:
         return np.stack([d_col, d_t / self.line_period_s], axis=1)
 
     def numeric_steps(self) -> FloatArray:
-        """Central-difference steps of the adjusted parameters (each moves ~0.1 px at most)."""
-        ifov = 0.1 * self.camera.ifov_rad
+        """Finite-difference steps of the adjusted parameters (each moves ~1 px at most)."""
+        ifov = self.camera.ifov_rad
         half_s = max(0.5 * self.n_rows * self.line_period_s, 1.0)
         x, y = self.camera.detector_xy(np.array([0.0, self.n_cols - 1.0]))
         r = max(float(np.max(np.hypot(x, y))), 1e-3)
@@ -450,21 +450,22 @@ class PushbroomModel:
             if name in lens:
                 out.append(lens[name])
             elif name.startswith("orbit_"):
-                out.append(0.1)
+                out.append(ifov * 5e5)  # ~0.5 px at a typical range
             else:
                 out.append(base_steps[name.split("_")[1]])
         return np.array(out)
 
     def _jacobian_numeric(self, lon: FloatArray, lat: FloatArray, h: FloatArray) -> FloatArray:
+        """Fourth-order central differences (steps +-h, +-2h) of ``project``."""
         p0, steps = self.params, self.numeric_steps()
         out = np.empty((lon.size, 2, p0.size))
         for k in range(p0.size):
-            dp = np.zeros_like(p0)
-            dp[k] = steps[k]
-            cp, rp = self.with_params(p0 + dp).project(lon, lat, h)
-            cm, rm = self.with_params(p0 - dp).project(lon, lat, h)
-            out[:, 0, k] = (cp - cm) / (2 * steps[k])
-            out[:, 1, k] = (rp - rm) / (2 * steps[k])
+            val = []
+            for mult in (1.0, -1.0, 2.0, -2.0):
+                dp = np.zeros_like(p0)
+                dp[k] = mult * steps[k]
+                val.append(np.stack(self.with_params(p0 + dp).project(lon, lat, h), axis=1))
+            out[:, :, k] = (8.0 * (val[0] - val[1]) - (val[2] - val[3])) / (12.0 * steps[k])
         return out
 
     # -- serialisation ------------------------------------------------------------------------

@@ -482,21 +482,33 @@ class RPCModel:
         """
         x, y = x.copy(), y.copy()
         todo = np.arange(x.size)
-        for _ in range(max_iter + 1):
-            pc, pr, jac = self._jacobian_norm(x[todo], y[todo], z[todo])
-            ec, er = tc[todo] - pc, tr[todo] - pr
-            done = np.hypot(ec, er) <= tol_px
-            keep = ~done
-            todo, ec, er, jac = todo[keep], ec[keep], er[keep], jac[:, :, keep]
-            if todo.size == 0:
-                break
-            det = jac[0, 0] * jac[1, 1] - jac[0, 1] * jac[1, 0]
-            with np.errstate(divide="ignore", invalid="ignore"):
-                dx = (jac[1, 1] * ec - jac[0, 1] * er) / det
-                dy = (jac[0, 0] * er - jac[1, 0] * ec) / det
-            x[todo] += dx
-            y[todo] += dy
+        with np.errstate(all="ignore"):  # diverging points go NaN and are counted as failed
+            for _ in range(max_iter + 1):
+                todo = self._newton_step(tc, tr, z, x, y, todo, tol_px)
+                if todo.size == 0:
+                    break
         return x, y, todo
+
+    def _newton_step(
+        self,
+        tc: FloatArray,
+        tr: FloatArray,
+        z: FloatArray,
+        x: FloatArray,
+        y: FloatArray,
+        todo: NDArray[np.intp],
+        tol_px: float,
+    ) -> NDArray[np.intp]:
+        """One Newton update of x, y (in place) at the points ``todo`` that are not yet within
+        ``tol_px``; returns the points still to do."""
+        pc, pr, jac = self._jacobian_norm(x[todo], y[todo], z[todo])
+        ec, er = tc[todo] - pc, tr[todo] - pr
+        keep = ~(np.hypot(ec, er) <= tol_px)
+        todo, ec, er, jac = todo[keep], ec[keep], er[keep], jac[:, :, keep]
+        det = jac[0, 0] * jac[1, 1] - jac[0, 1] * jac[1, 0]
+        x[todo] += (jac[1, 1] * ec - jac[0, 1] * er) / det
+        y[todo] += (jac[0, 0] * er - jac[1, 0] * ec) / det
+        return todo
 
     def localize_on_dem(
         self, col: ArrayLike, row: ArrayLike, dem: GeoDEM

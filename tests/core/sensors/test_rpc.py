@@ -171,6 +171,22 @@ def test_convergence_error_counts_points(ventoux):
         ventoux.localize([0.0, 1.0, 2.0], [0.0, 1.0, 2.0], 500.0, max_iter=0)
 
 
+def test_far_outside_the_domain_raises_convergence_error():
+    d = load(DIMAP_VENTOUX)
+    with pytest.raises(ConvergenceError, match="1 of 2 points"):
+        d.localize([1e9, 100.0], [1e9, 100.0], 500.0)
+
+
+def test_a_wrong_inverse_polynomial_still_localizes_exactly():
+    kw = load(DIMAP_VENTOUX).to_dict()
+    kw["lon_num"] = (np.array(kw["lon_num"]) * 40).tolist()
+    kw["lat_den"] = (np.array(kw["lat_den"]) + 0.9).tolist()
+    bad = RPCModel.from_dict(kw)
+    col, row = np.linspace(0, 39_000, 50), np.linspace(0, 41_000, 50)
+    c, r = bad.project(*bad.localize(col, row, 500.0), 500.0)
+    assert np.max(np.hypot(c - col, r - row)) < 1e-6
+
+
 def test_localize_on_dem_flat(ventoux):
     lon0, lat0 = ventoux.lon_off, ventoux.lat_off
     g = np.arange(-0.05, 0.05001, 0.001)
