@@ -7,13 +7,93 @@ import tempfile
 import threading
 from pathlib import Path
 
+from typing import Any
+
 import dask
+import dask.array as darr
+import numpy as np
 import rasterio
+import rasterio.io
 import rasterio.shutil
 import xarray as xr
+from affine import Affine
+from rasterio.rpc import RPC
+from rasterio.windows import Window
 
 # GDAL block cache while building a COG: bounded so memory stays flat on large rasters
 COG_CACHE_MB = 256
+
+
+class _WindowWriter:
+    """A ``dask.array.store`` target writing 2-D blocks into an open rasterio dataset."""
+
+    def __init__(self, dst: rasterio.io.DatasetWriter, lock: threading.Lock) -> None:
+        self.dst = dst
+        self.lock = lock
+
+    def __setitem__(self, key: tuple[slice, slice], value: np.ndarray) -> None:
+        rows, cols = key
+        window = Window.from_slices(rows, cols, height=self.dst.height, width=self.dst.width)
+        with self.lock:
+            self.dst.write(value, 1, window=window)
+
+
+def write_array_cog(
+    data: darr.Array | np.ndarray,
+    out: str | Path,
+    *,
+    transform: Affine | None = None,
+    crs: Any = None,
+    nodata: float | int | None = None,
+    rpcs: RPC | None = None,
+    tags: dict[str, str] | None = None,
+    resampling: str = "average",
+    predictor: int | None = None,
+    blocksize: int = 512,
+) -> Path:
+    """Write a 2-D (Dask) array to ``out`` as a Cloud-Optimized GeoTIFF, atomically.
+
+    Blocks are computed by Dask threads and streamed into a tiled GeoTIFF under one
+    write lock (memory stays bounded), then GDAL's COG driver copies it with
+    overviews. Raw sensor images pass ``rpcs`` and no transform. Everything happens
+    in a temporary folder beside ``out``; the finished file replaces ``out`` by a
+    rename, so a failure never leaves a half-written product and an earlier product
+    at ``out`` survives a failed rerun.
+    """
+    out = Path(out)
+    out.parent.mkdir(parents=True, exist_ok=True)
+    arr = data if isinstance(data, darr.Array) else darr.from_array(np.asarray(data), chunks=1024)
+    if arr.ndim != 2:
+        raise ValueError(f"write_array_cog writes one band, got an array of shape {arr.shape}")
+    dtype = np.dtype(arr.dtype)
+    if predictor is None:
+        predictor = 3 if dtype.kind == "f" else 2
+    profile: dict[str, Any] = dict(
+        driver="GTiff", width=arr.shape[1], height=arr.shape[0], count=1, dtype=dtype.name,
+        tiled=True, blockxsize=blocksize, blockysize=blocksize, compress="DEFLATE",
+        BIGTIFF="IF_SAFER", nodata=nodata,
+    )
+    if transform is not None:
+        profile.update(transform=transform, crs=crs)
+    if rpcs is not None:
+        profile["rpcs"] = rpcs
+    with tempfile.TemporaryDirectory(dir=out.parent, prefix=f".{out.name}.tmp") as tmp:
+        tiled = Path(tmp) / "tiled.tif"
+        cog = Path(tmp) / "cog.tif"
+        with rasterio.open(tiled, "w", **profile) as dst:
+            if tags:
+                dst.update_tags(**tags)
+            with dask.config.set(scheduler="threads"):
+                darr.store(arr, _WindowWriter(dst, threading.Lock()), lock=False)
+        with rasterio.Env(GDAL_CACHEMAX=COG_CACHE_MB):
+            rasterio.shutil.copy(
+                tiled, cog, driver="COG", COMPRESS="DEFLATE",
+                PREDICTOR=str(predictor) if predictor else "NO", BLOCKSIZE=str(blocksize),
+                OVERVIEWS="AUTO", RESAMPLING=resampling.upper(), BIGTIFF="IF_SAFER",
+            )
+        _chmod_default(cog)
+        os.replace(cog, out)
+    return out
 
 
 def write_cog(
@@ -21,48 +101,16 @@ def write_cog(
     out: str | Path,
     *,
     resampling: str = "average",
-    predictor: int = 3,
+    predictor: int | None = None,
     blocksize: int = 512,
 ) -> Path:
-    """Write a (lazy) georeferenced DataArray to ``out`` as a Cloud-Optimized GeoTIFF.
-
-    The array is streamed block by block into a tiled GeoTIFF (Dask threads, one
-    write lock), then GDAL's COG driver copies it with overviews. Everything
-    happens in a temporary folder beside ``out``; the finished file replaces
-    ``out`` atomically, so a failure never leaves a half-written product and an
-    earlier product at ``out`` survives a failed rerun.
-    """
-    out = Path(out)
-    out.parent.mkdir(parents=True, exist_ok=True)
-    with tempfile.TemporaryDirectory(dir=out.parent, prefix=f".{out.name}.tmp") as tmp:
-        tiled = Path(tmp) / "tiled.tif"
-        cog = Path(tmp) / "cog.tif"
-        with dask.config.set(scheduler="threads"):
-            da.rio.to_raster(
-                tiled,
-                driver="GTiff",
-                tiled=True,
-                blockxsize=blocksize,
-                blockysize=blocksize,
-                compress="DEFLATE",
-                BIGTIFF="IF_SAFER",
-                lock=threading.Lock(),
-            )
-        with rasterio.Env(GDAL_CACHEMAX=COG_CACHE_MB):
-            rasterio.shutil.copy(
-                tiled,
-                cog,
-                driver="COG",
-                COMPRESS="DEFLATE",
-                PREDICTOR=str(predictor) if predictor else "NO",
-                BLOCKSIZE=str(blocksize),
-                OVERVIEWS="AUTO",
-                RESAMPLING=resampling.upper(),
-                BIGTIFF="IF_SAFER",
-            )
-        _chmod_default(cog)
-        os.replace(cog, out)
-    return out
+    """Write a georeferenced 2-D DataArray (rioxarray CRS, transform, nodata) as a COG."""
+    tags = {k: str(v) for k, v in da.attrs.items() if isinstance(v, (str, int, float))}
+    return write_array_cog(
+        da.data, out, transform=da.rio.transform(recalc=True), crs=da.rio.crs,
+        nodata=da.rio.nodata if da.rio.encoded_nodata is None else da.rio.encoded_nodata,
+        tags=tags, resampling=resampling, predictor=predictor, blocksize=blocksize,
+    )
 
 
 def _chmod_default(path: Path | str) -> None:

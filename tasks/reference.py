@@ -126,7 +126,7 @@ def build_reference(
                 *counts, darr.nanmin(h.data), darr.nanmax(h.data),
                 darr.nanmin(H.data), darr.nanmax(H.data),
             )
-        write_cog(voids, mask_path, resampling="nearest", predictor=0)
+        write_cog(voids, mask_path, resampling="nearest")
         write_cog(h, out)
     n_cov = int(n_valid) + int(n_void)
     total = n_cov + int(n_unc)

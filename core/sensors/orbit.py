@@ -152,12 +152,18 @@ class Attitude:
     in rad, rad/s, rad/s^2... Angles rotate the camera frame into the local orbital frame (see the
     module docstring). A side-looking SPOT scene carries its mirror angle in ``roll_rad[0]``, a
     fore/aft stereo instrument its tilt in ``pitch_rad[0]``.
+
+    ``jitter`` adds high-frequency terms that no low-order polynomial absorbs: each
+    ``(axis, amplitude_rad, frequency_hz, phase_rad)`` adds
+    ``amplitude * sin(2 pi frequency (t - t_ref) + phase)`` to roll (axis 0), pitch (1) or
+    yaw (2). Delivered metadata have none; the scene simulator's truth models may.
     """
 
     t_ref_s: float
     roll_rad: tuple[float, ...] = (0.0,)
     pitch_rad: tuple[float, ...] = (0.0,)
     yaw_rad: tuple[float, ...] = (0.0,)
+    jitter: tuple[tuple[int, float, float, float], ...] = ()
     _coeffs: FloatArray = field(init=False, repr=False, compare=False)
 
     def __post_init__(self) -> None:
@@ -175,6 +181,21 @@ class Attitude:
             coeffs[i, : len(c)] = c
         coeffs.setflags(write=False)
         object.__setattr__(self, "_coeffs", coeffs)
+        terms = []
+        for term in self.jitter:
+            if len(term) != 4:
+                raise InputError(
+                    f"attitude jitter term {term!r} must be (axis, amplitude_rad, frequency_hz, "
+                    "phase_rad)"
+                )
+            axis, amp, freq, phase = int(term[0]), float(term[1]), float(term[2]), float(term[3])
+            if axis not in (0, 1, 2) or not all(np.isfinite((amp, freq, phase))) or freq < 0:
+                raise InputError(
+                    f"attitude jitter term {term!r}: axis must be 0, 1 or 2 and amplitude, "
+                    "frequency (>= 0) and phase finite"
+                )
+            terms.append((axis, amp, freq, phase))
+        object.__setattr__(self, "jitter", tuple(terms))
 
     def angles(self, t_s: FloatArray, delta: FloatArray | None = None) -> FloatArray:
         """(3, m) roll, pitch, yaw radians at times t (m,), with ``delta`` (3, 3) added to c0..c2."""
@@ -185,6 +206,8 @@ class Attitude:
         out = np.zeros((3,) + dt.shape)
         for k in range(c.shape[1] - 1, -1, -1):  # Horner
             out = out * dt + c[:, k].reshape((3,) + (1,) * dt.ndim)
+        for axis, amp, freq, phase in self.jitter:
+            out[axis] = out[axis] + amp * np.sin(2.0 * np.pi * freq * dt + phase)
         return out
 
     def to_dict(self) -> dict:
@@ -193,6 +216,7 @@ class Attitude:
             "roll_rad": list(self.roll_rad),
             "pitch_rad": list(self.pitch_rad),
             "yaw_rad": list(self.yaw_rad),
+            **({"jitter": [list(t) for t in self.jitter]} if self.jitter else {}),
         }
 
     @classmethod
@@ -202,7 +226,22 @@ class Attitude:
             roll_rad=get_float_tuple(d, "roll_rad", path),
             pitch_rad=get_float_tuple(d, "pitch_rad", path),
             yaw_rad=get_float_tuple(d, "yaw_rad", path),
+            jitter=_jitter_from(d, path),
         )
+
+
+def _jitter_from(d: object, path: str) -> tuple[tuple[int, float, float, float], ...]:
+    """The optional ``jitter`` list of an attitude dict."""
+    raw = d.get("jitter", []) if isinstance(d, dict) else []
+    if not isinstance(raw, list) or not all(
+        isinstance(t, list) and len(t) == 4
+        and all(isinstance(v, (int, float)) and not isinstance(v, bool) for v in t)
+        for t in raw
+    ):
+        raise InputError(
+            f"{path}.jitter must be a list of [axis, amplitude_rad, frequency_hz, phase_rad]"
+        )
+    return tuple((int(t[0]), float(t[1]), float(t[2]), float(t[3])) for t in raw)
 
 
 def circular_orbit_ecef(

@@ -166,7 +166,7 @@ def intersect_ellipsoid(
         x = pos_m + s[:, None] * u
         lon, lat, h = ecef_to_geodetic(x[:, 0], x[:, 1], x[:, 2])
         err = h - h_m
-        if np.max(np.abs(err), initial=0.0) <= tol_m:
+        if not np.any(np.abs(err) > tol_m):  # NaN inputs give NaN outputs
             return lon, lat
         up = enu_axes(lon, lat)[2]
         s = s - err / np.sum(up * u, axis=1)
@@ -268,7 +268,10 @@ class PushbroomModel:
     def localize(
         self, col: ArrayLike, row: ArrayLike, h_m: ArrayLike
     ) -> tuple[FloatArray, FloatArray]:
-        """Image (col, row) at ellipsoidal height h (m) -> ground (lon, lat) degrees, exact at h."""
+        """Image (col, row) at ellipsoidal height h (m) -> ground (lon, lat) degrees, exact at h.
+
+        NaN inputs give NaN; a line of sight that misses the Earth raises GeometryError.
+        """
         shape, (c, r, h) = _flat(col, row, h_m)
         lon, lat = self._localize_t(c, self.line_time_s(r), h)
         return lon.reshape(shape), lat.reshape(shape)
@@ -347,15 +350,16 @@ class PushbroomModel:
 
         Solves jointly, by vectorised Newton, for the acquisition time (the point lies in the
         instantaneous plane of the detector line) and the column (distortion and CCD rotation
-        included). Raises ConvergenceError if a point does not converge to ``tol_px``.
+        included). NaN inputs (DEM voids) give NaN; a finite point that does not converge to
+        ``tol_px`` in ``max_iter`` iterations raises ConvergenceError.
         """
         shape, (lon, lat, h) = _flat(lon_deg, lat_deg, h_m)
-        if not (np.all(np.isfinite(lon)) and np.all(np.isfinite(lat)) and np.all(np.isfinite(h))):
-            raise InputError("project got NaN or inf coordinates; drop those points first")
-        g = np.stack(geodetic_to_ecef(lon, lat, h), axis=1)
-        t, c = self._solve_time_col(g, tol_px, max_iter)
-        row = (t - self.t0_s) / self.line_period_s
-        return c.reshape(shape), row.reshape(shape)
+        ok = np.isfinite(lon) & np.isfinite(lat) & np.isfinite(h)
+        col, row = np.full(lon.shape, np.nan), np.full(lon.shape, np.nan)
+        g = np.stack(geodetic_to_ecef(lon[ok], lat[ok], h[ok]), axis=1)
+        t, col[ok] = self._solve_time_col(g, tol_px, max_iter)
+        row[ok] = (t - self.t0_s) / self.line_period_s
+        return col.reshape(shape), row.reshape(shape)
 
     def viewing_geometry(
         self, col: ArrayLike, row: ArrayLike, h_m: ArrayLike
@@ -555,7 +559,7 @@ class PushbroomModel:
         Orbit: circular Keplerian, radius ``WGS84 a + altitude_m``, inclination
         ``inclination_deg`` (98.7: near-polar, sun-synchronous like SPOT), descending over the
         scene unless ``ascending``; Earth rotation included (ECEF state vectors every
-        ``state_vector_spacing_s`` s, by default enough to cover the acquisition with >= 4
+        ``state_vector_spacing_s`` s, by default enough to cover the acquisition with >= 3
         samples of margin on each side; ``n_state_vectors`` overrides the count).
         Pointing: ``incidence_deg`` is the across-track incidence at the scene centre (angle at
         the ground from the vertical, in the plane across the track; positive = the satellite is

@@ -28,6 +28,7 @@ __all__ = [
     "cell_uniform",
     "fbm",
     "fbm_threshold",
+    "floor_index",
     "fractal_detail_m",
     "gradient_noise",
 ]
@@ -52,6 +53,16 @@ def _check_positive(**values: float) -> None:
     for name, v in values.items():
         if not np.isfinite(v) or v <= 0:
             raise InputError(f"{name} must be a positive finite number, got {v!r}")
+
+
+def floor_index(v: NDArray[np.float64]) -> NDArray[np.int64]:
+    """``floor(v)`` as int64; non-finite values give an arbitrary index without a warning.
+
+    Callers keep the NaN in their own arithmetic, so fields come out NaN (or
+    False for masks) at non-finite coordinates instead of raising.
+    """
+    with np.errstate(invalid="ignore"):
+        return np.floor(v).astype(np.int64)
 
 
 def _fade(t: NDArray[np.float64]) -> NDArray[np.float64]:
@@ -91,14 +102,19 @@ def _corner_gradients(seed: int, i0: NDArray[np.int64], j0: NDArray[np.int64]
             for di, dj in _CORNERS]
 
 
-def _lattice_noise(u: NDArray[np.float64], v: NDArray[np.float64], seed: int) -> NDArray[np.float64]:
-    """Gradient noise at lattice coordinates (u, v); values in [-1, 1]."""
+def _lattice_noise(u: NDArray[np.float64], v: NDArray[np.float64],
+                   seed: int) -> NDArray[np.float64]:
+    """Gradient noise at lattice coordinates (u, v); values in [-1, 1], NaN where not finite."""
+    bad = ~(np.isfinite(u) & np.isfinite(v))
+    if bad.any():
+        u = np.where(bad, np.nan, u)
+        v = np.where(bad, np.nan, v)
     fu = np.floor(u)
     fv = np.floor(v)
     xf = u - fu
     yf = v - fv
     (gx00, gy00), (gx10, gy10), (gx01, gy01), (gx11, gy11) = _corner_gradients(
-        seed, fu.astype(np.int64), fv.astype(np.int64))
+        seed, floor_index(fu), floor_index(fv))
     xf1 = xf - 1.0
     yf1 = yf - 1.0
     n00 = gx00 * xf + gy00 * yf
@@ -257,6 +273,5 @@ def cell_uniform(x_m: ArrayLike, y_m: ArrayLike, seed: int, cell_m: float) -> ND
     """
     _check_positive(cell_m=cell_m)
     x, y = _xy(x_m, y_m)
-    i = np.floor(x / cell_m).astype(np.int64)
-    j = np.floor(y / cell_m).astype(np.int64)
-    return hash_uniform(seed, i, j)
+    u = hash_uniform(seed, floor_index(x / cell_m), floor_index(y / cell_m))
+    return np.where(np.isfinite(x) & np.isfinite(y), u, np.nan)

@@ -58,7 +58,8 @@ def _as_key(a: ArrayLike) -> NDArray[np.uint64]:
         return arr.astype(np.uint64)
     if arr.dtype.kind != "i":
         raise InputError(
-            f"hash keys must be integer arrays (lattice indices, rows, cols), got dtype {arr.dtype}; "
+            f"hash keys must be integer arrays (lattice indices, rows, cols), "
+            f"got dtype {arr.dtype}; "
             "floor coordinates to integers first"
         )
     return arr.astype(np.int64).astype(np.uint64)

@@ -33,16 +33,16 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from core.errors import InputError
-from core.simulation.fields import fbm, fbm_threshold
+from core.simulation.fields import fbm, fbm_threshold, floor_index
 from core.simulation.hashing import derive_seed, hash_uniform
 
 __all__ = [
-    "LAS_CLASS",
+    "LANDCOVER_NODATA",
     "LAS_BUILDING",
+    "LAS_CLASS",
     "LAS_GROUND",
     "LAS_HIGH_VEGETATION",
     "LAS_WATER",
-    "LANDCOVER_NODATA",
     "BuildingSample",
     "LandCover",
     "LandCoverConfig",
@@ -237,26 +237,27 @@ def sample_buildings(x_m: ArrayLike, y_m: ArrayLike, seed: int,
     """
     x, y = _xy(x_m, y_m)
     b = config.block_m
-    bi = np.floor(x / b).astype(np.int64)
-    bj = np.floor(y / b).astype(np.int64)
+    finite = np.isfinite(x) & np.isfinite(y)
+    bi = np.where(finite, floor_index(x / b), 0)
+    bj = np.where(finite, floor_index(y / b), 0)
     lx = x - bi.astype(np.float64) * b
     ly = y - bj.astype(np.float64) * b
     half = 0.5 * config.street_width_m
-    street = (lx < half) | (lx >= b - half) | (ly < half) | (ly >= b - half)
+    street = finite & ((lx < half) | (lx >= b - half) | (ly < half) | (ly >= b - half))
     at = _per_block(bi.reshape(-1), bj.reshape(-1),
                     lambda i, j: _block_attributes(i, j, seed, config))
     at = {k: v.reshape(x.shape) for k, v in at.items()}
     in_fp = (at["present"] & (lx >= at["west"]) & (lx < at["east"])
              & (ly >= at["south"]) & (ly < at["north"]))
     return BuildingSample(
-        urban_block=at["urban"],
+        urban_block=at["urban"] & finite,
         street=street,
         in_footprint=in_fp,
         height_m=np.where(in_fp, at["height"], 0.0),
         dark_roof=at["dark"] & in_fp,
         roof_reflectance=np.where(in_fp, at["refl"], 0.0),
-        centre_x_m=bi.astype(np.float64) * b + 0.5 * (at["west"] + at["east"]),
-        centre_y_m=bj.astype(np.float64) * b + 0.5 * (at["south"] + at["north"]),
+        centre_x_m=np.where(finite, bi * b + 0.5 * (at["west"] + at["east"]), np.nan),
+        centre_y_m=np.where(finite, bj * b + 0.5 * (at["south"] + at["north"]), np.nan),
     )
 
 
@@ -304,7 +305,7 @@ def _soft_unit(v: NDArray[np.float64], gain: float) -> NDArray[np.float64]:
 
 def canopy_height_m(x_m: ArrayLike, y_m: ArrayLike, classes: ArrayLike, seed: int,
                     config: LandCoverConfig = LandCoverConfig()) -> NDArray[np.float64]:
-    """Canopy height above the terrain, metres: inside ``canopy_height_range_m`` on FOREST, 0 elsewhere.
+    """Canopy height above the terrain, metres: within ``canopy_height_range_m`` on FOREST, else 0.
 
     Stand-scale variation (``stand_wavelength_m``) plus crown-scale bumps
     (``crown_wavelength_m``), squeezed smoothly into the range (never outside).

@@ -29,6 +29,8 @@ __all__ = [
     "texture",
 ]
 
+_DEFAULT_LANDCOVER = LandCoverConfig()
+
 
 def _pad_linear(a: NDArray[np.float64]) -> NDArray[np.float64]:
     """Pad one cell on every side by linear extrapolation (exact for planes)."""
@@ -85,7 +87,7 @@ def hillshade(dem_h_m: ArrayLike, dx_m: float, dy_m: float, sun_azimuth_deg: flo
     el = np.deg2rad(sun_elevation_deg)
     sx, sy, sz = np.sin(az) * np.cos(el), np.cos(az) * np.cos(el), np.sin(el)
     shade = (sz - sx * dz_dx - sy * dz_dy) / np.sqrt(1.0 + dz_dx * dz_dx + dz_dy * dz_dy)
-    return np.where(np.isnan(shade), np.nan, np.clip(shade, 0.0, 1.0))
+    return np.clip(shade, 0.0, 1.0)  # NaN stays NaN
 
 
 def _xy(x_m: ArrayLike, y_m: ArrayLike) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
@@ -95,7 +97,7 @@ def _xy(x_m: ArrayLike, y_m: ArrayLike) -> tuple[NDArray[np.float64], NDArray[np
 
 
 def texture(x_m: ArrayLike, y_m: ArrayLike, classes: ArrayLike, seed: int,
-            config: LandCoverConfig = LandCoverConfig()) -> NDArray[np.float64]:
+            config: LandCoverConfig = _DEFAULT_LANDCOVER) -> NDArray[np.float64]:
     """Ground-fixed reflectance in [0, 1] by land cover.
 
     - bare soil: 0.30 +- 0.12 from field-scale (250 m) and fine (12 m) fbm;

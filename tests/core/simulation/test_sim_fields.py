@@ -143,3 +143,11 @@ def test_fractal_detail_input_errors() -> None:
         fractal_detail_m(0.0, 0.0, 1, 1.0, 1.0, 30.0, 1.5)
     with pytest.raises(InputError, match="fraction"):
         fbm_threshold(1.5, 3)
+
+
+def test_non_finite_coordinates_give_nan_without_warnings() -> None:
+    x = np.array([1.0, np.nan, 3.0, np.inf])
+    y = np.array([2.0, 2.0, np.nan, 2.0])
+    for f in (fbm(x, y, 1, 10.0, 3), fractal_detail_m(x, y, 1, 1.0, 1.0, 8.0, 0.8),
+              cell_uniform(x, y, 1, 5.0)):
+        assert np.isfinite(f[0]) and np.all(np.isnan(f[1:]))

@@ -179,3 +179,10 @@ def test_water_level_for_fraction() -> None:
 def test_config_checks(kwargs: dict, match: str) -> None:
     with pytest.raises(InputError, match=match):
         LandCoverConfig(**kwargs)
+
+
+def test_non_finite_coordinates_are_not_buildings() -> None:
+    x = np.array([np.nan, 1e5 + 25.0])
+    y = np.array([4e6 + 25.0, np.nan])
+    bs = sample_buildings(x, y, SEED)
+    assert not bs.in_footprint.any() and not bs.urban_block.any() and not bs.street.any()

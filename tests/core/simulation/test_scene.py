@@ -1,0 +1,68 @@
+"""Scene definitions: truth models with jitter/lens, delivered metadata with known errors."""
+
+import numpy as np
+import pytest
+
+from core.sensors.orbit import Attitude
+from core.sensors.pushbroom import PushbroomModel
+from core.simulation.scene import (
+    PRESETS,
+    ErrorConfig,
+    centre_displacement_m,
+    delivered_model,
+    truth_model,
+)
+
+CENTRE = (5.3, 44.2, 600.0)
+
+
+@pytest.fixture(scope="module")
+def tiny_truth():
+    cfg = ErrorConfig(lens=True, jitter=True)
+    rng = np.random.default_rng(1)
+    return truth_model(PRESETS["tiny"].images[0], PRESETS["tiny"], CENTRE, cfg, rng)
+
+
+def test_truth_with_jitter_and_lens_round_trips(tiny_truth):
+    m = tiny_truth
+    assert len(m.attitude.jitter) == 4 and m.distortion.k3 != 0
+    r, c = np.mgrid[0:600:37, 0:600:41].astype(float)
+    h = np.full(c.shape, 900.0)
+    lon, lat = m.localize(c, r, h)
+    c2, r2 = m.project(lon, lat, h)
+    assert np.hypot(c2 - c, r2 - r).max() < 1e-3
+    again = PushbroomModel.from_json(m.to_json())
+    np.testing.assert_array_equal(again.localize(c, r, h)[0], lon)
+
+
+def test_jitter_is_not_absorbed_by_a_quadratic(tiny_truth):
+    att = tiny_truth.attitude
+    t = tiny_truth.line_time_s(np.arange(0, 600, 0.5))
+    smooth = Attitude(att.t_ref_s, att.roll_rad, att.pitch_rad, att.yaw_rad)
+    jit = att.angles(t) - smooth.angles(t)
+    for axis in (0, 1):
+        coef = np.polyfit(t - att.t_ref_s, jit[axis], 2)
+        resid = jit[axis] - np.polyval(coef, t - att.t_ref_s)
+        assert resid.std() > 0.5 * jit[axis].std() > 0
+
+
+@pytest.mark.parametrize("seed", [0, 1, 2, 3])
+def test_delivered_error_at_centre_is_within_100_300_m(tiny_truth, seed):
+    rng = np.random.default_rng(seed)
+    delivered, inj = delivered_model(tiny_truth, PRESETS["tiny"], ErrorConfig(), rng, 600.0)
+    assert 100.0 <= inj.centre_error_m <= 300.0
+    assert inj.centre_error_m == pytest.approx(
+        centre_displacement_m(tiny_truth, delivered, 600.0), rel=1e-9)
+    # the delivered metadata know neither the jitter nor the lens
+    assert delivered.attitude.jitter == () and delivered.distortion.k3 == 0.0
+    assert abs(inj.roll_rate_rad_s) + abs(inj.pitch_rate_rad_s) > 0
+
+
+def test_attitude_jitter_rejects_bad_terms():
+    from core.errors import InputError
+
+    with pytest.raises(InputError, match="jitter"):
+        Attitude(0.0, jitter=((5, 1e-6, 10.0, 0.0),))
+    with pytest.raises(InputError, match="jitter"):
+        Attitude.from_dict({"t_ref_s": 0.0, "roll_rad": [0.0], "pitch_rad": [0.0],
+                            "yaw_rad": [0.0], "jitter": [[0, 1.0]]})
