@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import contextlib
 import os
 import tempfile
 import threading
@@ -38,62 +39,77 @@ class _WindowWriter:
             self.dst.write(value, 1, window=window)
 
 
-def write_array_cog(
-    data: darr.Array | np.ndarray,
-    out: str | Path,
-    *,
-    transform: Affine | None = None,
-    crs: Any = None,
-    nodata: float | int | None = None,
-    rpcs: RPC | None = None,
-    tags: dict[str, str] | None = None,
-    resampling: str = "average",
-    predictor: int | None = None,
-    blocksize: int = 512,
-) -> Path:
-    """Write a 2-D (Dask) array to ``out`` as a Cloud-Optimized GeoTIFF, atomically.
+def write_array_cog(data: darr.Array | np.ndarray, out: str | Path, **kwargs: Any) -> Path:
+    """Write one 2-D (Dask) array as a COG; see :func:`write_arrays_cog` for the options."""
+    write_arrays_cog([(data, out, kwargs)])
+    return Path(out)
 
-    Blocks are computed by Dask threads and streamed into a tiled GeoTIFF under one
-    write lock (memory stays bounded), then GDAL's COG driver copies it with
-    overviews. Raw sensor images pass ``rpcs`` and no transform. Everything happens
-    in a temporary folder beside ``out``; the finished file replaces ``out`` by a
-    rename, so a failure never leaves a half-written product and an earlier product
-    at ``out`` survives a failed rerun.
+
+def write_arrays_cog(
+    items: list[tuple[darr.Array | np.ndarray, str | Path, dict[str, Any]]],
+    extra: list[Any] | None = None,
+) -> tuple[Any, ...]:
+    """Write 2-D (Dask) arrays as Cloud-Optimized GeoTIFFs, atomically, in one Dask pass.
+
+    Each item is ``(array, out_path, options)`` with options ``transform``, ``crs``,
+    ``nodata``, ``rpcs`` (raw sensor images: RPCs and no transform), ``tags``,
+    ``resampling`` (overviews), ``predictor`` and ``blocksize``. Arrays that share blocks
+    (slices of one computation) are computed once; ``extra`` Dask values (statistics)
+    are computed in the same pass and returned.
+
+    Blocks are computed by Dask threads and streamed into tiled GeoTIFFs under one write
+    lock each (memory stays bounded), then GDAL's COG driver copies them with overviews.
+    Everything happens in temporary folders beside the outputs; each finished file
+    replaces its output by a rename, so a failure never leaves a half-written product and
+    an earlier product survives a failed rerun.
     """
-    out = Path(out)
-    out.parent.mkdir(parents=True, exist_ok=True)
-    arr = data if isinstance(data, darr.Array) else darr.from_array(np.asarray(data), chunks=1024)
-    if arr.ndim != 2:
-        raise ValueError(f"write_array_cog writes one band, got an array of shape {arr.shape}")
-    dtype = np.dtype(arr.dtype)
-    if predictor is None:
-        predictor = 3 if dtype.kind == "f" else 2
-    profile: dict[str, Any] = dict(
-        driver="GTiff", width=arr.shape[1], height=arr.shape[0], count=1, dtype=dtype.name,
-        tiled=True, blockxsize=blocksize, blockysize=blocksize, compress="DEFLATE",
-        BIGTIFF="IF_SAFER", nodata=nodata,
-    )
-    if transform is not None:
-        profile.update(transform=transform, crs=crs)
-    if rpcs is not None:
-        profile["rpcs"] = rpcs
-    with tempfile.TemporaryDirectory(dir=out.parent, prefix=f".{out.name}.tmp") as tmp:
-        tiled = Path(tmp) / "tiled.tif"
-        cog = Path(tmp) / "cog.tif"
-        with rasterio.open(tiled, "w", **profile) as dst:
-            if tags:
-                dst.update_tags(**tags)
-            with dask.config.set(scheduler="threads"):
-                darr.store(arr, _WindowWriter(dst, threading.Lock()), lock=False)
-        with rasterio.Env(GDAL_CACHEMAX=COG_CACHE_MB):
-            rasterio.shutil.copy(
-                tiled, cog, driver="COG", COMPRESS="DEFLATE",
-                PREDICTOR=str(predictor) if predictor else "NO", BLOCKSIZE=str(blocksize),
-                OVERVIEWS="AUTO", RESAMPLING=resampling.upper(), BIGTIFF="IF_SAFER",
+    with contextlib.ExitStack() as stack:
+        sources, targets, jobs = [], [], []
+        for data, out, opts in items:
+            out = Path(out)
+            out.parent.mkdir(parents=True, exist_ok=True)
+            arr = data if isinstance(data, darr.Array) else darr.from_array(np.asarray(data),
+                                                                            chunks=1024)
+            if arr.ndim != 2:
+                raise ValueError(f"write_arrays_cog writes single bands, got shape {arr.shape}")
+            tmp = Path(stack.enter_context(
+                tempfile.TemporaryDirectory(dir=out.parent, prefix=f".{out.name}.tmp")))
+            dtype = np.dtype(arr.dtype)
+            blocksize = int(opts.get("blocksize", 512))
+            profile: dict[str, Any] = dict(
+                driver="GTiff", width=arr.shape[1], height=arr.shape[0], count=1,
+                dtype=dtype.name, tiled=True, blockxsize=blocksize, blockysize=blocksize,
+                compress="DEFLATE", BIGTIFF="IF_SAFER", nodata=opts.get("nodata"),
             )
-        _chmod_default(cog)
-        os.replace(cog, out)
-    return out
+            if opts.get("transform") is not None:
+                profile.update(transform=opts["transform"], crs=opts.get("crs"))
+            if opts.get("rpcs") is not None:
+                profile["rpcs"] = opts["rpcs"]
+            dst = stack.enter_context(rasterio.open(tmp / "tiled.tif", "w", **profile))
+            if opts.get("tags"):
+                dst.update_tags(**opts["tags"])
+            sources.append(arr)
+            targets.append(_WindowWriter(dst, threading.Lock()))
+            predictor = opts.get("predictor")
+            if predictor is None:
+                predictor = 3 if dtype.kind == "f" else 2
+            jobs.append((dst, tmp, out, predictor, blocksize, opts.get("resampling", "average")))
+        stored = darr.store(sources, targets, lock=False, compute=False)
+        with dask.config.set(scheduler="threads"):
+            results = dask.compute(stored, *(extra or []))[1:]
+        for dst, tmp, out, predictor, blocksize, resampling in jobs:
+            dst.close()
+            cog = tmp / "cog.tif"
+            with rasterio.Env(GDAL_CACHEMAX=COG_CACHE_MB):
+                rasterio.shutil.copy(
+                    tmp / "tiled.tif", cog, driver="COG", COMPRESS="DEFLATE",
+                    PREDICTOR=str(predictor) if predictor else "NO", BLOCKSIZE=str(blocksize),
+                    OVERVIEWS="AUTO", RESAMPLING=str(resampling).upper(), BIGTIFF="IF_SAFER",
+                )
+            _chmod_default(cog)
+        for _, tmp, out, *_ in jobs:
+            os.replace(tmp / "cog.tif", out)
+    return tuple(results)
 
 
 def write_cog(

@@ -45,6 +45,7 @@ class Preset:
     truth_res_m: float  # spacing of the truth DSM/DTM grid
     images: tuple[ImageSpec, ImageSpec]
     lidar_strip_m: tuple[float, float] | None  # (across, along) size; None = whole scene
+    lidar_spacing_m: float = 3.0
 
     def __post_init__(self) -> None:
         if self.n_cols < 16 or self.n_rows < 16 or self.gsd_m <= 0 or self.truth_res_m <= 0:
@@ -66,7 +67,8 @@ PRESETS: dict[str, Preset] = {
         (5_000.0, 13_000.0),
     ),
     # the same physics at 600x600 px and 40 m, for CI
-    "tiny": Preset("tiny", 600, 600, 40.0, 20.0, _ACROSS, None),
+    # (lidar over the whole scene, its spacing scaled with the GSD to stay CI-sized)
+    "tiny": Preset("tiny", 600, 600, 40.0, 20.0, _ACROSS, None, lidar_spacing_m=20.0),
 }
 
 
@@ -113,20 +115,21 @@ def truth_model(
 ) -> PushbroomModel:
     """The true geometry of one image (with the lens distortion and jitter the metadata lack)."""
     lon, lat, h = centre
-    distortion = LensDistortion()
-    if cfg.lens:
-        # radial: k3 r^3 reaching lens_edge_px at the edge of the focal plane; small decentering
-        probe = PushbroomModel.synthetic(lon, lat, center_h_m=h, n_cols=preset.n_cols,
-                                         n_rows=preset.n_rows, gsd_m=preset.gsd_m)
-        r_edge = 0.5 * preset.n_cols * probe.camera.detector_pitch_m / probe.camera.focal_length_m
-        k3 = cfg.lens_edge_px * 2.0 / preset.n_cols / r_edge**3 * float(rng.choice([-1.0, 1.0]))
-        p = 0.1 * cfg.lens_edge_px * 2.0 / preset.n_cols / r_edge**2
-        distortion = LensDistortion(k1=0.0, k3=k3, p1=p * rng.uniform(-1, 1), p2=p * rng.uniform(-1, 1))
     model = PushbroomModel.synthetic(
         lon, lat, center_h_m=h, n_cols=preset.n_cols, n_rows=preset.n_rows, gsd_m=preset.gsd_m,
-        incidence_deg=spec.incidence_deg, pitch_deg=spec.pitch_deg, distortion=distortion,
+        incidence_deg=spec.incidence_deg, pitch_deg=spec.pitch_deg,
         epoch_utc=f"{spec.date}T10:00:00Z",
     )
+    if cfg.lens:
+        # radial k3 r^3 worth lens_edge_px at the edge of the detector line (r in normalised
+        # focal-plane units, measured on this camera), decentering a tenth of it
+        ex, ey = model.camera.detector_xy(np.array([0.0]))
+        r_edge = float(np.hypot(ex[0], ey[0]))
+        px = r_edge / (0.5 * (preset.n_cols - 1))  # one pixel in normalised units
+        k3 = cfg.lens_edge_px * px / r_edge**3 * float(rng.choice([-1.0, 1.0]))
+        p = 0.1 * cfg.lens_edge_px * px / r_edge**2
+        model = replace(model, distortion=LensDistortion(
+            k1=0.0, k3=k3, p1=p * rng.uniform(-1, 1), p2=p * rng.uniform(-1, 1)))
     if cfg.jitter:
         model = with_jitter(model, preset, cfg.jitter_rms_px, rng)
     return model

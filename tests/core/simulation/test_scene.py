@@ -66,3 +66,29 @@ def test_attitude_jitter_rejects_bad_terms():
     with pytest.raises(InputError, match="jitter"):
         Attitude.from_dict({"t_ref_s": 0.0, "roll_rad": [0.0], "pitch_rad": [0.0],
                             "yaw_rad": [0.0], "jitter": [[0, 1.0]]})
+
+
+def test_lens_distortion_reaches_the_stated_shift_at_the_edge():
+    preset = PRESETS["tiny"]
+    spec = preset.images[0]
+    cfg = ErrorConfig(lens=True, lens_edge_px=1.5)
+    with_lens = truth_model(spec, preset, CENTRE, cfg, np.random.default_rng(3))
+    from dataclasses import replace
+
+    from core.sensors.linear_array import LensDistortion
+
+    without = replace(with_lens, distortion=LensDistortion())
+    lon, lat = without.localize(np.array([0.0, 299.5, 599.0]), np.array([300.0] * 3), 600.0)
+    c, _ = with_lens.project(lon, lat, np.full(3, 600.0))
+    shift = c - np.array([0.0, 299.5, 599.0])
+    assert abs(shift[1]) < 0.05  # no distortion at the centre
+    # radial: opposite shifts at the two edges, lens_edge_px each; decentering: a common
+    # shift of at most 3 x 0.1 x lens_edge_px (p (r^2 + 2 x^2) at the edge)
+    radial = 0.5 * (shift[2] - shift[0])
+    common = 0.5 * (shift[2] + shift[0])
+    assert abs(abs(radial) - 1.5) < 0.05
+    assert abs(common) <= 0.45 + 0.05
+    # and projection stays well posed well beyond the edges
+    lon2, lat2 = with_lens.localize(np.array([-300.0, 900.0]), np.array([300.0, 300.0]), 600.0)
+    c2, _ = with_lens.project(lon2, lat2, np.full(2, 600.0))
+    np.testing.assert_allclose(c2, [-300.0, 900.0], atol=1e-6)

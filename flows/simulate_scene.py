@@ -1,0 +1,57 @@
+"""Flow: render a SPOT-like stereo pair with known truth over a real DEM."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from pathlib import Path
+
+from prefect import flow
+
+from core.simulation.scene import ErrorConfig
+from tasks.geoid import BUNDLED_SRTM_DIR
+from tasks.simulate import (
+    SimulationSummary,
+    build_radiance,
+    build_truth_surface,
+    define_scene,
+    make_checkpoints,
+    make_lidar,
+    render_image,
+    summarize,
+)
+
+BUNDLED_DEM = BUNDLED_SRTM_DIR / "N44E005.hgt"
+
+
+@dataclass(frozen=True)
+class SimulationParams:
+    """Parameters of :func:`simulate_scene` (see ``gcpfree simulate --help``)."""
+
+    out: Path
+    dem: Path = BUNDLED_DEM
+    preset: str = "tiny"
+    seed: int = 0
+    lens: bool = False
+    jitter: bool = False
+    date_change: float = 0.0
+    relief_factor: float = 1.0
+    bits: int = 8
+    center: tuple[float, float] | None = None
+    lidar: bool = True
+
+
+@flow(name="simulate-scene", log_prints=True)
+def simulate_scene(params: SimulationParams) -> SimulationSummary:
+    """Scene and models -> truth surface -> radiance and image per date -> check points, lidar."""
+    out = Path(params.out)
+    errors = ErrorConfig(lens=params.lens, jitter=params.jitter)
+    scene = define_scene(Path(params.dem), out, params.preset, params.seed, errors,
+                         params.relief_factor, params.bits, params.date_change, params.center)
+    scene = build_truth_surface(scene, out)
+    for i in range(len(scene.image_names)):
+        build_radiance(scene, out, i)
+        render_image(scene, out, i)
+    make_checkpoints(scene, out)
+    if params.lidar:
+        make_lidar(scene, out)
+    return summarize(scene, out)
