@@ -363,7 +363,7 @@ def define_scene(
         except (ValueError, TypeError) as exc:
             raise InputError(f"{paths.scene_json} is unreadable ({exc}); remove {paths.root} "
                              "or choose another --out") from exc
-        if _replace(old, dsm_range_m=None) == scene:
+        if _replace(old, dsm_range_m=None).to_json() == scene.to_json():
             return old  # same scene: resume, keep the products already made
         raise InputError(
             f"{paths.root} already holds a different simulated scene; choose another --out "
@@ -374,7 +374,7 @@ def define_scene(
         atomic_write_text(paths.truth_model(n), truths[n].to_json(indent=1))
         atomic_write_text(paths.delivered(n), delivered[n].to_json(indent=1))
     atomic_write_text(paths.scene_json, scene.to_json())
-    return scene
+    return SceneDef.from_json(scene.to_json())  # the same value a resumed run reads back
 
 
 # ---------------------------------------------------------------------------- B. truth surface

@@ -14,7 +14,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from core.errors import InputError
-from core.simulation.fields import fbm, fbm_threshold
+from core.simulation.fields import cell_uniform, fbm, fbm_threshold
 from core.simulation.hashing import derive_seed, hash_normal
 from core.simulation.landcover import LandCover, LandCoverConfig, sample_buildings
 
@@ -100,8 +100,11 @@ def texture(x_m: ArrayLike, y_m: ArrayLike, classes: ArrayLike, seed: int,
             config: LandCoverConfig = _DEFAULT_LANDCOVER) -> NDArray[np.float64]:
     """Ground-fixed reflectance in [0, 1] by land cover.
 
-    - bare soil: 0.30 +- 0.12 from field-scale (250 m) and fine (12 m) fbm;
-    - forest: 0.09 +- 0.05, crown-scale (``crown_wavelength_m``) noise;
+    - bare soil: about 0.30: a mosaic of field parcels (hashed reflectance per 150 m and
+      330 m cell, sharp edges, as agricultural land shows at every GSD), plus fbm from
+      400 m down to 12 m (texture at every scale a 2.5-40 m sensor resolves);
+    - forest: 0.09 +- 0.05, stand-scale (``stand_wavelength_m``) and crown-scale
+      (``crown_wavelength_m``) noise;
     - urban: each roof its hashed reflectance (0.35-0.70, dark roofs 0.05-0.10),
       streets 0.12, yards 0.22, with 3 m noise;
     - water: 0.04 +- 0.01.
@@ -115,14 +118,19 @@ def texture(x_m: ArrayLike, y_m: ArrayLike, classes: ArrayLike, seed: int,
     bare = cls == LandCover.BARE_SOIL
     if bare.any():
         xb, yb = x[bare], y[bare]
-        v = 0.30 + 0.25 * fbm(xb, yb, derive_seed(seed, "tex-field"), 250.0, 3) \
-            + 0.20 * fbm(xb, yb, derive_seed(seed, "tex-fine"), 12.0, 3)
+        parcels = (0.12 * (cell_uniform(xb, yb, derive_seed(seed, "tex-parcel"), 150.0) - 0.5)
+                   + 0.10 * (cell_uniform(xb + 71.0, yb + 37.0,
+                                          derive_seed(seed, "tex-parcel-2"), 330.0) - 0.5))
+        v = 0.30 + parcels + 0.22 * fbm(xb, yb, derive_seed(seed, "tex-field"), 400.0, 6) \
+            + 0.10 * fbm(xb, yb, derive_seed(seed, "tex-fine"), 12.0, 3)
         out[bare] = v
     forest = cls == LandCover.FOREST
     if forest.any():
         xf, yf = x[forest], y[forest]
-        out[forest] = 0.09 + 0.15 * fbm(xf, yf, derive_seed(seed, "tex-crown"),
-                                        config.crown_wavelength_m, 3)
+        out[forest] = (0.09 + 0.08 * fbm(xf, yf, derive_seed(seed, "tex-stand"),
+                                         config.stand_wavelength_m, 4)
+                       + 0.12 * fbm(xf, yf, derive_seed(seed, "tex-crown"),
+                                    config.crown_wavelength_m, 3))
     urban = cls == LandCover.URBAN
     if urban.any():
         xu, yu = x[urban], y[urban]
