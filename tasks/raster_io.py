@@ -7,7 +7,6 @@ import os
 import tempfile
 import threading
 from pathlib import Path
-
 from typing import Any
 
 import dask
@@ -17,8 +16,6 @@ import rasterio
 import rasterio.io
 import rasterio.shutil
 import xarray as xr
-from affine import Affine
-from rasterio.rpc import RPC
 from rasterio.windows import Window
 
 # GDAL block cache while building a COG: bounded so memory stays flat on large rasters
@@ -76,11 +73,12 @@ def write_arrays_cog(
                 tempfile.TemporaryDirectory(dir=out.parent, prefix=f".{out.name}.tmp")))
             dtype = np.dtype(arr.dtype)
             blocksize = int(opts.get("blocksize", 512))
-            profile: dict[str, Any] = dict(
-                driver="GTiff", width=arr.shape[1], height=arr.shape[0], count=1,
-                dtype=dtype.name, tiled=True, blockxsize=blocksize, blockysize=blocksize,
-                compress="DEFLATE", BIGTIFF="IF_SAFER", nodata=opts.get("nodata"),
-            )
+            profile: dict[str, Any] = {
+                "driver": "GTiff", "width": arr.shape[1], "height": arr.shape[0], "count": 1,
+                "dtype": dtype.name, "tiled": True, "blockxsize": blocksize,
+                "blockysize": blocksize, "compress": "DEFLATE", "BIGTIFF": "IF_SAFER",
+                "nodata": opts.get("nodata"),
+            }
             if opts.get("transform") is not None:
                 profile.update(transform=opts["transform"], crs=opts.get("crs"))
             if opts.get("rpcs") is not None:

@@ -48,12 +48,12 @@ class ReferenceSummary:
     def lines(self) -> list[str]:
         return [
             f"reference DEM  {self.path}",
-            f"grid           {self.width} x {self.height} px at {self.res_arcsec:g} arcsec, "
-            f"{len(self.tiles)} SRTM tile(s): {', '.join(self.tiles)}",
+            (f"grid           {self.width} x {self.height} px at {self.res_arcsec:g} arcsec, "
+             f"{len(self.tiles)} SRTM tile(s): {', '.join(self.tiles)}"),
             f"coverage       {self.coverage_pct:.2f} % of the box has SRTM tiles",
             f"voids          {self.void_pct:.3f} % of covered pixels (mask: {self.void_mask_path})",
-            f"height range   h {self.h_min_m:.1f} .. {self.h_max_m:.1f} m (WGS84 ellipsoid), "
-            f"H {self.H_min_m:.1f} .. {self.H_max_m:.1f} m (EGM96)",
+            (f"height range   h {self.h_min_m:.1f} .. {self.h_max_m:.1f} m (WGS84 ellipsoid), "
+             f"H {self.H_min_m:.1f} .. {self.H_max_m:.1f} m (EGM96)"),
         ]
 
 
@@ -153,8 +153,8 @@ def render_hillshade(dem_path: Path, png_path: Path, max_px: int = 1600) -> Path
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
-    from matplotlib.colors import LightSource
     import rasterio
+    from matplotlib.colors import LightSource
     from rasterio.enums import Resampling
 
     with rasterio.open(dem_path) as src:

@@ -9,13 +9,12 @@ from __future__ import annotations
 
 import json
 import threading
-from datetime import date
 from dataclasses import asdict, dataclass, field
+from datetime import date
 from functools import lru_cache
 from pathlib import Path
 from typing import Any
 
-import dask
 import dask.array as darr
 import laspy
 import numpy as np
@@ -31,6 +30,8 @@ from scipy.ndimage import map_coordinates
 
 from core.dem import GeoDEM
 from core.errors import InputError
+from core.sensors.pushbroom import PushbroomModel
+from core.sensors.rpcfit import fit_rpc
 from core.simulation.hashing import derive_seed
 from core.simulation.landcover import LandCover, LandCoverConfig, water_level_for_fraction
 from core.simulation.lidar import LidarConfig, lidar_points, lidar_returns
@@ -46,10 +47,8 @@ from core.simulation.render import (
 )
 from core.simulation.scene import PRESETS, ErrorConfig, Preset, delivered_model, truth_model
 from core.simulation.surface import SurfaceSpec, sample_surface
-from core.sensors.pushbroom import PushbroomModel
-from core.sensors.rpcfit import fit_rpc
 from tasks.geoid import load_geoid
-from tasks.raster_io import atomic_write_bytes, atomic_write_text, write_arrays_cog
+from tasks.raster_io import atomic_write_text, write_arrays_cog
 
 CHUNK = 1024
 COL_STEP = 8  # lines of sight are localised every COL_STEP columns and interpolated
@@ -402,7 +401,7 @@ def build_truth_surface(scene: SceneDef, out: Path) -> SceneDef:
     stack = darr.map_blocks(truth_block, base, scene=scene, new_axis=0,
                             chunks=((3,),) + base.chunks, dtype=np.float32)
     crs = f"EPSG:{scene.epsg}"
-    kw = dict(transform=scene.transform, crs=crs)
+    kw = {"transform": scene.transform, "crs": crs}
     tags = {"vertical_datum": "WGS84 ellipsoid", "units": "m", "seed": str(scene.seed)}
     dsm = stack[1]
     lo, hi = write_arrays_cog(
@@ -470,8 +469,8 @@ def build_radiance(scene: SceneDef, out: Path, image_index: int) -> Path:
         radiance_block, dsm.data.astype(np.float64), cls.data, depth=1, boundary="nearest",
         dtype=np.float32, scene=scene, image_index=image_index, trim=True,
     )
-    write_arrays_cog([(rad, paths.radiance(name), dict(transform=scene.transform,
-                                                       crs=f"EPSG:{scene.epsg}", nodata=np.nan))])
+    write_arrays_cog([(rad, paths.radiance(name), {"transform": scene.transform,
+                                                   "crs": f"EPSG:{scene.epsg}", "nodata": np.nan})])
     return paths.radiance(name)
 
 
@@ -529,7 +528,7 @@ def render_block(block: np.ndarray, scene: SceneDef, model_json: str, image_inde
     if not np.isfinite(z).any():
         return np.zeros(shape, dtype=np.uint8 if bits == 8 else np.uint16)
     surf = SurfaceGrid(z, zx0, zy0, res, res)
-    x, y, h = first_hit(rays, surf, float(np.nanmax(z)) + 0.5, float(np.nanmin(z)) - 0.5,
+    x, y, _ = first_hit(rays, surf, float(np.nanmax(z)) + 0.5, float(np.nanmin(z)) - 0.5,
                         tol_m=0.01)
     rad, rx0, ry0 = _read_window(Path(radiance_path), tr, xmin, ymin, xmax, ymax)
     fj = (x - rx0) / res
@@ -568,8 +567,8 @@ def render_image(scene: SceneDef, out: Path, image_index: int) -> Path:
     rpc, report = fit_rpc(delivered, truth.n_cols, truth.n_rows, (lo - 100.0, hi + 100.0))
     tags = {"rpc_fit_max_px": f"{report.max_px:.2e}", "rpc_fit_rms_px": f"{report.rms_px:.2e}",
             "metadata": paths.delivered(name).name, "seed": str(scene.seed)}
-    write_arrays_cog([(img, paths.image(name), dict(rpcs=RPC.from_gdal(rpc.to_gdal_tags()),
-                                                    nodata=0, tags=tags))])
+    write_arrays_cog([(img, paths.image(name), {"rpcs": RPC.from_gdal(rpc.to_gdal_tags()),
+                                                "nodata": 0, "tags": tags})])
     return paths.image(name)
 
 
@@ -732,8 +731,8 @@ class SimulationSummary:
             f"simulated scene  {self.out} (preset {self.preset}, seed {self.seed})",
             f"images           {', '.join(self.images)} (RPC tags inside, metadata .json beside)",
             f"metadata error   at the scene centre: {errs}",
-            f"truth            DSM/DTM {self.dsm_range_m[0]:.0f}..{self.dsm_range_m[1]:.0f} m "
-            f"ellipsoidal, {self.checkpoints} check points, {self.lidar_points} lidar points",
+            (f"truth            DSM/DTM {self.dsm_range_m[0]:.0f}..{self.dsm_range_m[1]:.0f} m "
+             f"ellipsoidal, {self.checkpoints} check points, {self.lidar_points} lidar points"),
         ]
 
 

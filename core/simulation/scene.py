@@ -16,7 +16,6 @@ from numpy.typing import NDArray
 from core.errors import InputError
 from core.geodesy import geodetic_to_ecef
 from core.sensors.linear_array import LensDistortion
-from core.sensors.orbit import Attitude
 from core.sensors.pushbroom import PushbroomModel
 
 FloatArray = NDArray[np.float64]

@@ -21,8 +21,8 @@ from numpy.typing import NDArray
 from core.dem import GeoDEM
 from core.errors import InputError
 from core.geoid import GeoidGrid
-from core.simulation.hashing import derive_seed
 from core.simulation.fields import fractal_detail_m
+from core.simulation.hashing import derive_seed
 from core.simulation.landcover import (
     LandCover,
     LandCoverConfig,

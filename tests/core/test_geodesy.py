@@ -77,10 +77,10 @@ def test_round_trip_is_exact(points):
 
 
 def test_poles_and_centre_axis():
-    lon, lat, h = ecef_to_geodetic(0.0, 0.0, 6356752.314245 + 100.0)
+    _, lat, h = ecef_to_geodetic(0.0, 0.0, 6356752.314245 + 100.0)
     assert lat == pytest.approx(90.0, abs=1e-12)
     assert h == pytest.approx(100.0, abs=1e-6)
-    lon, lat, h = ecef_to_geodetic(0.0, 0.0, -6356752.314245)
+    _, lat, h = ecef_to_geodetic(0.0, 0.0, -6356752.314245)
     assert lat == pytest.approx(-90.0, abs=1e-12) and h == pytest.approx(0.0, abs=1e-6)
 
 

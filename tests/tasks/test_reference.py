@@ -180,7 +180,7 @@ def test_failed_write_keeps_previous_product(tmp_path, monkeypatch):
 
 def run_cli(*args: str) -> subprocess.CompletedProcess:
     return subprocess.run(
-        [sys.executable, "-m", "flows.cli", *args], capture_output=True, text=True, timeout=120
+        [sys.executable, "-m", "flows.cli", *args], capture_output=True, text=True, timeout=120, check=False
     )
 
 

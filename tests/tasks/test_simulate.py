@@ -17,8 +17,8 @@ from core.errors import InputError
 from core.sensors.pushbroom import PushbroomModel
 from core.simulation.landcover import LandCover
 from core.simulation.scene import ErrorConfig
-from tasks.geoid import BUNDLED_SRTM_DIR, load_geoid
 from tasks import simulate as S
+from tasks.geoid import BUNDLED_SRTM_DIR, load_geoid
 
 DEM = BUNDLED_SRTM_DIR / "N44E005.hgt"
 CENTRE = (5.25, 44.2)
@@ -138,7 +138,7 @@ def test_rendering_puts_ground_where_the_truth_models_say(scene_dir):
         c = np.array([p[name]["col"] for p in pts])
         r = np.array([p[name]["row"] for p in pts])
 
-        def residual(dc: float, dr: float) -> float:
+        def residual(dc: float, dr: float, img=img, c=c, r=r, L=L) -> float:
             dn = map_coordinates(img, [r + dr, c + dc], order=1)
             return float(np.median(np.abs(dn - gain * L)))
 
@@ -209,7 +209,7 @@ def test_lidar_reads_back_with_crs_and_classes(scene_dir):
     assert classes <= {2, 5, 6, 9} and {2, 5} <= classes
     x, y, z = np.asarray(las.x), np.asarray(las.y), np.asarray(las.z)
     # density: irregular, about the preset's spacing
-    x0, y0, res, w, h = scene.grid
+    _, _, res, w, h = scene.grid
     spacing = scene.preset_obj.lidar_spacing_m
     assert 0.6 < len(x) / (w * h * res * res / spacing**2) < 1.05
     # heights are EGM96: adding N gives the ellipsoidal truth DSM at ground points
@@ -234,7 +234,6 @@ def test_rerun_resumes_and_refuses_another_scene(scene_dir):
 
 
 def test_relief_factor_flattens(tmp_path, scene_dir):
-    _, ref = scene_dir
     scene = S.define_scene.fn(DEM, tmp_path, "tiny", 11, ErrorConfig(), centre_lonlat=CENTRE,
                               relief_factor=0.05)
     scene = S.build_truth_surface.fn(scene, tmp_path)

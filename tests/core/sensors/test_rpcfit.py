@@ -37,7 +37,7 @@ def random_ground(model, n=5000, seed=0):
 
 
 def test_fit_meets_002_px_on_independent_grid(fitted):
-    rpc, report = fitted
+    _, report = fitted
     assert report.max_px <= 0.02
     assert report.rms_px <= report.max_px
     assert report.n_check > 1000
