@@ -26,6 +26,8 @@ demo: $(STAMP)
 	mkdir -p $(OUT)
 	$(VENV)/bin/gcpfree prepare-reference --bbox 5.0 44.0 6.0 45.0 \
 	    --out $(OUT)/reference.tif --hillshade $(OUT)/reference.png
+	$(VENV)/bin/gcpfree simulate --preset tiny --seed 1 --center 5.25 44.2 \
+	    --lens --jitter --date-change 0.1 --out $(OUT)/scene_tiny
 	@echo "demo products in $(OUT)/"
 
 test: $(STAMP)
