@@ -3,6 +3,7 @@
 import numpy as np
 import pytest
 
+from core.geodesy import geodetic_to_ecef
 from core.sensors.orbit import Attitude
 from core.sensors.pushbroom import PushbroomModel
 from core.simulation.scene import (
@@ -92,3 +93,33 @@ def test_lens_distortion_reaches_the_stated_shift_at_the_edge():
     lon2, lat2 = with_lens.localize(np.array([-300.0, 900.0]), np.array([300.0, 300.0]), 600.0)
     c2, _ = with_lens.project(lon2, lat2, np.full(2, 600.0))
     np.testing.assert_allclose(c2, [-300.0, 900.0], atol=1e-6)
+
+
+def _base_to_height(preset_name: str) -> tuple[float, float]:
+    """B/H of a preset's pair at the scene centre, and the base's along-track share."""
+    preset = PRESETS[preset_name]
+    rng = np.random.default_rng(0)
+    ms = [truth_model(s, preset, CENTRE, ErrorConfig(), rng) for s in preset.images]
+    g = np.array(geodetic_to_ecef(*CENTRE)).ravel()
+    pos, vel = [], []
+    for m in ms:
+        _, r = m.project(CENTRE[0], CENTRE[1], CENTRE[2])
+        p, v = m.orbit.interpolate(np.atleast_1d(m.line_time_s(r)))
+        pos.append(p[0])
+        vel.append(v[0])
+    base = pos[1] - pos[0]
+    height = np.mean([np.dot(p - g, g / np.linalg.norm(g)) for p in pos])
+    along = abs(np.dot(base, vel[0] / np.linalg.norm(vel[0]))) / np.linalg.norm(base)
+    return float(np.linalg.norm(base) / height), float(along)
+
+
+def test_hrs_preset_is_an_along_track_pair_with_b_over_h_near_08():
+    bh, along = _base_to_height("hrs")
+    assert 0.7 < bh < 0.9
+    assert along > 0.99
+
+
+def test_spot_preset_is_an_across_track_pair():
+    bh, along = _base_to_height("spot")
+    assert 0.6 < bh < 1.1  # +25.5 / -20 deg incidence from two orbits
+    assert along < 0.5
