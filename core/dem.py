@@ -11,7 +11,24 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
+from scipy.ndimage import map_coordinates
+
 from core.errors import InputError
+
+
+def sample_bilinear(z: NDArray[np.floating], fi: ArrayLike, fj: ArrayLike) -> NDArray[np.float64]:
+    """Bilinear value of grid ``z`` at fractional (row, col) indices; NaN outside the grid.
+
+    Cells next to a NaN node give NaN (voids are not invented).
+    """
+    fi = np.asarray(fi, dtype=np.float64)
+    fj = np.asarray(fj, dtype=np.float64)
+    fi, fj = np.broadcast_arrays(fi, fj)
+    nr, nc = np.shape(z)
+    inside = (fi >= 0) & (fi <= nr - 1) & (fj >= 0) & (fj <= nc - 1)
+    out = map_coordinates(np.asarray(z, dtype=np.float64), [fi.ravel(), fj.ravel()], order=1,
+                          mode="nearest", prefilter=False).reshape(fi.shape)
+    return np.where(inside, out, np.nan)
 
 
 @dataclass(frozen=True, eq=False)
@@ -64,23 +81,9 @@ class GeoDEM:
 
     def height_m(self, lon_deg: ArrayLike, lat_deg: ArrayLike) -> NDArray[np.float64]:
         """Bilinear height at (lon, lat); NaN outside the grid or next to a void."""
-        lon = np.asarray(lon_deg, dtype=np.float64)
-        lat = np.asarray(lat_deg, dtype=np.float64)
-        lon, lat = np.broadcast_arrays(lon, lat)
-        fi = (lat - self.lat0_deg) / self.dlat_deg
-        fj = (lon - self.lon0_deg) / self.dlon_deg
-        nr, nc = self.shape
-        inside = (fi >= 0) & (fi <= nr - 1) & (fj >= 0) & (fj <= nc - 1)
-        fi = np.where(inside, fi, 0.0)
-        fj = np.where(inside, fj, 0.0)
-        i0 = np.minimum(np.floor(fi).astype(np.intp), nr - 2)
-        j0 = np.minimum(np.floor(fj).astype(np.intp), nc - 2)
-        ti, tj = fi - i0, fj - j0
-        h = self.h_m
-        top = h[i0, j0] * (1 - tj) + h[i0, j0 + 1] * tj
-        bot = h[i0 + 1, j0] * (1 - tj) + h[i0 + 1, j0 + 1] * tj
-        out = top * (1 - ti) + bot * ti
-        return np.where(inside, out, np.nan)
+        fi = (np.asarray(lat_deg, dtype=np.float64) - self.lat0_deg) / self.dlat_deg
+        fj = (np.asarray(lon_deg, dtype=np.float64) - self.lon0_deg) / self.dlon_deg
+        return sample_bilinear(self.h_m, fi, fj)
 
     def cell_size_m(self) -> float:
         """Approximate smaller ground cell size in metres at the DEM centre."""

@@ -14,8 +14,7 @@ from dataclasses import dataclass
 
 import numpy as np
 from numpy.typing import NDArray
-from scipy.ndimage import map_coordinates
-
+from core.dem import sample_bilinear
 from core.errors import InputError
 
 FloatArray = NDArray[np.float64]
@@ -41,11 +40,7 @@ class SurfaceGrid:
         """Bilinear height; NaN outside the grid (or next to NaN cells)."""
         fj = (np.asarray(x_m) - self.x0_m) / self.dx_m
         fi = (self.y0_m - np.asarray(y_m)) / self.dy_m
-        nr, nc = self.z_m.shape
-        out = map_coordinates(self.z_m, [fi.ravel(), fj.ravel()], order=1, mode="constant",
-                              cval=np.nan, prefilter=False).reshape(fi.shape)
-        inside = (fi >= 0) & (fi <= nr - 1) & (fj >= 0) & (fj <= nc - 1)
-        return np.where(inside, out, np.nan)
+        return sample_bilinear(self.z_m, fi, fj)
 
 
 @dataclass(frozen=True, eq=False)
