@@ -10,7 +10,6 @@ from dataclasses import dataclass
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
-
 from scipy.ndimage import map_coordinates
 
 from core.errors import InputError

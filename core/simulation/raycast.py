@@ -14,6 +14,7 @@ from dataclasses import dataclass
 
 import numpy as np
 from numpy.typing import NDArray
+
 from core.dem import sample_bilinear
 from core.errors import InputError
 
