@@ -156,7 +156,7 @@ class MosaicGrid:
 
     @property
     def transform(self) -> tuple[float, float, float, float, float, float]:
-        """GDAL geotransform order (c, a, b, f, d, e) is not used: this is affine (a..f)."""
+        """Affine coefficients (a, b, c, d, e, f): pixel corner origin, north-up."""
         r = self.res_deg
         return (r, 0.0, self.lon0 - r / 2, 0.0, -r, self.lat0 + r / 2)
 

@@ -115,7 +115,7 @@ def _derivative_matrices() -> tuple[FloatArray, FloatArray]:
 _DX, _DY = _derivative_matrices()
 
 
-def _rational(
+def rational_functions(
     coeffs: FloatArray,
     x: FloatArray,
     y: FloatArray,
@@ -333,7 +333,7 @@ class RPCModel:
         self, x: FloatArray, y: FloatArray, z: FloatArray
     ) -> tuple[FloatArray, FloatArray]:
         """Unbiased image (col, row) in pixels from normalised 1-D (L, P, H)."""
-        v = _rational(self._forward, x, y, z)
+        v = rational_functions(self._forward, x, y, z)
         return v[0] * self.col_scale + self.col_off, v[1] * self.row_scale + self.row_off
 
     def project(
@@ -349,7 +349,7 @@ class RPCModel:
             np.asarray(h_m, dtype=np.float64),
         )
         shape = lon.shape
-        v = _rational(
+        v = rational_functions(
             self._forward, lon.ravel(), lat.ravel(), h.ravel(),
             (self.lon_off, self.lat_off, self.alt_off),
             (self.lon_scale, self.lat_scale, self.alt_scale),
@@ -372,7 +372,7 @@ class RPCModel:
         self, x: FloatArray, y: FloatArray, z: FloatArray
     ) -> tuple[FloatArray, FloatArray, FloatArray]:
         """Unbiased (col, row) pixels and their derivatives d(col,row)/d(x,y), shape (2, 2, n)."""
-        v = _rational(self._forward_with_derivatives, x, y, z, divide=False)
+        v = rational_functions(self._forward_with_derivatives, x, y, z, divide=False)
         scales = (self.col_scale, self.row_scale)
         jac = np.empty((2, 2, x.size))
         out = []
@@ -405,7 +405,7 @@ class RPCModel:
         r = (row - self.row_off) / self.row_scale
         if self.has_inverse and use_inverse:
             inv = np.stack([self.lon_num, self.lon_den, self.lat_num, self.lat_den])
-            v = _rational(inv, c, r, z)
+            v = rational_functions(inv, c, r, z)
             # the vendor inverse is normalised with the same lon/lat offsets and scales
             return v[0], v[1]
         sol = self._linear_inverse

@@ -17,7 +17,7 @@ from numpy.typing import NDArray
 
 from core.errors import ConvergenceError, InputError
 from core.sensors.base import SensorModel
-from core.sensors.rpc import RPCModel, _rational
+from core.sensors.rpc import RPCModel, rational_functions
 
 FloatArray = NDArray[np.float64]
 
@@ -54,7 +54,7 @@ class RPCFitReport:
 
 def monomials(x: FloatArray, y: FloatArray, z: FloatArray) -> FloatArray:
     """The 20 RPC00B monomials of normalised coordinates, shape (n, 20)."""
-    return _rational(np.eye(20), np.ravel(x), np.ravel(y), np.ravel(z), divide=False).T
+    return rational_functions(np.eye(20), np.ravel(x), np.ravel(y), np.ravel(z), divide=False).T
 
 
 def _fit_rational(m: FloatArray, target: FloatArray, cfg: RPCFitConfig) -> tuple[FloatArray, FloatArray]:
@@ -164,7 +164,7 @@ def check_rpc(
     R = (r - rpc.row_off) / rpc.row_scale
     H = (h - rpc.alt_off) / rpc.alt_scale
     coeffs = np.stack([rpc.lon_num, rpc.lon_den, rpc.lat_num, rpc.lat_den])
-    ln, lt = _rational(coeffs, C, R, H)
+    ln, lt = rational_functions(coeffs, C, R, H)
     ilon = ln * rpc.lon_scale + rpc.lon_off
     ilat = lt * rpc.lat_scale + rpc.lat_off
     d_m = np.hypot((ilon - lon) * 111_320.0 * np.cos(np.radians(lat)), (ilat - lat) * 110_574.0)
