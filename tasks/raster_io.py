@@ -36,12 +36,6 @@ class _WindowWriter:
             self.dst.write(value, 1, window=window)
 
 
-def write_array_cog(data: darr.Array | np.ndarray, out: str | Path, **kwargs: Any) -> Path:
-    """Write one 2-D (Dask) array as a COG; see :func:`write_arrays_cog` for the options."""
-    write_arrays_cog([(data, out, kwargs)])
-    return Path(out)
-
-
 def write_arrays_cog(
     items: list[tuple[darr.Array | np.ndarray, str | Path, dict[str, Any]]],
     extra: list[Any] | None = None,
@@ -110,21 +104,15 @@ def write_arrays_cog(
     return tuple(results)
 
 
-def write_cog(
-    da: xr.DataArray,
-    out: str | Path,
-    *,
-    resampling: str = "average",
-    predictor: int | None = None,
-    blocksize: int = 512,
-) -> Path:
-    """Write a georeferenced 2-D DataArray (rioxarray CRS, transform, nodata) as a COG."""
+def cog_item(
+    da: xr.DataArray, out: str | Path, **opts: Any
+) -> tuple[darr.Array, str | Path, dict[str, Any]]:
+    """A :func:`write_arrays_cog` item from a georeferenced 2-D DataArray: its rioxarray
+    transform, CRS and nodata, its scalar attrs as tags, plus ``opts``."""
     tags = {k: str(v) for k, v in da.attrs.items() if isinstance(v, (str, int, float))}
-    return write_array_cog(
-        da.data, out, transform=da.rio.transform(recalc=True), crs=da.rio.crs,
-        nodata=da.rio.nodata if da.rio.encoded_nodata is None else da.rio.encoded_nodata,
-        tags=tags, resampling=resampling, predictor=predictor, blocksize=blocksize,
-    )
+    nodata = da.rio.nodata if da.rio.encoded_nodata is None else da.rio.encoded_nodata
+    return da.data, out, {"transform": da.rio.transform(recalc=True), "crs": da.rio.crs,
+                          "nodata": nodata, "tags": tags, **opts}
 
 
 def _chmod_default(path: Path | str) -> None:

@@ -8,7 +8,6 @@ import tempfile
 from dataclasses import asdict, dataclass
 from pathlib import Path
 
-import dask
 import dask.array as darr
 import numpy as np
 import rioxarray
@@ -17,7 +16,7 @@ from prefect import task
 
 from core.geoid import GeoidGrid
 from tasks.geoid import load_geoid
-from tasks.raster_io import atomic_write_bytes, atomic_write_text, write_cog
+from tasks.raster_io import atomic_write_bytes, atomic_write_text, cog_item, write_arrays_cog
 from tasks.srtm import BBox, SrtmTile, build_vrt, covered, find_tiles, mosaic_grid
 
 CHUNK = 1024
@@ -121,13 +120,12 @@ def build_reference(
         voids.attrs = {"long_name": "0 valid, 1 SRTM void, 2 no SRTM tile"}
 
         counts = [(voids.data == v).sum() for v in (VOID_VALID, VOID_SRTM, VOID_UNCOVERED)]
-        with dask.config.set(scheduler="threads"):
-            n_valid, n_void, n_unc, hmin, hmax, Hmin, Hmax = dask.compute(
-                *counts, darr.nanmin(h.data), darr.nanmax(h.data),
-                darr.nanmin(H.data), darr.nanmax(H.data),
-            )
-        write_cog(voids, mask_path, resampling="nearest")
-        write_cog(h, out)
+        # one pass over the mosaic: both COGs and the summary statistics
+        n_valid, n_void, n_unc, hmin, hmax, Hmin, Hmax = write_arrays_cog(
+            [cog_item(voids, mask_path, resampling="nearest"), cog_item(h, out)],
+            extra=[*counts, darr.nanmin(h.data), darr.nanmax(h.data),
+                   darr.nanmin(H.data), darr.nanmax(H.data)],
+        )
     n_cov = int(n_valid) + int(n_void)
     total = n_cov + int(n_unc)
     summary = ReferenceSummary(
