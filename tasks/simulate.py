@@ -9,7 +9,7 @@ from __future__ import annotations
 
 import json
 import threading
-from dataclasses import asdict, dataclass, field
+from dataclasses import asdict, dataclass, field, replace
 from datetime import date
 from functools import lru_cache
 from pathlib import Path
@@ -362,7 +362,7 @@ def define_scene(
         except (ValueError, TypeError) as exc:
             raise InputError(f"{paths.scene_json} is unreadable ({exc}); remove {paths.root} "
                              "or choose another --out") from exc
-        if _replace(old, dsm_range_m=None).to_json() == scene.to_json():
+        if replace(old, dsm_range_m=None).to_json() == scene.to_json():
             return old  # same scene: resume, keep the products already made
         raise InputError(
             f"{paths.root} already holds a different simulated scene; choose another --out "
@@ -414,7 +414,7 @@ def build_truth_surface(scene: SceneDef, out: Path) -> SceneDef:
         ],
         extra=[darr.nanmin(dsm), darr.nanmax(dsm)],
     )
-    scene = _replace(scene, dsm_range_m=(float(lo), float(hi)))
+    scene = replace(scene, dsm_range_m=(float(lo), float(hi)))
     atomic_write_text(paths.scene_json, scene.to_json())
     return scene
 
@@ -422,12 +422,6 @@ def build_truth_surface(scene: SceneDef, out: Path) -> SceneDef:
 def _exist(*paths: Path) -> bool:
     """Products of an earlier run of the same scene (written atomically, so complete)."""
     return all(p.exists() for p in paths)
-
-
-def _replace(scene: SceneDef, **kw: Any) -> SceneDef:
-    from dataclasses import replace
-
-    return replace(scene, **kw)
 
 
 # ---------------------------------------------------------------------------- C. radiance
@@ -509,28 +503,46 @@ def _read_window(path: Path, transform: Affine, xmin: float, ymin: float, xmax: 
     return a, transform.c + (c0 + 0.5) * res, transform.f - (r0 + 0.5) * res
 
 
+def _ray_levels(scene: SceneDef) -> tuple[float, float, float]:
+    """Heights at which lines of sight are localised: just below, across and above the DSM."""
+    lo, hi = scene.dsm_range_m
+    return lo - 5.0, 0.5 * (lo + hi), hi + 5.0
+
+
+Bounds = tuple[float, float, float, float]
+
+
+def _cast_on_dsm(rays: Rays, scene: SceneDef, dsm_path: Path,
+                 tol_m: float) -> tuple[np.ndarray, np.ndarray, Bounds] | None:
+    """First hit (x, y) of each ray on the truth DSM, and the rays' ground bounds;
+    None when the DSM holds no height under them."""
+    bounds = (float(np.nanmin(rays.x_m)), float(np.nanmin(rays.y_m)),
+              float(np.nanmax(rays.x_m)), float(np.nanmax(rays.y_m)))
+    z, zx0, zy0 = _read_window(Path(dsm_path), scene.transform, *bounds)
+    if not np.isfinite(z).any():
+        return None
+    res = scene.transform.a
+    x, y, _ = first_hit(rays, SurfaceGrid(z, zx0, zy0, res, res),
+                        float(np.nanmax(z)) + 0.5, float(np.nanmin(z)) - 0.5, tol_m=tol_m)
+    return x, y, bounds
+
+
 def render_block(block: np.ndarray, scene: SceneDef, model_json: str, image_index: int,
                  dsm_path: str, radiance_path: str, block_info: dict | None = None) -> np.ndarray:
     """DN of one image block: ray-cast each pixel on the truth DSM, sample the radiance."""
     (r0, r1), (c0, c1) = block_info[0]["array-location"]
     model = _model(model_json)
     rows, cols = np.arange(r0, r1), np.arange(c0, c1)
-    lo, hi = scene.dsm_range_m
-    rays = _rays(model, rows, cols, scene.epsg, (lo - 5.0, 0.5 * (lo + hi), hi + 5.0))
-    xa, ya = rays.x_m, rays.y_m
-    xmin, xmax = float(np.nanmin(xa)), float(np.nanmax(xa))
-    ymin, ymax = float(np.nanmin(ya)), float(np.nanmax(ya))
-    tr = scene.transform
-    z, zx0, zy0 = _read_window(Path(dsm_path), tr, xmin, ymin, xmax, ymax)
-    res = tr.a
+    rays = _rays(model, rows, cols, scene.epsg, _ray_levels(scene))
     shape = (r1 - r0, c1 - c0)
     bits = scene.bits
-    if not np.isfinite(z).any():
+    hit = _cast_on_dsm(rays, scene, Path(dsm_path), tol_m=0.01)
+    if hit is None:
         return np.zeros(shape, dtype=np.uint8 if bits == 8 else np.uint16)
-    surf = SurfaceGrid(z, zx0, zy0, res, res)
-    x, y, _ = first_hit(rays, surf, float(np.nanmax(z)) + 0.5, float(np.nanmin(z)) - 0.5,
-                        tol_m=0.01)
-    rad, rx0, ry0 = _read_window(Path(radiance_path), tr, xmin, ymin, xmax, ymax)
+    x, y, bounds = hit
+    tr = scene.transform
+    res = tr.a
+    rad, rx0, ry0 = _read_window(Path(radiance_path), tr, *bounds)
     fj = (x - rx0) / res
     fi = (ry0 - y) / res
     ok = np.isfinite(fi) & np.isfinite(fj)
@@ -635,19 +647,13 @@ def _visible(scene: SceneDef, paths: ScenePaths, models: list[PushbroomModel],
              k: int) -> bool:
     """Whether point ``k`` is what its pixels see in every image (no tree or roof in front):
     the first hit of each line of sight on the truth DSM lies within 1.5 cells of it."""
-    lo, hi = scene.dsm_range_m
-    levels = (lo - 5.0, 0.5 * (lo + hi), hi + 5.0)
     res = scene.grid[2]
     for (c, r), m in zip(img, models, strict=True):
-        lon, lat = m.localize(np.full(3, c[k]), np.full(3, r[k]), np.array(levels))
-        x, y = to_xy(scene.epsg, lon, lat)
-        rays = Rays(x[:, None], y[:, None], levels)
-        z, zx0, zy0 = _read_window(paths.dsm, scene.transform, float(x.min()), float(y.min()),
-                                   float(x.max()), float(y.max()))
-        if not np.isfinite(z).any():
+        rays = _rays(m, np.array([r[k]]), np.array([c[k]]), scene.epsg, _ray_levels(scene))
+        hit = _cast_on_dsm(rays, scene, paths.dsm, tol_m=1e-3)
+        if hit is None:
             return False
-        hx, hy, _ = first_hit(rays, SurfaceGrid(z, zx0, zy0, res, res),
-                              float(np.nanmax(z)) + 0.5, float(np.nanmin(z)) - 0.5)
+        hx, hy, _ = hit
         if not (np.isfinite(hx[0]) and np.hypot(hx[0] - px[k], hy[0] - py[k]) < 1.5 * res):
             return False
     return True
