@@ -1,4 +1,4 @@
-"""WGS84 geodesy: geodetic <-> ECEF and local East-North-Up frames.
+"""WGS84 geodesy: geodetic <-> ECEF, local East-North-Up frames, viewing angles, lon/lat boxes.
 
 Angles in degrees at the interface, heights in metres above the WGS84 ellipsoid.
 All functions are vectorised over NumPy arrays (scalars work too) and broadcast.
@@ -6,8 +6,12 @@ All functions are vectorised over NumPy arrays (scalars work too) and broadcast.
 
 from __future__ import annotations
 
+from dataclasses import dataclass
+
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
+
+from core.errors import InputError
 
 WGS84_A_M = 6378137.0
 WGS84_F = 1.0 / 298.257223563
@@ -63,21 +67,109 @@ def ecef_to_geodetic(
     return np.degrees(lon), np.degrees(lat), h
 
 
-def enu_rotation(lon_deg: float, lat_deg: float) -> FloatArray:
-    """3x3 matrix R whose rows are the East, North, Up unit vectors in ECEF at (lon, lat).
+def enu_rotation(lon_deg: ArrayLike, lat_deg: ArrayLike) -> FloatArray:
+    """Matrices R whose rows are the East, North, Up unit vectors in ECEF at (lon, lat).
 
-    ``enu = R @ (ecef - origin)`` and ``ecef = origin + R.T @ enu``.
+    Shape ``(..., 3, 3)`` for inputs of shape ``(...)`` (a single 3x3 for scalars);
+    ``R[..., 2, :]`` is the ellipsoid normal. ``enu = R @ (ecef - origin)`` and
+    ``ecef = origin + R.T @ enu``.
     """
     lon, lat = np.radians(lon_deg), np.radians(lat_deg)
     sl, cl = np.sin(lon), np.cos(lon)
     sp, cp = np.sin(lat), np.cos(lat)
-    return np.array(
-        [
-            [-sl, cl, 0.0],
-            [-sp * cl, -sp * sl, cp],
-            [cp * cl, cp * sl, sp],
-        ]
-    )
+    sl, cl, sp, cp = np.broadcast_arrays(sl, cl, sp, cp)
+    r = np.empty(sl.shape + (3, 3))
+    r[..., 0, 0], r[..., 0, 1], r[..., 0, 2] = -sl, cl, 0.0
+    r[..., 1, 0], r[..., 1, 1], r[..., 1, 2] = -sp * cl, -sp * sl, cp
+    r[..., 2, 0], r[..., 2, 1], r[..., 2, 2] = cp * cl, cp * sl, sp
+    return r
+
+
+def metres_per_degree(lat_deg: ArrayLike) -> tuple[FloatArray, FloatArray]:
+    """Approximate ground metres per degree of longitude and of latitude at ``lat_deg``.
+
+    ``111 320 cos(lat)`` and ``110 574``: WGS84's equatorial values, within 0.34 % of the true
+    east-west scale and 1.02 % of the north-south one anywhere (exact at the equator). For
+    step sizes, margins, windows and cell sizes only; measure distances in ECEF or
+    :func:`geodetic_to_enu`. (The scene simulator sizes its world with these values, so
+    changing them changes every simulated scene.)
+    """
+    lat = np.asarray(lat_deg, dtype=np.float64)
+    return 111_320.0 * np.cos(np.radians(lat)), np.full(lat.shape, 110_574.0)
+
+
+def utm_epsg(lon_deg: float, lat_deg: float) -> int:
+    """EPSG code of the WGS84 UTM zone holding (lon, lat): 326zz north, 327zz south."""
+    zone = int((lon_deg + 180.0) // 6.0) % 60 + 1
+    return (32600 if lat_deg >= 0 else 32700) + zone
+
+
+def incidence_angles(
+    sat_pos_m: FloatArray, sat_vel_m_s: FloatArray, ground_m: FloatArray, lon_deg: FloatArray,
+    lat_deg: FloatArray,
+) -> tuple[FloatArray, FloatArray, FloatArray]:
+    """Viewing angles of ground points (n, 3 ECEF, at ``lon_deg``, ``lat_deg``) from a satellite.
+
+    Returns ``(incidence_rad, across_track_rad, slant_range_m)``: the incidence is the angle at
+    the ground between the ellipsoid normal and the direction to the satellite (position
+    ``sat_pos_m`` (n, 3), ECEF velocity ``sat_vel_m_s`` (n, 3)); the across-track incidence is
+    the same angle in the vertical plane across the ground track, positive when the satellite
+    is west of the point (the view looks east).
+    """
+    r = enu_rotation(lon_deg, lat_deg)
+    e, n, u = r[..., 0, :], r[..., 1, :], r[..., 2, :]
+    s = sat_pos_m - ground_m
+    rng = np.linalg.norm(s, axis=1)
+    se, sn, su = (np.sum(s * a, axis=1) for a in (e, n, u))
+    ae, an = np.sum(sat_vel_m_s * e, axis=1), np.sum(sat_vel_m_s * n, axis=1)
+    norm = np.hypot(ae, an)
+    ce, cn = an / norm, -ae / norm  # horizontal, perpendicular to the track
+    flip = np.where(ce < 0, -1.0, 1.0)  # make it point east
+    across = np.arctan2(-(se * ce + sn * cn) * flip, su)
+    inc = np.arccos(np.clip(su / rng, -1.0, 1.0))
+    return inc, across, rng
+
+
+@dataclass(frozen=True)
+class BBox:
+    """A lon/lat box in degrees (WGS84)."""
+
+    lon_min: float
+    lat_min: float
+    lon_max: float
+    lat_max: float
+
+    def __post_init__(self) -> None:
+        if not (-180 <= self.lon_min < self.lon_max <= 180):
+            raise InputError(
+                f"bad bbox longitudes {self.lon_min}..{self.lon_max}: need "
+                "-180 <= LON_MIN < LON_MAX <= 180 (order: LON_MIN LAT_MIN LON_MAX LAT_MAX)"
+            )
+        if not (-90 <= self.lat_min < self.lat_max <= 90):
+            raise InputError(
+                f"bad bbox latitudes {self.lat_min}..{self.lat_max}: need "
+                "-90 <= LAT_MIN < LAT_MAX <= 90 (order: LON_MIN LAT_MIN LON_MAX LAT_MAX)"
+            )
+
+    def expanded(self, margin_deg: float) -> BBox:
+        """The box widened by ``margin_deg`` on every side (clipped to the globe)."""
+        if margin_deg < 0:
+            raise InputError(f"margin must be >= 0 degrees, got {margin_deg}")
+        return BBox(
+            max(self.lon_min - margin_deg, -180.0),
+            max(self.lat_min - margin_deg, -90.0),
+            min(self.lon_max + margin_deg, 180.0),
+            min(self.lat_max + margin_deg, 90.0),
+        )
+
+    def contains(self, other: BBox, tol_deg: float = 1e-9) -> bool:
+        """Whether ``other`` lies inside this box (within ``tol_deg``)."""
+        return (other.lon_min >= self.lon_min - tol_deg and other.lat_min >= self.lat_min - tol_deg
+                and other.lon_max <= self.lon_max + tol_deg
+                and other.lat_max <= self.lat_max + tol_deg)
+
+    def as_tuple(self) -> tuple[float, float, float, float]:
+        return (self.lon_min, self.lat_min, self.lon_max, self.lat_max)
 
 
 def geodetic_to_enu(

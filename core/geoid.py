@@ -1,4 +1,5 @@
-"""Geoid undulation grids (EGM96) as immutable values, interpolated bilinearly.
+"""Geoid undulation grids (EGM96) as immutable values, interpolated bilinearly
+(:func:`core.dem.sample_bilinear`).
 
 No I/O here: ``tasks.geoid`` reads the GTX file and builds a :class:`GeoidGrid`.
 Orthometric heights H (SRTM) become ellipsoidal heights with ``h = H + N``.
@@ -13,6 +14,7 @@ from functools import cached_property
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
+from core.dem import sample_bilinear
 from core.errors import InputError
 
 
@@ -32,6 +34,7 @@ class GeoidGrid:
     dlon_deg: float
     name: str = "geoid"
     _global_lon: bool = field(init=False, repr=False)
+    _nodes: NDArray[np.float64] = field(init=False, repr=False)
 
     def __post_init__(self) -> None:
         v = np.asarray(self.values_m, dtype=np.float64)
@@ -49,6 +52,8 @@ class GeoidGrid:
         object.__setattr__(self, "values_m", v)
         span = v.shape[1] * self.dlon_deg
         object.__setattr__(self, "_global_lon", abs(span - 360.0) < 1e-9)
+        # a global grid repeats its first column after the last, so the seam interpolates
+        object.__setattr__(self, "_nodes", np.hstack([v, v[:, :1]]) if self._global_lon else v)
 
     @property
     def shape(self) -> tuple[int, int]:
@@ -88,24 +93,18 @@ class GeoidGrid:
                 f"{self.name!r}; use a grid that covers the area"
             )
         fi = np.clip(fi, 0.0, nrows - 1)
-        i0 = np.minimum(np.floor(fi).astype(np.intp), nrows - 2)
-        ti = fi - i0
-        if self._global_lon:
-            j0 = np.floor(fj).astype(np.intp) % ncols
-            j1 = (j0 + 1) % ncols
-            tj = fj - np.floor(fj)
-        else:
+        if not self._global_lon:
             fj = np.clip(fj, 0.0, ncols - 1)
-            j0 = np.minimum(np.floor(fj).astype(np.intp), ncols - 2)
-            j1 = j0 + 1
-            tj = fj - j0
-        v = self.values_m
-        top = v[i0, j0] * (1 - tj) + v[i0, j1] * tj
-        bot = v[i0 + 1, j0] * (1 - tj) + v[i0 + 1, j1] * tj
-        return top * (1 - ti) + bot * ti
+        return sample_bilinear(self._nodes, fi, fj)
 
     def orthometric_to_ellipsoidal(
         self, lon_deg: ArrayLike, lat_deg: ArrayLike, H_m: ArrayLike
     ) -> NDArray[np.float64]:
         """h = H + N."""
         return np.asarray(H_m, dtype=np.float64) + self.undulation_m(lon_deg, lat_deg)
+
+    def ellipsoidal_to_orthometric(
+        self, lon_deg: ArrayLike, lat_deg: ArrayLike, h_m: ArrayLike
+    ) -> NDArray[np.float64]:
+        """H = h - N."""
+        return np.asarray(h_m, dtype=np.float64) - self.undulation_m(lon_deg, lat_deg)

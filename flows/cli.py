@@ -39,8 +39,9 @@ def _add_prepare_reference(sub: argparse._SubParsersAction) -> None:
 
 
 def _run_prepare_reference(args: argparse.Namespace) -> int:
+    from core.geodesy import BBox
     from tasks.geoid import BUNDLED_SRTM_DIR
-    from tasks.srtm import BBox, find_tiles
+    from tasks.srtm import find_tiles
 
     params_box = BBox(*args.bbox).expanded(args.margin_deg)
     # check inputs before starting Prefect, so bad input is one clean line

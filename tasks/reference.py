@@ -14,10 +14,11 @@ import rioxarray
 import xarray as xr
 from prefect import task
 
+from core.geodesy import BBox, metres_per_degree
 from core.geoid import GeoidGrid
 from tasks.geoid import load_geoid
 from tasks.raster_io import atomic_write_bytes, atomic_write_text, cog_item, write_arrays_cog
-from tasks.srtm import BBox, SrtmTile, build_vrt, covered, find_tiles, mosaic_grid
+from tasks.srtm import SrtmTile, build_vrt, covered, find_tiles, mosaic_grid
 
 CHUNK = 1024
 VOID_VALID, VOID_SRTM, VOID_UNCOVERED = 0, 1, 2
@@ -160,9 +161,9 @@ def render_hillshade(dem_path: Path, png_path: Path, max_px: int = 1600) -> Path
         shape = (max(2, src.height // f), max(2, src.width // f))
         z = src.read(1, out_shape=shape, resampling=Resampling.average, masked=True)
         b = src.bounds
-    lat_c = 0.5 * (b.top + b.bottom)
-    dy = (b.top - b.bottom) / shape[0] * 111_320.0
-    dx = (b.right - b.left) / shape[1] * 111_320.0 * np.cos(np.radians(lat_c))
+    m_lon, m_lat = metres_per_degree(0.5 * (b.top + b.bottom))
+    dy = float((b.top - b.bottom) / shape[0] * m_lat)
+    dx = float((b.right - b.left) / shape[1] * m_lon)
     zf = z.filled(np.nan).astype(np.float64)
     fill = np.where(np.isnan(zf), np.nanmean(zf), zf)
     ls = LightSource(azdeg=315, altdeg=45)

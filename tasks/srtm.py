@@ -21,43 +21,12 @@ import rasterio
 from rasterio.errors import RasterioIOError
 
 from core.errors import CoverageError, InputError
+from core.geodesy import BBox
 
 SRTM_VOID = -32768
 HGT_SIZES = {1201 * 1201 * 2: 1201, 3601 * 3601 * 2: 3601}
 _TILE_RE = re.compile(r"^([ns])(\d{1,2})_?([ew])(\d{1,3})", re.IGNORECASE)
 _SUFFIXES = (".hgt", ".tif", ".tiff")
-
-
-@dataclass(frozen=True)
-class BBox:
-    """A lon/lat box in degrees."""
-
-    lon_min: float
-    lat_min: float
-    lon_max: float
-    lat_max: float
-
-    def __post_init__(self) -> None:
-        if not (-180 <= self.lon_min < self.lon_max <= 180):
-            raise InputError(
-                f"bad bbox longitudes {self.lon_min}..{self.lon_max}: need "
-                "-180 <= LON_MIN < LON_MAX <= 180 (order: LON_MIN LAT_MIN LON_MAX LAT_MAX)"
-            )
-        if not (-90 <= self.lat_min < self.lat_max <= 90):
-            raise InputError(
-                f"bad bbox latitudes {self.lat_min}..{self.lat_max}: need "
-                "-90 <= LAT_MIN < LAT_MAX <= 90 (order: LON_MIN LAT_MIN LON_MAX LAT_MAX)"
-            )
-
-    def expanded(self, margin_deg: float) -> BBox:
-        if margin_deg < 0:
-            raise InputError(f"margin must be >= 0 degrees, got {margin_deg}")
-        return BBox(
-            max(self.lon_min - margin_deg, -180.0),
-            max(self.lat_min - margin_deg, -90.0),
-            min(self.lon_max + margin_deg, 180.0),
-            min(self.lat_max + margin_deg, 90.0),
-        )
 
 
 @dataclass(frozen=True)

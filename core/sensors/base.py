@@ -2,6 +2,11 @@
 
 Image coordinates: ``col`` (pixel, across track) and ``row`` (line, along track),
 0-based with pixel centres at integers. Ground: WGS84 lon/lat degrees, ellipsoidal h metres.
+
+The adjustments (relative and absolute orientation) see a model only through this protocol:
+``param_names``/``params`` name and hold the adjustable corrections, ``with_params`` returns a
+new model with other values, ``jacobian`` gives d(col, row)/d(params). They never ask which
+sensor family they hold.
 """
 
 from __future__ import annotations
@@ -11,8 +16,9 @@ from typing import Protocol, runtime_checkable
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from core.dem import GeoDEM
+from core.dem import GeoDEM, first_crossing, march_levels
 from core.errors import GeometryError, InputError
+from core.geodesy import metres_per_degree
 
 FloatArray = NDArray[np.float64]
 
@@ -34,6 +40,11 @@ class SensorModel(Protocol):
         ...
 
     @property
+    def param_names(self) -> tuple[str, ...]:
+        """Names of the adjustable parameters, in the order of ``params``."""
+        ...
+
+    @property
     def params(self) -> FloatArray:
         """The adjustable parameter vector (zeros for an unadjusted model)."""
         ...
@@ -42,18 +53,68 @@ class SensorModel(Protocol):
         """A new model with the adjustable parameters set to ``p``."""
         ...
 
+    def jacobian(self, lon_deg: ArrayLike, lat_deg: ArrayLike, h_m: ArrayLike) -> FloatArray:
+        """d(col, row)/d(params) at ground points: shape (n, 2, len(params)), pixels per unit."""
+        ...
 
-def ray_height_step_m(model: SensorModel, col: FloatArray, row: FloatArray,
-                      h_lo: float, h_hi: float, cell_m: float) -> float:
-    """Height step along the line of sight that moves the ground point by <= half a DEM cell."""
+
+def numeric_jacobian(
+    model: SensorModel, lon_deg: ArrayLike, lat_deg: ArrayLike, h_m: ArrayLike,
+    steps: ArrayLike,
+) -> FloatArray:
+    """d(col, row)/d(params) by fourth-order central differences (steps +-s, +-2s) of ``project``.
+
+    ``steps`` holds one step per parameter, in the parameter's unit; choose steps that move the
+    image point by about a pixel. Shape (n, 2, p). The fallback for models without an analytic
+    Jacobian, and the check of those that have one.
+    """
+    lon, lat, h = (np.ravel(a) for a in np.broadcast_arrays(
+        np.asarray(lon_deg, dtype=np.float64), np.asarray(lat_deg, dtype=np.float64),
+        np.asarray(h_m, dtype=np.float64)))
+    p0 = np.asarray(model.params, dtype=np.float64)
+    steps = np.asarray(steps, dtype=np.float64).ravel()
+    if steps.shape != p0.shape or not np.all(steps > 0):
+        raise InputError(f"numeric_jacobian needs {p0.size} positive steps, got {steps.tolist()}")
+    out = np.empty((lon.size, 2, p0.size))
+    for k in range(p0.size):
+        val = []
+        for mult in (1.0, -1.0, 2.0, -2.0):
+            dp = np.zeros_like(p0)
+            dp[k] = mult * steps[k]
+            val.append(np.stack(model.with_params(p0 + dp).project(lon, lat, h), axis=1))
+        out[:, :, k] = (8.0 * (val[0] - val[1]) - (val[2] - val[3])) / (12.0 * steps[k])
+    return out
+
+
+def footprint_lonlat(
+    model: SensorModel, n_cols: int, n_rows: int, heights_m: tuple[float, ...], n_side: int = 21,
+) -> tuple[FloatArray, FloatArray]:
+    """Ground (lon, lat) of ``n_side`` points along each image edge, at each of ``heights_m``.
+
+    The image spans columns 0..n_cols-1 and rows 0..n_rows-1 (pixel centres). The points of
+    every height are concatenated: their bounds hold the image's ground footprint over that
+    height range.
+    """
+    c = np.linspace(0, n_cols - 1, n_side)
+    r = np.linspace(0, n_rows - 1, n_side)
+    border_c = np.concatenate([c, c, np.zeros(n_side), np.full(n_side, n_cols - 1)])
+    border_r = np.concatenate([np.zeros(n_side), np.full(n_side, n_rows - 1), r, r])
+    lons, lats = [], []
+    for h in heights_m:
+        lo, la = model.localize(border_c, border_r, np.full(border_c.shape, h))
+        lons.append(lo)
+        lats.append(la)
+    return np.concatenate(lons), np.concatenate(lats)
+
+
+def ray_ground_move_per_m(model: SensorModel, col: FloatArray, row: FloatArray,
+                          h_lo: float, h_hi: float) -> float:
+    """Largest horizontal move (m) of the ground point per metre of height along the rays."""
     lon_a, lat_a = model.localize(col, row, np.full(col.shape, h_lo))
     lon_b, lat_b = model.localize(col, row, np.full(col.shape, h_hi))
-    dy = (lat_b - lat_a) * 111_320.0
-    dx = (lon_b - lon_a) * 111_320.0 * np.cos(np.radians(lat_a))
-    horiz = float(np.nanmax(np.hypot(dx, dy))) / max(h_hi - h_lo, 1e-9)  # m per m of height
-    if horiz <= 1e-6:
-        return h_hi - h_lo
-    return max(0.5 * cell_m / horiz, 0.05)
+    m_lon, m_lat = metres_per_degree(lat_a)
+    horiz = np.hypot((lon_b - lon_a) * m_lon, (lat_b - lat_a) * m_lat)
+    return float(np.nanmax(horiz)) / max(h_hi - h_lo, 1e-9)
 
 
 def localize_on_dem(
@@ -68,9 +129,9 @@ def localize_on_dem(
 ) -> tuple[FloatArray, FloatArray, FloatArray]:
     """Intersect the lines of sight of image points with a DEM: (col, row) -> (lon, lat, h).
 
-    Robust on steep slopes: the ray is marched down from above the highest terrain
-    in height steps small enough that the ground point never moves more than half
-    a DEM cell, the first crossing (the visible surface) is kept, then refined by
+    Robust on steep slopes (:func:`core.dem.first_crossing`): the ray is marched down from
+    above the highest terrain in height steps small enough that the ground point never moves
+    more than half a DEM cell, the first crossing (the visible surface) is kept, then refined by
     bisection to ``tol_m``. Points whose ray never meets the DEM get NaN.
     """
     col = np.atleast_1d(np.asarray(col, dtype=np.float64))
@@ -85,52 +146,23 @@ def localize_on_dem(
         h_range_m = (lo - 10.0, hi + 10.0)
     h_lo, h_hi = map(float, h_range_m)
     if not h_hi > h_lo:
-        raise InputError(f"height range {h_range_m} is empty; give (h_min, h_max) with h_min < h_max")
-    step = ray_height_step_m(model, col, row, h_lo, h_hi, dem.cell_size_m())
-    levels = np.linspace(h_hi, h_lo, int(np.ceil((h_hi - h_lo) / step)) + 1)
+        raise InputError(
+            f"height range {h_range_m} is empty; give (h_min, h_max) with h_min < h_max")
+    move = ray_ground_move_per_m(model, col, row, h_lo, h_hi)
+    levels = march_levels(h_hi, h_lo, move, dem.cell_size_m(), min_step_m=0.05)
 
-    def above(h: FloatArray, c: FloatArray, r: FloatArray) -> FloatArray:
-        lon, lat = model.localize(c, r, h)
+    def above(h: FloatArray, idx: NDArray[np.intp]) -> FloatArray:
+        lon, lat = model.localize(col[idx], row[idx], h)
         return h - dem.height_m(lon, lat)  # >0 above ground, NaN off the DEM
 
-    n = col.size
-    found = np.zeros(n, dtype=bool)
-    h_up = np.full(n, np.nan)
-    h_dn = np.full(n, np.nan)
-    prev_h = np.full(n, levels[0])
-    prev_d = above(prev_h, col, row)
-    for lev in levels[1:]:
-        todo = ~found
-        if not todo.any():
-            break
-        h = np.full(int(todo.sum()), lev)
-        d = above(h, col[todo], row[todo])
-        cross = (prev_d[todo] > 0) & (d <= 0)
-        idx = np.flatnonzero(todo)[cross]
-        h_up[idx] = prev_h[todo][cross]
-        h_dn[idx] = lev
-        found[idx] = True
-        prev_h[todo] = lev
-        prev_d[todo] = d
-    if not found.any():
+    h = first_crossing(above, col.size, levels, tol_m=tol_m, max_bisections=max_iter)
+    k = np.flatnonzero(np.isfinite(h))
+    if k.size == 0:
         raise GeometryError(
             "no line of sight meets the DEM; check that the DEM covers the image and that "
             "its heights are ellipsoidal (SRTM + geoid)"
         )
-    k = np.flatnonzero(found)
-    a, b = h_dn[k], h_up[k]  # a below ground, b above
-    ck, rk = col[k], row[k]
-    for _ in range(max_iter):
-        m = 0.5 * (a + b)
-        d = above(m, ck, rk)
-        up = d > 0
-        b = np.where(up, m, b)
-        a = np.where(up, a, m)
-        if np.max(b - a) <= tol_m:
-            break
-    h = np.full(n, np.nan)
-    h[k] = 0.5 * (a + b)
-    lon = np.full(n, np.nan)
-    lat = np.full(n, np.nan)
-    lon[k], lat[k] = model.localize(ck, rk, h[k])
+    lon = np.full(col.size, np.nan)
+    lat = np.full(col.size, np.nan)
+    lon[k], lat[k] = model.localize(col[k], row[k], h[k])
     return lon.reshape(shape), lat.reshape(shape), h.reshape(shape)

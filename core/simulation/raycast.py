@@ -4,44 +4,29 @@ The surface is a north-up grid in a local projected frame (x east, y north, metr
 ``z[i, j]`` at ``x0 + j*dx``, ``y0 - i*dy``. Each line of sight is given by its ground
 position at three heights (low, middle, high) and interpolated quadratically in h, which
 represents a straight ECEF ray in a projected frame to well under a millimetre over a
-few kilometres of height. Marching from the top keeps the first crossing, so
-occlusions (buildings, steep slopes away from the sensor) are right.
+few kilometres of height. Marching from the top keeps the first crossing
+(:func:`core.dem.first_crossing`), so occlusions (buildings, steep slopes away from the sensor)
+are right.
 """
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass
 
 import numpy as np
 from numpy.typing import NDArray
 
-from core.dem import sample_bilinear
+from core.dem import SurfaceGrid, first_crossing, march_levels
 from core.errors import InputError
+from core.sensors.base import SensorModel
 
 FloatArray = NDArray[np.float64]
+ToXY = Callable[[FloatArray, FloatArray], tuple[FloatArray, FloatArray]]
+Bounds = tuple[float, float, float, float]  # x_min, y_min, x_max, y_max (metres)
+SurfaceReader = Callable[[Bounds], SurfaceGrid | None]
 
-
-@dataclass(frozen=True, eq=False)
-class SurfaceGrid:
-    """A north-up height grid; (x0, y0) is the centre of the top-left cell."""
-
-    z_m: NDArray[np.floating]
-    x0_m: float
-    y0_m: float
-    dx_m: float
-    dy_m: float
-
-    def __post_init__(self) -> None:
-        if np.ndim(self.z_m) != 2 or min(np.shape(self.z_m)) < 2:
-            raise InputError(f"a surface grid needs at least 2x2 cells, got {np.shape(self.z_m)}")
-        if self.dx_m <= 0 or self.dy_m <= 0:
-            raise InputError("surface grid spacings must be positive")
-
-    def sample(self, x_m: FloatArray, y_m: FloatArray) -> FloatArray:
-        """Bilinear height; NaN outside the grid (or next to NaN cells)."""
-        fj = (np.asarray(x_m) - self.x0_m) / self.dx_m
-        fi = (self.y0_m - np.asarray(y_m)) / self.dy_m
-        return sample_bilinear(self.z_m, fi, fj)
+COL_STEP = 8  # lines of sight are localised every COL_STEP columns and interpolated
 
 
 @dataclass(frozen=True, eq=False)
@@ -52,7 +37,8 @@ class Rays:
     y_m: FloatArray
     h_levels_m: tuple[float, float, float]
 
-    def at(self, h: FloatArray, idx: NDArray[np.intp] | slice = slice(None)) -> tuple[FloatArray, FloatArray]:
+    def at(self, h: FloatArray,
+           idx: NDArray[np.intp] | slice = slice(None)) -> tuple[FloatArray, FloatArray]:
         """Quadratic (Lagrange) interpolation of the ray's ground position at height ``h``."""
         h0, h1, h2 = self.h_levels_m
         l0 = (h - h1) * (h - h2) / ((h0 - h1) * (h0 - h2))
@@ -61,6 +47,40 @@ class Rays:
         x = l0 * self.x_m[0, idx] + l1 * self.x_m[1, idx] + l2 * self.x_m[2, idx]
         y = l0 * self.y_m[0, idx] + l1 * self.y_m[1, idx] + l2 * self.y_m[2, idx]
         return x, y
+
+    def ground_bounds(self) -> Bounds:
+        """(x_min, y_min, x_max, y_max) of the rays' ground positions at the three heights."""
+        return (float(np.nanmin(self.x_m)), float(np.nanmin(self.y_m)),
+                float(np.nanmax(self.x_m)), float(np.nanmax(self.y_m)))
+
+
+def ray_levels(surface_range_m: tuple[float, float]) -> tuple[float, float, float]:
+    """Heights at which lines of sight are localised: just below, across and above a surface."""
+    lo, hi = surface_range_m
+    return lo - 5.0, 0.5 * (lo + hi), hi + 5.0
+
+
+def image_rays(model: SensorModel, rows: NDArray, cols: NDArray, levels: tuple[float, float, float],
+               to_xy: ToXY, col_step: int = COL_STEP) -> Rays:
+    """Lines of sight of the pixels ``rows x cols`` (a block, row-major) in the frame of ``to_xy``.
+
+    The model localises every ``col_step``-th column (and the last) at the three ``levels``;
+    the columns between are interpolated linearly along each row (a pushbroom line is
+    straight to well under a millimetre over 8 pixels).
+    """
+    sub = np.unique(np.concatenate([cols[::col_step], cols[-1:]])).astype(np.float64)
+    rr, cc = np.meshgrid(rows.astype(np.float64), sub, indexing="ij")
+    xs, ys = [], []
+    for h in levels:
+        lon, lat = model.localize(cc.ravel(), rr.ravel(), np.full(cc.size, h))
+        x, y = to_xy(lon, lat)
+        x = x.reshape(rr.shape)
+        y = y.reshape(rr.shape)
+        fx = np.stack([np.interp(cols, sub, xr) for xr in x])
+        fy = np.stack([np.interp(cols, sub, yr) for yr in y])
+        xs.append(fx.ravel())
+        ys.append(fy.ravel())
+    return Rays(np.stack(xs), np.stack(ys), levels)
 
 
 def first_hit(
@@ -82,39 +102,28 @@ def first_hit(
     n = rays.x_m.shape[1]
     xa, ya = rays.at(np.full(n, h_top_m))
     xb, yb = rays.at(np.full(n, h_bottom_m))
-    horiz = np.nanmax(np.hypot(xa - xb, ya - yb)) / (h_top_m - h_bottom_m) if n else 0.0
-    cell = min(surface.dx_m, surface.dy_m)
-    step = (h_top_m - h_bottom_m) if horiz < 1e-9 else max(0.5 * cell / horiz, 1e-3)
-    n_levels = int(np.ceil((h_top_m - h_bottom_m) / step)) + 1
-    levels = np.linspace(h_top_m, h_bottom_m, n_levels)
+    move = np.nanmax(np.hypot(xa - xb, ya - yb)) / (h_top_m - h_bottom_m) if n else 0.0
+    levels = march_levels(h_top_m, h_bottom_m, move, min(surface.dx_m, surface.dy_m),
+                          min_step_m=1e-3)
 
-    hi = np.full(n, np.nan)  # above the surface
-    lo = np.full(n, np.nan)  # below
-    active = np.arange(n)
-    prev = levels[0] - surface.sample(xa, ya)
-    prev_h = levels[0]
-    for lev in levels[1:]:
-        if active.size == 0:
-            break
-        x, y = rays.at(np.full(active.size, lev), active)
-        d = lev - surface.sample(x, y)
-        hit = (prev > 0) & (d <= 0)
-        hi[active[hit]] = prev_h
-        lo[active[hit]] = lev
-        keep = ~hit
-        active, prev = active[keep], d[keep]
-        prev_h = lev
-    found = np.flatnonzero(np.isfinite(lo))
-    a, b = lo[found], hi[found]
-    for _ in range(max_bisections):
-        if a.size == 0 or np.max(b - a) <= tol_m:
-            break
-        m = 0.5 * (a + b)
-        x, y = rays.at(m, found)
-        above = m - surface.sample(x, y) > 0
-        b = np.where(above, m, b)
-        a = np.where(above, a, m)
-    h = np.full(n, np.nan)
-    h[found] = 0.5 * (a + b)
+    def above(h: FloatArray, idx: NDArray[np.intp]) -> FloatArray:
+        x, y = rays.at(h, idx)
+        return h - surface.sample(x, y)
+
+    h = first_crossing(above, n, levels, tol_m=tol_m, max_bisections=max_bisections)
     x, y = rays.at(h)
     return x, y, h
+
+
+def cast_on_surface(rays: Rays, read_surface: SurfaceReader,
+                    tol_m: float) -> tuple[FloatArray, FloatArray] | None:
+    """First hit (x, y) of each ray on the surface that ``read_surface`` gives for the rays'
+    ground bounds, searched from just above its highest cell to just below its lowest; None
+    when it holds no height there."""
+    surface = read_surface(rays.ground_bounds())
+    if surface is None or not np.isfinite(surface.z_m).any():
+        return None
+    top = float(np.nanmax(surface.z_m)) + 0.5
+    bottom = float(np.nanmin(surface.z_m)) - 0.5
+    x, y, _ = first_hit(rays, surface, top, bottom, tol_m=tol_m)
+    return x, y

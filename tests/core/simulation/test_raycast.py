@@ -1,8 +1,9 @@
 import numpy as np
 import pytest
 
+from core.dem import SurfaceGrid
 from core.errors import InputError
-from core.simulation.raycast import Rays, SurfaceGrid, first_hit
+from core.simulation.raycast import Rays, first_hit
 
 
 def slanted_rays(x_ground, y_ground, tan_inc, levels=(0.0, 500.0, 1000.0)):
