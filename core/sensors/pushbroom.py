@@ -53,7 +53,15 @@ from numpy.typing import ArrayLike, NDArray
 
 from core.dem import GeoDEM
 from core.errors import ConvergenceError, GeometryError, InputError
-from core.geodesy import WGS84_A_M, WGS84_B_M, ecef_to_geodetic, geodetic_to_ecef
+from core.geodesy import (
+    WGS84_A_M,
+    WGS84_B_M,
+    ecef_to_geodetic,
+    enu_rotation,
+    geodetic_to_ecef,
+    incidence_angles,
+)
+from core.jsonio import parse_json
 from core.sensors import base
 from core.sensors._dictio import get_float, get_int, get_str, get_str_tuple
 from core.sensors.linear_array import (
@@ -66,7 +74,7 @@ from core.sensors.linear_array import (
     ideal_from_detector,
     ideal_partials,
 )
-from core.sensors.orbit import GM_EARTH_M3_S2, Attitude, Orbit, orbital_frame, rotation_rpy
+from core.sensors.orbit import Attitude, Orbit, orbital_frame, rotation_rpy
 
 FloatArray = NDArray[np.float64]
 
@@ -77,6 +85,17 @@ ATTITUDE_QUADS = ("roll_quad", "pitch_quad", "yaw_quad")
 ORBIT_OFFSETS = ("orbit_along_m", "orbit_across_m", "orbit_radial_m")
 LENS = ("focal_scale", "k1", "k3", "p1", "p2")
 DEFAULT_ADJUST = ATTITUDE_BIASES + ATTITUDE_RATES
+# how each attitude correction enters the polynomials: (axis: 0 roll, 1 pitch, 2 yaw; power of
+# t - t_ref: 0 bias, 1 rate, 2 quad)
+ATTITUDE_TERMS: dict[str, tuple[int, int]] = {
+    name: (axis, power)
+    for power, group in enumerate((ATTITUDE_BIASES, ATTITUDE_RATES, ATTITUDE_QUADS))
+    for axis, name in enumerate(group)
+}
+# orbit offsets: (axis of the orbital frame X, Y, Z; sign of the offset along it)
+ORBIT_TERMS: dict[str, tuple[int, float]] = {
+    "orbit_along_m": (0, 1.0), "orbit_across_m": (1, 1.0), "orbit_radial_m": (2, -1.0),
+}
 _FD_TIME_S = 0.01  # time step of the finite differences in time (the motion is smooth)
 
 
@@ -107,10 +126,10 @@ class Corrections:
 
     def attitude_delta(self) -> FloatArray:
         """(3, 3): [roll, pitch, yaw] x [bias, rate, quad]."""
-        return np.array(
-            [[getattr(self, f"{a}_{k}") for k in ("bias", "rate", "quad")]
-             for a in ("roll", "pitch", "yaw")]
-        )
+        delta = np.zeros((3, 3))
+        for name, (axis, power) in ATTITUDE_TERMS.items():
+            delta[axis, power] = getattr(self, name)
+        return delta
 
 
 PARAM_NAMES: tuple[str, ...] = tuple(f.name for f in fields(Corrections))
@@ -130,15 +149,6 @@ def _check_adjust(names: tuple[str, ...]) -> tuple[str, ...]:
 def _flat(*arrays: ArrayLike) -> tuple[tuple[int, ...], list[FloatArray]]:
     b = np.broadcast_arrays(*(np.asarray(a, dtype=np.float64) for a in arrays))
     return b[0].shape, [np.ascontiguousarray(a).ravel() for a in b]
-
-
-def enu_axes(lon_deg: FloatArray, lat_deg: FloatArray) -> tuple[FloatArray, ...]:
-    lo, la = np.radians(lon_deg), np.radians(lat_deg)
-    sl, cl, sp, cp = np.sin(lo), np.cos(lo), np.sin(la), np.cos(la)
-    e = np.stack([-sl, cl, np.zeros_like(sl)], axis=-1)
-    n = np.stack([-sp * cl, -sp * sl, cp], axis=-1)
-    u = np.stack([cp * cl, cp * sl, sp], axis=-1)
-    return e, n, u
 
 
 def intersect_ellipsoid(
@@ -168,7 +178,7 @@ def intersect_ellipsoid(
         err = h - h_m
         if not np.any(np.abs(err) > tol_m):  # NaN inputs give NaN outputs
             return lon, lat
-        up = enu_axes(lon, lat)[2]
+        up = enu_rotation(lon, lat)[:, 2, :]  # ellipsoid normals
         s = s - err / np.sum(up * u, axis=1)
     raise ConvergenceError(
         f"ray-height intersection did not reach {tol_m} m in {max_iter} iterations; "
@@ -251,14 +261,26 @@ class PushbroomModel:
         pos, vel = self.orbit.interpolate(t)
         frame = orbital_frame(pos, vel)
         c = self.corrections
-        off = np.array([c.orbit_along_m, c.orbit_across_m, -c.orbit_radial_m])
+        off = np.zeros(3)
+        for name, (axis, sign) in ORBIT_TERMS.items():
+            off[axis] = sign * getattr(c, name)
         if np.any(off):
             pos = pos + frame @ off
         ang = self.attitude.angles(t, c.attitude_delta())
         rot = rotation_rpy(*ang)
         return pos, frame @ rot, rot, ang
 
-    def _localize_t(self, col: FloatArray, t: FloatArray, h: FloatArray) -> tuple[FloatArray, ...]:
+    def localize_time(
+        self, col: ArrayLike, t_s: ArrayLike, h_m: ArrayLike
+    ) -> tuple[FloatArray, FloatArray]:
+        """Detector ``col`` at time ``t_s`` (s since the orbit epoch) and ellipsoidal height h (m)
+        -> ground (lon, lat) degrees: :meth:`localize` for a time instead of a row."""
+        shape, (col, t, h) = _flat(col, t_s, h_m)
+        lon, lat = self._localize_flat(col, t, h)
+        return lon.reshape(shape), lat.reshape(shape)
+
+    def _localize_flat(self, col: FloatArray, t: FloatArray,
+                       h: FloatArray) -> tuple[FloatArray, ...]:
         pos, cam2ecef, _, _ = self._platform(t)
         xi, yi = self._ideal(col)
         u = np.einsum("mij,mj->mi", cam2ecef, np.stack([xi, yi, np.ones_like(xi)], axis=1))
@@ -273,13 +295,14 @@ class PushbroomModel:
         NaN inputs give NaN; a line of sight that misses the Earth raises GeometryError.
         """
         shape, (c, r, h) = _flat(col, row, h_m)
-        lon, lat = self._localize_t(c, self.line_time_s(r), h)
+        lon, lat = self._localize_flat(c, self.line_time_s(r), h)
         return lon.reshape(shape), lat.reshape(shape)
 
     def localize_on_dem(
         self, col: ArrayLike, row: ArrayLike, dem: GeoDEM, **kwargs: object
     ) -> tuple[FloatArray, FloatArray, FloatArray]:
-        """Lines of sight met with a DEM: (lon, lat, h); see :func:`core.sensors.base.localize_on_dem`."""
+        """Lines of sight met with a DEM: (lon, lat, h); see
+        :func:`core.sensors.base.localize_on_dem`."""
         return base.localize_on_dem(self, col, row, dem, **kwargs)  # type: ignore[arg-type]
 
     def _observe(self, t: FloatArray, g: FloatArray) -> tuple[FloatArray, FloatArray, FloatArray]:
@@ -372,10 +395,10 @@ class PushbroomModel:
         """
         shape, (c, r, h) = _flat(col, row, h_m)
         t = self.line_time_s(r)
-        lon, lat = self._localize_t(c, t, h)
+        lon, lat = self._localize_flat(c, t, h)
         g = np.stack(geodetic_to_ecef(lon, lat, h), axis=1)
         pos, vel = self.orbit.interpolate(t)
-        inc, across, rng = incidences(pos, vel, g, lon, lat)
+        inc, across, rng = incidence_angles(pos, vel, g, lon, lat)
         return np.degrees(inc).reshape(shape), np.degrees(across).reshape(shape), rng.reshape(shape)
 
     # -- Jacobians ----------------------------------------------------------------------------
@@ -395,7 +418,7 @@ class PushbroomModel:
         """
         _, (lon, lat, h) = _flat(lon_deg, lat_deg, h_m)
         if method == "numeric":
-            return self._jacobian_numeric(lon, lat, h)
+            return base.numeric_jacobian(self, lon, lat, h, self.numeric_steps())
         if method != "analytic":
             raise InputError(f"jacobian method must be 'analytic' or 'numeric', got {method!r}")
         g = np.stack(geodetic_to_ecef(lon, lat, h), axis=1)
@@ -410,27 +433,24 @@ class PushbroomModel:
         xi, yi, dxi, dyi = self._ideal_and_dcol(col)
         cr, sr, cp, sp = np.cos(ang[0]), np.sin(ang[0]), np.cos(ang[1]), np.sin(ang[1])
         zero, one = np.zeros_like(cr), np.ones_like(cr)
-        axes = {  # rotation axes of roll, pitch, yaw expressed in the camera frame
-            "roll": np.stack([one, zero, zero], axis=1),
-            "pitch": np.stack([zero, cr, -sr], axis=1),
-            "yaw": np.stack([-sp, sr * cp, cr * cp], axis=1),
-        }
+        axes = (  # rotation axes of roll, pitch, yaw expressed in the camera frame
+            np.stack([one, zero, zero], axis=1),
+            np.stack([zero, cr, -sr], axis=1),
+            np.stack([-sp, sr * cp, cr * cp], axis=1),
+        )
         lens = ideal_partials(xd, yd, xi, yi, self.corrections.focal_scale)
         dt_ref = t - self.attitude.t_ref_s
-        order = {"bias": 0, "rate": 1, "quad": 2}
-        orbit_dir = {"orbit_along_m": (0, -1.0), "orbit_across_m": (1, -1.0),
-                     "orbit_radial_m": (2, 1.0)}
         fp = np.empty((t.size, 2, len(self.adjust)))
         for k, name in enumerate(self.adjust):
             if name in lens:
                 fp[:, 0, k], fp[:, 1, k] = lens[name]
                 continue
-            if name in orbit_dir:
-                i, sign = orbit_dir[name]
-                dv = sign * rot[:, i, :]
+            if name in ORBIT_TERMS:  # the camera moves by the offset: v changes by -R^T off
+                axis, sign = ORBIT_TERMS[name]
+                dv = -sign * rot[:, axis, :]
             else:
-                angle, kind = name.split("_")
-                dv = -np.cross(axes[angle], v) * (dt_ref ** order[kind])[:, None]
+                axis, power = ATTITUDE_TERMS[name]
+                dv = -np.cross(axes[axis], v) * (dt_ref ** power)[:, None]
             fp[:, 0, k] = -(dv[:, 0] * v[:, 2] - v[:, 0] * dv[:, 2]) / v[:, 2] ** 2
             fp[:, 1, k] = -(dv[:, 1] * v[:, 2] - v[:, 1] * dv[:, 2]) / v[:, 2] ** 2
         # F = ideal(col) - observed(t) = 0  =>  [dF/dt dF/dcol] d(t, col) = -dF/dp
@@ -446,31 +466,18 @@ class PushbroomModel:
         half_s = max(0.5 * self.n_rows * self.line_period_s, 1.0)
         x, y = self.camera.detector_xy(np.array([0.0, self.n_cols - 1.0]))
         r = max(float(np.max(np.hypot(x, y))), 1e-3)
-        base_steps = {"bias": ifov, "rate": ifov / half_s, "quad": ifov / half_s**2}
+        by_power = (ifov, ifov / half_s, ifov / half_s**2)
         lens = {"focal_scale": ifov / r, "k1": ifov / r, "k3": ifov / r**3,
                 "p1": ifov / r**2, "p2": ifov / r**2}
         out = []
         for name in self.adjust:
             if name in lens:
                 out.append(lens[name])
-            elif name.startswith("orbit_"):
+            elif name in ORBIT_TERMS:
                 out.append(ifov * 5e5)  # ~0.5 px at a typical range
             else:
-                out.append(base_steps[name.split("_")[1]])
+                out.append(by_power[ATTITUDE_TERMS[name][1]])
         return np.array(out)
-
-    def _jacobian_numeric(self, lon: FloatArray, lat: FloatArray, h: FloatArray) -> FloatArray:
-        """Fourth-order central differences (steps +-h, +-2h) of ``project``."""
-        p0, steps = self.params, self.numeric_steps()
-        out = np.empty((lon.size, 2, p0.size))
-        for k in range(p0.size):
-            val = []
-            for mult in (1.0, -1.0, 2.0, -2.0):
-                dp = np.zeros_like(p0)
-                dp[k] = mult * steps[k]
-                val.append(np.stack(self.with_params(p0 + dp).project(lon, lat, h), axis=1))
-            out[:, :, k] = (8.0 * (val[0] - val[1]) - (val[2] - val[3])) / (12.0 * steps[k])
-        return out
 
     # -- serialisation ------------------------------------------------------------------------
     def to_dict(self) -> dict:
@@ -523,86 +530,7 @@ class PushbroomModel:
 
     @classmethod
     def from_json(cls, text: str) -> PushbroomModel:
-        try:
-            d = json.loads(text)
-        except json.JSONDecodeError as exc:
-            raise InputError(f"pushbroom model JSON is not valid JSON: {exc}") from exc
-        return cls.from_dict(d)
-
-    # -- simulation ---------------------------------------------------------------------------
-    @classmethod
-    def synthetic(
-        cls,
-        center_lon_deg: float,
-        center_lat_deg: float,
-        *,
-        center_h_m: float = 0.0,
-        n_cols: int = 6000,
-        n_rows: int = 6000,
-        gsd_m: float = 10.0,
-        incidence_deg: float = 0.0,
-        pitch_deg: float = 0.0,
-        altitude_m: float = 822e3,
-        inclination_deg: float = 98.7,
-        ascending: bool = False,
-        detector_pitch_m: float = 6.5e-6,
-        along_track_offset_m: float = 0.0,
-        ccd_rotation_rad: float = 0.0,
-        distortion: LensDistortion | None = None,
-        state_vector_spacing_s: float = 30.0,
-        n_state_vectors: int | None = None,
-        epoch_utc: str = "2024-06-01T10:00:00Z",
-        adjust: tuple[str, ...] = DEFAULT_ADJUST,
-    ) -> PushbroomModel:
-        """A SPOT-like scene whose centre pixel sees (center_lon, center_lat, center_h_m).
-
-        Orbit: circular Keplerian, radius ``WGS84 a + altitude_m``, inclination
-        ``inclination_deg`` (98.7: near-polar, sun-synchronous like SPOT), descending over the
-        scene unless ``ascending``; Earth rotation included (ECEF state vectors every
-        ``state_vector_spacing_s`` s, by default enough to cover the acquisition with >= 3
-        samples of margin on each side; ``n_state_vectors`` overrides the count).
-        Pointing: ``incidence_deg`` is the across-track incidence at the scene centre (angle at
-        the ground from the vertical, in the plane across the track; positive = the satellite is
-        west of the scene, looking east), reached by rolling the camera (a mirror, as on SPOT);
-        ``pitch_deg`` tilts the camera forward (> 0) or aft (< 0) like HRS (+-20 deg stereo).
-        Camera: ``n_cols`` detectors of ``detector_pitch_m`` with the focal length that gives a
-        ground sample of ``gsd_m`` across track at the scene centre; the line period gives
-        ``gsd_m`` along track there too. ``along_track_offset_m``, ``ccd_rotation_rad`` and
-        ``distortion`` shape the focal plane (see ParametricCamera, LensDistortion). Times are
-        seconds since ``epoch_utc``, the first state vector. Valid for |lat| up to about 75 deg.
-        """
-        from core.sensors.pushbroom_synthetic import SyntheticGeometry, check_synthetic
-
-        dist = LensDistortion() if distortion is None else distortion
-        check_synthetic(center_lat_deg, n_cols, n_rows, gsd_m, incidence_deg, pitch_deg,
-                         altitude_m, inclination_deg, state_vector_spacing_s)
-        radius = WGS84_A_M + altitude_m
-        v_ground = np.sqrt(GM_EARTH_M3_S2 / radius) * WGS84_A_M / radius
-        duration = 1.5 * n_rows * gsd_m / v_ground
-        n_sv = int(np.ceil(duration / state_vector_spacing_s)) + 10
-        n_sv = n_sv if n_state_vectors is None else int(n_state_vectors)
-        times = np.arange(n_sv) * state_vector_spacing_s
-        t_c = 0.5 * (times[0] + times[-1])
-        geo = SyntheticGeometry(
-            target=(center_lon_deg, center_lat_deg, center_h_m), t_c=t_c, times=times,
-            radius=radius, inclination=np.radians(inclination_deg), ascending=ascending,
-            pitch=np.radians(pitch_deg), epoch_utc=epoch_utc, n_rows=n_rows, distortion=dist,
-            camera=ParametricCamera(
-                focal_length_m=detector_pitch_m * altitude_m / gsd_m,
-                detector_pitch_m=detector_pitch_m, n_cols=n_cols,
-                along_track_offset_m=along_track_offset_m, rotation_rad=ccd_rotation_rad,
-            ),
-        )
-        model = geo.solve(np.radians(incidence_deg), gsd_m)
-        model = replace(model, adjust=_check_adjust(adjust))
-        t_end = model.line_time_s(n_rows - 1)
-        if model.t0_s < times[min(3, n_sv - 1)] or t_end > times[max(n_sv - 4, 0)]:
-            raise InputError(
-                f"{n_sv} state vectors every {state_vector_spacing_s} s do not cover the "
-                f"acquisition ({model.t0_s:.1f}..{t_end:.1f} s) with 3 samples of margin; "
-                "leave n_state_vectors to its default or raise it"
-            )
-        return model
+        return cls.from_dict(parse_json(text, "pushbroom model JSON"))
 
 
 def get_dict(d: object, key: str) -> dict:
@@ -614,23 +542,6 @@ def get_dict(d: object, key: str) -> dict:
     if not isinstance(d[key], dict):
         raise InputError(f"pushbroom model: key '{key}' must be a JSON object, got {d[key]!r:.80}")
     return d[key]
-
-
-def incidences(
-    pos: FloatArray, vel: FloatArray, g: FloatArray, lon: FloatArray, lat: FloatArray
-) -> tuple[FloatArray, FloatArray, FloatArray]:
-    """(incidence, signed across-track incidence) radians and slant range m; see viewing_geometry."""
-    e, n, u = enu_axes(lon, lat)
-    s = pos - g
-    rng = np.linalg.norm(s, axis=1)
-    se, sn, su = (np.sum(s * a, axis=1) for a in (e, n, u))
-    ae, an = np.sum(vel * e, axis=1), np.sum(vel * n, axis=1)
-    norm = np.hypot(ae, an)
-    ce, cn = an / norm, -ae / norm  # horizontal, perpendicular to the track
-    flip = np.where(ce < 0, -1.0, 1.0)  # make it point east
-    across = np.arctan2(-(se * ce + sn * cn) * flip, su)
-    inc = np.arccos(np.clip(su / rng, -1.0, 1.0))
-    return inc, across, rng
 
 
 __all__ = [

@@ -65,7 +65,13 @@ from core.sensors import base
 
 FloatArray = NDArray[np.float64]
 
-BIAS_MODES: dict[str, int] = {"none": 0, "shift": 2, "affine": 6}
+BIAS_PARAMS: dict[str, tuple[str, ...]] = {
+    "none": (),
+    "shift": ("a0", "b0"),
+    "affine": ("a0", "a1", "a2", "b0", "b1", "b2"),
+}
+"""Names of the image-space bias parameters of each bias mode (module docstring)."""
+BIAS_MODES: dict[str, int] = {mode: len(names) for mode, names in BIAS_PARAMS.items()}
 """Number of image-space bias parameters of each bias mode."""
 
 _SCALAR_FIELDS = (
@@ -525,6 +531,28 @@ class RPCModel:
     def params(self) -> FloatArray:
         """The image-space bias parameters (0, 2 or 6 values, see the module docstring)."""
         return self.bias.copy()
+
+    @property
+    def param_names(self) -> tuple[str, ...]:
+        """Names of the bias parameters of the current mode: () , (a0, b0) or (a0 .. b2)."""
+        return BIAS_PARAMS[self.bias_mode]
+
+    def jacobian(self, lon_deg: ArrayLike, lat_deg: ArrayLike, h_m: ArrayLike) -> FloatArray:
+        """d(col, row)/d(bias params) at ground points, shape (n, 2, p): analytic (the bias is
+        linear in its parameters; the affine terms multiply the unbiased col and row)."""
+        lon, lat, h = (np.ravel(a) for a in np.broadcast_arrays(
+            np.asarray(lon_deg, dtype=np.float64), np.asarray(lat_deg, dtype=np.float64),
+            np.asarray(h_m, dtype=np.float64)))
+        n = lon.size
+        jac = np.zeros((n, 2, BIAS_MODES[self.bias_mode]))
+        if self.bias_mode == "shift":
+            jac[:, 0, 0] = 1.0
+            jac[:, 1, 1] = 1.0
+        elif self.bias_mode == "affine":
+            col, row = replace(self, bias_mode="none", bias=np.zeros(0)).project(lon, lat, h)
+            jac[:, 0, 0], jac[:, 0, 1], jac[:, 0, 2] = 1.0, col, row
+            jac[:, 1, 3], jac[:, 1, 4], jac[:, 1, 5] = 1.0, col, row
+        return jac
 
     def with_params(self, p: ArrayLike) -> RPCModel:
         """A new model with the bias parameters set to ``p`` (same bias mode)."""

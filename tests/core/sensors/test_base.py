@@ -5,13 +5,13 @@ import pytest
 
 from core.dem import GeoDEM
 from core.sensors.base import localize_on_dem
-from core.sensors.pushbroom import PushbroomModel
+from core.sensors.pushbroom_synthetic import SyntheticSpec, synthetic_pushbroom
 
 
 @pytest.fixture(scope="module")
 def model():
-    return PushbroomModel.synthetic(5.3, 44.2, center_h_m=1000.0, n_cols=2000, n_rows=2000,
-                                    gsd_m=10.0, incidence_deg=25.0)
+    return synthetic_pushbroom(SyntheticSpec(5.3, 44.2, centre_h_m=1000.0, n_cols=2000, n_rows=2000,
+                                    gsd_m=10.0, incidence_deg=25.0))
 
 
 def cliff_dem() -> GeoDEM:

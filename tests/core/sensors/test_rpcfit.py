@@ -10,7 +10,7 @@ from rasterio.transform import RPCTransformer
 
 from core.errors import InputError
 from core.sensors.linear_array import LensDistortion
-from core.sensors.pushbroom import PushbroomModel
+from core.sensors.pushbroom_synthetic import SyntheticSpec, synthetic_pushbroom
 from core.sensors.rpcfit import RPCFitConfig, fit_rpc
 
 H_RANGE = (-400.0, 4800.0)
@@ -18,8 +18,8 @@ H_RANGE = (-400.0, 4800.0)
 
 @pytest.fixture(scope="module")
 def spot_like():
-    return PushbroomModel.synthetic(5.3, 44.2, center_h_m=500.0, n_cols=6000, n_rows=6000,
-                                    gsd_m=10.0, incidence_deg=25.0)
+    return synthetic_pushbroom(SyntheticSpec(5.3, 44.2, centre_h_m=500.0, n_cols=6000, n_rows=6000,
+                                    gsd_m=10.0, incidence_deg=25.0))
 
 
 @pytest.fixture(scope="module")
@@ -55,11 +55,11 @@ def test_fit_on_random_points(spot_like, fitted):
 
 
 def test_fit_with_lens_distortion_and_rotation():
-    m = PushbroomModel.synthetic(
-        -70.0, -33.0, center_h_m=1000.0, n_cols=3000, n_rows=4000, gsd_m=20.0,
+    m = synthetic_pushbroom(SyntheticSpec(
+        -70.0, -33.0, centre_h_m=1000.0, n_cols=3000, n_rows=4000, gsd_m=20.0,
         incidence_deg=-18.0, pitch_deg=10.0, ccd_rotation_rad=2e-4,
         distortion=LensDistortion(k1=1e-5, k3=2e-3, p1=1e-6, p2=-2e-6),
-    )
+    ))
     rpc, report = fit_rpc(m, 3000, 4000, (0.0, 6000.0))
     assert report.max_px <= 0.02
     col, row = np.array([0.0, 2999.0, 1500.0]), np.array([0.0, 3999.0, 2000.0])
