@@ -6,6 +6,8 @@ import contextlib
 import os
 import tempfile
 import threading
+from collections.abc import Mapping
+from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
@@ -16,7 +18,11 @@ import rasterio
 import rasterio.io
 import rasterio.shutil
 import xarray as xr
+from affine import Affine
 from rasterio.windows import Window
+
+from core.dem import SurfaceGrid
+from core.errors import InputError
 
 # GDAL block cache while building a COG: bounded so memory stays flat on large rasters
 COG_CACHE_MB = 256
@@ -36,17 +42,41 @@ class _WindowWriter:
             self.dst.write(value, 1, window=window)
 
 
-def write_arrays_cog(
-    items: list[tuple[darr.Array | np.ndarray, str | Path, dict[str, Any]]],
-    extra: list[Any] | None = None,
-) -> tuple[Any, ...]:
+@dataclass(frozen=True)
+class CogOptions:
+    """How one raster is written.
+
+    ``transform`` (affine coefficients ``(a, b, c, d, e, f)`` or an ``Affine``) and ``crs``
+    georeference it; raw sensor images carry ``rpcs`` instead. ``tags`` go to the default
+    metadata domain; ``resampling`` makes the overviews (``"average"`` for heights,
+    ``"nearest"`` for classes and masks); ``predictor`` None picks 3 for floats and 2 for
+    integers.
+    """
+
+    transform: Any = None
+    crs: Any = None
+    nodata: float | int | None = None
+    rpcs: Any = None
+    tags: Mapping[str, str] = field(default_factory=dict)
+    resampling: str = "average"
+    predictor: int | None = None
+    blocksize: int = 512
+
+
+@dataclass(frozen=True, eq=False)
+class CogItem:
+    """A 2-D (Dask) array to write to ``path`` with ``options``."""
+
+    data: darr.Array | np.ndarray
+    path: Path
+    options: CogOptions = field(default_factory=CogOptions)
+
+
+def write_arrays_cog(items: list[CogItem], extra: list[Any] | None = None) -> tuple[Any, ...]:
     """Write 2-D (Dask) arrays as Cloud-Optimized GeoTIFFs, atomically, in one Dask pass.
 
-    Each item is ``(array, out_path, options)`` with options ``transform``, ``crs``,
-    ``nodata``, ``rpcs`` (raw sensor images: RPCs and no transform), ``tags``,
-    ``resampling`` (overviews), ``predictor`` and ``blocksize``. Arrays that share blocks
-    (slices of one computation) are computed once; ``extra`` Dask values (statistics)
-    are computed in the same pass and returned.
+    Arrays that share blocks (slices of one computation) are computed once; ``extra`` Dask
+    values (statistics) are computed in the same pass and returned.
 
     Blocks are computed by Dask threads and streamed into tiled GeoTIFFs under one write
     lock each (memory stays bounded), then GDAL's COG driver copies them with overviews.
@@ -56,36 +86,37 @@ def write_arrays_cog(
     """
     with contextlib.ExitStack() as stack:
         sources, targets, jobs = [], [], []
-        for data, out, opts in items:
-            out = Path(out)
+        for item in items:
+            out, opts = Path(item.path), item.options
             out.parent.mkdir(parents=True, exist_ok=True)
+            data = item.data
             arr = data if isinstance(data, darr.Array) else darr.from_array(np.asarray(data),
                                                                             chunks=1024)
             if arr.ndim != 2:
-                raise ValueError(f"write_arrays_cog writes single bands, got shape {arr.shape}")
+                raise InputError(f"{out.name}: a COG is written from a single band (2-D array), "
+                                 f"got shape {arr.shape}; write each band separately")
             tmp = Path(stack.enter_context(
                 tempfile.TemporaryDirectory(dir=out.parent, prefix=f".{out.name}.tmp")))
             dtype = np.dtype(arr.dtype)
-            blocksize = int(opts.get("blocksize", 512))
             profile: dict[str, Any] = {
                 "driver": "GTiff", "width": arr.shape[1], "height": arr.shape[0], "count": 1,
-                "dtype": dtype.name, "tiled": True, "blockxsize": blocksize,
-                "blockysize": blocksize, "compress": "DEFLATE", "BIGTIFF": "IF_SAFER",
-                "nodata": opts.get("nodata"),
+                "dtype": dtype.name, "tiled": True, "blockxsize": opts.blocksize,
+                "blockysize": opts.blocksize, "compress": "DEFLATE", "BIGTIFF": "IF_SAFER",
+                "nodata": opts.nodata,
             }
-            if opts.get("transform") is not None:
-                profile.update(transform=opts["transform"], crs=opts.get("crs"))
-            if opts.get("rpcs") is not None:
-                profile["rpcs"] = opts["rpcs"]
+            if opts.transform is not None:
+                profile.update(transform=Affine(*tuple(opts.transform)[:6]), crs=opts.crs)
+            if opts.rpcs is not None:
+                profile["rpcs"] = opts.rpcs
             dst = stack.enter_context(rasterio.open(tmp / "tiled.tif", "w", **profile))
-            if opts.get("tags"):
-                dst.update_tags(**opts["tags"])
+            if opts.tags:
+                dst.update_tags(**opts.tags)
             sources.append(arr)
             targets.append(_WindowWriter(dst, threading.Lock()))
-            predictor = opts.get("predictor")
+            predictor = opts.predictor
             if predictor is None:
                 predictor = 3 if dtype.kind == "f" else 2
-            jobs.append((dst, tmp, out, predictor, blocksize, opts.get("resampling", "average")))
+            jobs.append((dst, tmp, out, predictor, opts.blocksize, opts.resampling))
         stored = darr.store(sources, targets, lock=False, compute=False)
         with dask.config.set(scheduler="threads"):
             results = dask.compute(stored, *(extra or []))[1:]
@@ -104,15 +135,14 @@ def write_arrays_cog(
     return tuple(results)
 
 
-def cog_item(
-    da: xr.DataArray, out: str | Path, **opts: Any
-) -> tuple[darr.Array, str | Path, dict[str, Any]]:
+def cog_item(da: xr.DataArray, out: str | Path, *, resampling: str = "average") -> CogItem:
     """A :func:`write_arrays_cog` item from a georeferenced 2-D DataArray: its rioxarray
-    transform, CRS and nodata, its scalar attrs as tags, plus ``opts``."""
+    transform, CRS and nodata, its scalar attrs as tags."""
     tags = {k: str(v) for k, v in da.attrs.items() if isinstance(v, (str, int, float))}
     nodata = da.rio.nodata if da.rio.encoded_nodata is None else da.rio.encoded_nodata
-    return da.data, out, {"transform": da.rio.transform(recalc=True), "crs": da.rio.crs,
-                          "nodata": nodata, "tags": tags, **opts}
+    return CogItem(da.data, Path(out), CogOptions(
+        transform=da.rio.transform(recalc=True), crs=da.rio.crs, nodata=nodata, tags=tags,
+        resampling=resampling))
 
 
 def _chmod_default(path: Path | str) -> None:
@@ -140,3 +170,20 @@ def atomic_write_bytes(path: str | Path, data: bytes) -> Path:
 
 def atomic_write_text(path: str | Path, text: str) -> Path:
     return atomic_write_bytes(path, text.encode("utf-8"))
+
+
+def read_surface_window(path: str | Path, bounds_m: tuple[float, float, float, float],
+                        margin_cells: int = 2) -> SurfaceGrid:
+    """The part of a north-up projected raster covering ``bounds_m`` (x_min, y_min, x_max,
+    y_max) plus ``margin_cells``, as float64 heights (NaN outside the raster)."""
+    xmin, ymin, xmax, ymax = bounds_m
+    with rasterio.open(path) as src:
+        t = src.transform
+        res = t.a
+        c0 = int(np.floor((xmin - t.c) / res)) - margin_cells
+        c1 = int(np.ceil((xmax - t.c) / res)) + margin_cells
+        r0 = int(np.floor((t.f - ymax) / res)) - margin_cells
+        r1 = int(np.ceil((t.f - ymin) / res)) + margin_cells
+        a = src.read(1, window=Window(c0, r0, c1 - c0, r1 - r0), boundless=True,
+                     fill_value=np.nan, masked=False).astype(np.float64)
+    return SurfaceGrid(a, t.c + (c0 + 0.5) * res, t.f - (r0 + 0.5) * res, res, res)

@@ -1,19 +1,19 @@
-"""Tasks of the scene simulator: truth surface, radiance, rendering, check points, lidar.
+"""Tasks of the scene simulator: scene, truth surface, radiance, rendering, check points, lidar.
 
 Every raster is computed block by block with Dask from the deterministic functions of
 :mod:`core.simulation` (no full-scene array), written as COG through a temporary file.
-The per-block functions only slice, transform coordinates, call core and return arrays.
+The per-block functions only slice, call one core function and return arrays; reading the
+DEM and raster windows, projections (pyproj) and writing stay here.
 """
 
 from __future__ import annotations
 
 import json
-import threading
-from dataclasses import asdict, dataclass, field, replace
+import warnings
+from dataclasses import dataclass, replace
 from datetime import date
-from functools import lru_cache
+from functools import lru_cache, partial
 from pathlib import Path
-from typing import Any
 
 import dask.array as darr
 import laspy
@@ -21,85 +21,49 @@ import numpy as np
 import pyproj
 import rasterio
 import rioxarray
-from affine import Affine
 from prefect import task
+from rasterio.errors import NotGeoreferencedWarning
 from rasterio.fill import fillnodata
 from rasterio.rpc import RPC
 from rasterio.windows import Window, from_bounds
-from scipy.ndimage import map_coordinates
 
 from core.dem import GeoDEM
-from core.errors import InputError
+from core.errors import InputError, InsufficientDataError
+from core.geodesy import BBox, utm_epsg
+from core.points import CheckPointSet, GeoPoint
 from core.sensors.pushbroom import PushbroomModel
 from core.sensors.rpcfit import fit_rpc
+from core.simulation.checkpoints import select_checkpoints
 from core.simulation.hashing import derive_seed
-from core.simulation.landcover import LandCover, LandCoverConfig, water_level_for_fraction
-from core.simulation.lidar import LidarConfig, lidar_points, lidar_returns
-from core.simulation.raycast import Rays, SurfaceGrid, first_hit
-from core.simulation.render import (
-    ChangeKind,
-    apply_date_change,
-    date_change_kind,
-    date_change_weight,
-    hillshade,
-    radiance_to_dn,
-    texture,
+from core.simulation.landcover import LandCover, LandCoverConfig
+from core.simulation.lidar import lidar_extent, lidar_tile
+from core.simulation.raycast import ray_levels
+from core.simulation.render import ground_radiance, render_dn
+from core.simulation.scene import (
+    PRESETS,
+    ErrorConfig,
+    SceneDef,
+    TruthGrid,
+    check_window_covers,
+    dem_window,
+    footprint_points,
+    scale_relief,
+    scene_models,
+    terrain_levels,
 )
-from core.simulation.scene import PRESETS, ErrorConfig, Preset, delivered_model, truth_model
 from core.simulation.surface import SurfaceSpec, sample_surface
+from tasks.crs import Projection
 from tasks.geoid import load_geoid
-from tasks.raster_io import atomic_write_text, write_arrays_cog
+from tasks.raster_io import (
+    CogItem,
+    CogOptions,
+    atomic_write_text,
+    read_surface_window,
+    write_arrays_cog,
+)
 
 CHUNK = 1024
-COL_STEP = 8  # lines of sight are localised every COL_STEP columns and interpolated
 NOISE_DN = {8: 1.0, 12: 6.0}
-DEM_MARGIN_DEG = 0.02
-
-
-@dataclass(frozen=True)
-class SceneDef:
-    """Everything later steps need, saved as DIR/truth/scene.json."""
-
-    preset: str
-    seed: int
-    dem_path: str
-    dem_window: tuple[float, float, float, float]  # lon_min, lat_min, lon_max, lat_max read
-    relief_factor: float
-    H_ref_m: float  # relief is scaled around this orthometric height
-    centre: tuple[float, float, float]  # lon, lat, ellipsoidal h
-    epsg: int  # UTM zone of the truth grids
-    grid: tuple[float, float, float, int, int]  # x_left, y_top, res_m, width, height
-    water_level_m: float | None
-    bits: int
-    date_change: float
-    errors: dict[str, Any]
-    image_names: tuple[str, str]
-    dsm_range_m: tuple[float, float] | None = None
-    injected: dict[str, Any] = field(default_factory=dict)
-
-    @property
-    def preset_obj(self) -> Preset:
-        return PRESETS[self.preset]
-
-    @property
-    def transform(self) -> Affine:
-        x0, y0, res, _, _ = self.grid
-        return Affine(res, 0.0, x0, 0.0, -res, y0)
-
-    @property
-    def shape(self) -> tuple[int, int]:
-        return int(self.grid[4]), int(self.grid[3])
-
-    def to_json(self) -> str:
-        return json.dumps(asdict(self), indent=1)
-
-    @classmethod
-    def from_json(cls, text: str) -> SceneDef:
-        d = json.loads(text)
-        for k in ("dem_window", "centre", "grid", "image_names", "dsm_range_m"):
-            if d.get(k) is not None:
-                d[k] = tuple(d[k])
-        return cls(**d)
 
 
 @dataclass(frozen=True)
@@ -153,67 +117,12 @@ class ScenePaths:
         return self.truth / "lidar.laz"
 
 
-# ---------------------------------------------------------------------------- coordinates
-
-_local = threading.local()
-
-
-def _transformer(epsg: int, inverse: bool) -> pyproj.Transformer:
-    """A per-thread cached UTM <-> lon/lat transformer."""
-    cache = _local.__dict__.setdefault("tr", {})
-    key = (epsg, inverse)
-    if key not in cache:
-        src, dst = (f"EPSG:{epsg}", "EPSG:4326") if inverse else ("EPSG:4326", f"EPSG:{epsg}")
-        cache[key] = pyproj.Transformer.from_crs(src, dst, always_xy=True)
-    return cache[key]
-
-
-def to_lonlat(epsg: int):
-    def f(x: np.ndarray, y: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        lon, lat = _transformer(epsg, True).transform(x, y)
-        return np.asarray(lon), np.asarray(lat)
-    return f
-
-
-def to_xy(epsg: int, lon: np.ndarray, lat: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    x, y = _transformer(epsg, False).transform(lon, lat)
-    return np.asarray(x), np.asarray(y)
-
-
-def utm_epsg(lon: float, lat: float) -> int:
-    zone = int((lon + 180.0) // 6.0) % 60 + 1
-    return (32600 if lat >= 0 else 32700) + zone
+def _exist(*paths: Path) -> bool:
+    """Products of an earlier run of the same scene (written atomically, so complete)."""
+    return all(p.exists() for p in paths)
 
 
 # ---------------------------------------------------------------------------- the DEM
-
-
-def _read_dem_window(path: Path, window_deg: tuple[float, float, float, float] | None):
-    """(H array float64 NaN voids, transform, bounds) of a geographic DEM, optionally a window."""
-    try:
-        src = rasterio.open(path)
-    except rasterio.errors.RasterioIOError as exc:
-        raise InputError(f"cannot read DEM {path}: {exc}; give a GeoTIFF or .hgt file") from exc
-    with src:
-        if src.crs is None or not src.crs.is_geographic:
-            raise InputError(
-                f"DEM {path} is not in geographic coordinates (CRS {src.crs}); reproject it "
-                "to EPSG:4326 (e.g. gdalwarp -t_srs EPSG:4326)"
-            )
-        win = None
-        if window_deg is not None:
-            win = from_bounds(*window_deg, transform=src.transform).round_offsets().round_lengths()
-            win = win.intersection(Window(0, 0, src.width, src.height))
-        H = src.read(1, window=win, masked=True).astype(np.float64).filled(np.nan)
-        tr = src.window_transform(win) if win is not None else src.transform
-        bounds = src.bounds
-    H[H <= -1000] = np.nan  # SRTM voids (-32768) when no nodata is declared
-    voids = np.isnan(H)
-    if voids.any() and not voids.all():
-        # the simulated world has no holes: fill voids by GDAL's inverse-distance fill
-        H = fillnodata(H, mask=(~voids).astype(np.uint8), max_search_distance=max(H.shape),
-                       smoothing_iterations=0)
-    return H, tr, bounds
 
 
 def check_dem(path: Path) -> None:
@@ -233,20 +142,44 @@ def check_dem(path: Path) -> None:
         )
 
 
+def read_dem_window(path: Path, window: BBox | None) -> tuple[np.ndarray, tuple, BBox]:
+    """(H float64, geotransform, the box read) of a geographic DEM, voids filled.
+
+    The simulated world has no holes: SRTM voids (-32768, or the declared nodata) are filled
+    by GDAL's inverse-distance fill.
+    """
+    check_dem(path)
+    with rasterio.open(path) as src:
+        win = None
+        if window is not None:
+            win = from_bounds(*window.as_tuple(), transform=src.transform)
+            win = win.round_offsets().round_lengths().intersection(
+                Window(0, 0, src.width, src.height))
+        H = src.read(1, window=win, masked=True).astype(np.float64).filled(np.nan)
+        tr = src.window_transform(win) if win is not None else src.transform
+    H[H <= -1000] = np.nan  # SRTM voids (-32768) when no nodata is declared
+    voids = np.isnan(H)
+    if voids.any() and not voids.all():
+        with warnings.catch_warnings():  # GDAL's fill works on an in-memory, unreferenced copy
+            warnings.simplefilter("ignore", NotGeoreferencedWarning)
+            H = fillnodata(H, mask=(~voids).astype(np.uint8), max_search_distance=max(H.shape),
+                           smoothing_iterations=0)
+    box = BBox(tr.c, tr.f + tr.e * H.shape[0], tr.c + tr.a * H.shape[1], tr.f)
+    return H, tuple(tr)[:6], box
+
+
 @lru_cache(maxsize=4)
 def load_surface_spec(scene_json: str) -> SurfaceSpec:
     """The truth-surface definition of a scene (reads its DEM window once per process)."""
     scene = SceneDef.from_json(scene_json)
-    H, tr, _ = _read_dem_window(Path(scene.dem_path), scene.dem_window)
-    H = scene.H_ref_m + scene.relief_factor * (H - scene.H_ref_m)
-    preset = scene.preset_obj
+    H, tr, _ = read_dem_window(Path(scene.dem_path), scene.dem_window)
     return SurfaceSpec(
-        dem_H=GeoDEM.from_transform(H, tuple(tr)[:6]),
+        dem_H=GeoDEM.from_transform(scale_relief(H, scene.H_ref_m, scene.relief_factor), tr),
         geoid=load_geoid(),
         seed=scene.seed,
         landcover=LandCoverConfig(water_level_m=scene.water_level_m),
         detail_amplitude_m=3.0 * scene.relief_factor,
-        detail_min_wavelength_m=2.0 * preset.truth_res_m,
+        detail_min_wavelength_m=2.0 * scene.preset_spec.truth_res_m,
     )
 
 
@@ -254,21 +187,12 @@ def _spec(scene: SceneDef) -> SurfaceSpec:
     return load_surface_spec(scene.to_json())
 
 
+@lru_cache(maxsize=8)
+def _model(text: str) -> PushbroomModel:
+    return PushbroomModel.from_json(text)
+
+
 # ---------------------------------------------------------------------------- A. scene
-
-
-def _footprint_lonlat(model: PushbroomModel, h_lo: float, h_hi: float) -> tuple[np.ndarray, np.ndarray]:
-    n = 21
-    c = np.linspace(0, model.n_cols - 1, n)
-    r = np.linspace(0, model.n_rows - 1, n)
-    border_c = np.concatenate([c, c, np.zeros(n), np.full(n, model.n_cols - 1)])
-    border_r = np.concatenate([np.zeros(n), np.full(n, model.n_rows - 1), r, r])
-    lons, lats = [], []
-    for h in (h_lo, h_hi):
-        lo, la = model.localize(border_c, border_r, np.full(border_c.shape, h))
-        lons.append(lo)
-        lats.append(la)
-    return np.concatenate(lons), np.concatenate(lats)
 
 
 @task(name="define-scene")
@@ -290,76 +214,31 @@ def define_scene(
     paths = ScenePaths(Path(out))
     dem = Path(dem)
     check_dem(dem)
-    with rasterio.open(dem) as src:
-        bounds = src.bounds
     if centre_lonlat is None:
-        centre_lonlat = (0.5 * (bounds.left + bounds.right), 0.5 * (bounds.bottom + bounds.top))
+        with rasterio.open(dem) as src:
+            b = src.bounds
+        centre_lonlat = (0.5 * (b.left + b.right), 0.5 * (b.bottom + b.top))
     clon, clat = map(float, centre_lonlat)
-    # read a window large enough for both footprints (grown below if too small)
-    half_m = 0.5 * max(preset.n_cols, preset.n_rows) * preset.gsd_m * 1.6 + 3000.0
-    half_lat = half_m / 110_574.0
-    half_lon = half_m / (111_320.0 * np.cos(np.radians(clat)))
-    window = (clon - half_lon, clat - half_lat, clon + half_lon, clat + half_lat)
-    H, tr, _ = _read_dem_window(dem, window)
-    window = (tr.c, tr.f + tr.e * H.shape[0], tr.c + tr.a * H.shape[1], tr.f)
-    if np.isnan(H).all():
-        raise InputError(f"DEM {dem} has no valid height around {clon:.4f}, {clat:.4f}")
-    H_ref = float(np.nanmedian(H))
-    Hs = H_ref + relief_factor * (H - H_ref)
-    geoid = load_geoid()
-    demH = GeoDEM.from_transform(Hs, tuple(tr)[:6])
-    h_centre = float(demH.height_m(clon, clat) + geoid.undulation_m(clon, clat))
-    if not np.isfinite(h_centre):
-        raise InputError(f"the scene centre {clon:.4f}, {clat:.4f} falls on a DEM void or "
-                         "outside the DEM; choose another --center")
-    rows, cols = np.mgrid[0 : H.shape[0], 0 : H.shape[1]]
-    node_lon = tr.c + (cols + 0.5) * tr.a
-    node_lat = tr.f + (rows + 0.5) * tr.e
-    h_nodes = Hs + geoid.undulation_m(node_lon, node_lat)
-    h_lo = float(np.nanmin(h_nodes)) - 20.0
-    h_hi = float(np.nanmax(h_nodes)) + 60.0  # canopy, buildings, detail
-    water = water_level_for_fraction(h_nodes, 0.02)
-
-    names = tuple(s.name for s in preset.images)
-    truths, delivered, injected = {}, {}, {}
-    for spec in preset.images:
-        rng = np.random.default_rng(derive_seed(seed, "geometry", spec.name))
-        t = truth_model(spec, preset, (clon, clat, h_centre), errors, rng)
-        d, inj = delivered_model(t, preset, errors, rng, h_centre)
-        truths[spec.name], delivered[spec.name], injected[spec.name] = t, d, inj.to_dict()
-
-    lons, lats = zip(*(_footprint_lonlat(m, h_lo, h_hi) for m in truths.values()))
-    lon_all, lat_all = np.concatenate(lons), np.concatenate(lats)
-    need = (lon_all.min(), lat_all.min(), lon_all.max(), lat_all.max())
-    if (need[0] < window[0] - 1e-9 or need[1] < window[1] - 1e-9
-            or need[2] > window[2] + 1e-9 or need[3] > window[3] + 1e-9):
-        raise InputError(
-            f"the DEM does not cover the simulated scene: it needs lon {need[0]:.4f}..{need[2]:.4f}, "
-            f"lat {need[1]:.4f}..{need[3]:.4f} but {dem.name} gives lon {window[0]:.4f}.."
-            f"{window[2]:.4f}, lat {window[1]:.4f}..{window[3]:.4f}; use a larger DEM, a smaller "
-            "preset or another --center"
-        )
+    H, tr, window = read_dem_window(dem, dem_window(preset, clon, clat))
+    levels = terrain_levels(H, tr, load_geoid(), clon, clat, relief_factor)
+    centre = GeoPoint(clon, clat, levels.h_centre_m)
+    models = scene_models(preset, centre, errors, seed)
+    lon, lat = footprint_points([m.truth for m in models.values()], levels.h_lo_m, levels.h_hi_m)
+    check_window_covers(window, lon, lat, dem.name)
     epsg = utm_epsg(clon, clat)
-    x, y = to_xy(epsg, lon_all, lat_all)
+    x, y = Projection(epsg).to_xy(lon, lat)
     res = preset.truth_res_m
-    margin = 10 * res
-    x0 = np.floor((x.min() - margin) / res) * res
-    y1 = np.ceil((y.max() + margin) / res) * res
-    width = int(np.ceil((x.max() + margin - x0) / res))
-    height = int(np.ceil((y1 - (y.min() - margin)) / res))
-
     scene = SceneDef(
-        preset=preset_name, seed=int(seed), dem_path=str(dem.resolve()),
-        dem_window=tuple(float(v) for v in window), relief_factor=float(relief_factor),
-        H_ref_m=H_ref, centre=(clon, clat, h_centre), epsg=epsg,
-        grid=(float(x0), float(y1), float(res), width, height),
-        water_level_m=float(water), bits=int(bits), date_change=float(date_change),
-        errors=asdict(errors), image_names=names, injected=injected,
+        preset=preset_name, seed=int(seed), dem_path=str(dem.resolve()), dem_window=window,
+        relief_factor=float(relief_factor), H_ref_m=levels.H_ref_m, centre=centre, epsg=epsg,
+        grid=TruthGrid.covering(x, y, res, 10 * res), water_level_m=levels.water_level_m,
+        bits=int(bits), date_change=float(date_change), errors=errors,
+        image_names=tuple(models), injected={n: m.injected for n, m in models.items()},
     )
     if paths.scene_json.exists():
         try:
             old = SceneDef.from_json(paths.scene_json.read_text())
-        except (ValueError, TypeError) as exc:
+        except InputError as exc:
             raise InputError(f"{paths.scene_json} is unreadable ({exc}); remove {paths.root} "
                              "or choose another --out") from exc
         if replace(old, dsm_range_m=None).to_json() == scene.to_json():
@@ -369,9 +248,9 @@ def define_scene(
             "or remove that folder"
         )
     paths.truth.mkdir(parents=True, exist_ok=True)
-    for n in names:
-        atomic_write_text(paths.truth_model(n), truths[n].to_json(indent=1))
-        atomic_write_text(paths.delivered(n), delivered[n].to_json(indent=1))
+    for n, m in models.items():
+        atomic_write_text(paths.truth_model(n), m.truth.to_json(indent=1))
+        atomic_write_text(paths.delivered(n), m.delivered.to_json(indent=1))
     atomic_write_text(paths.scene_json, scene.to_json())
     return SceneDef.from_json(scene.to_json())  # the same value a resumed run reads back
 
@@ -382,12 +261,13 @@ def define_scene(
 def truth_block(block: np.ndarray, scene: SceneDef, block_info: dict | None = None) -> np.ndarray:
     """(3, h, w) float32: DTM, DSM, land cover of one block of the truth grid."""
     (r0, r1), (c0, c1) = block_info[0]["array-location"][-2:]
-    x0, y0, res, _, _ = scene.grid
-    x = x0 + (np.arange(c0, c1) + 0.5) * res
-    y = y0 - (np.arange(r0, r1) + 0.5) * res
-    xx, yy = np.meshgrid(x, y)
-    s = sample_surface(_spec(scene), xx, yy, to_lonlat(scene.epsg))
+    xx, yy = scene.grid.cell_centres(r0, r1, c0, c1)
+    s = sample_surface(_spec(scene), xx, yy, Projection(scene.epsg).to_lonlat)
     return np.stack([s.dtm_m, s.dsm_m, s.classes.astype(np.float64)]).astype(np.float32)
+
+
+def _georef(scene: SceneDef, **kw: object) -> CogOptions:
+    return CogOptions(transform=scene.grid.geotransform(), crs=f"EPSG:{scene.epsg}", **kw)
 
 
 @task(name="truth-surface")
@@ -396,21 +276,18 @@ def build_truth_surface(scene: SceneDef, out: Path) -> SceneDef:
     paths = ScenePaths(Path(out))
     if scene.dsm_range_m is not None and _exist(paths.dtm, paths.dsm, paths.landcover):
         return scene
-    shape = scene.shape
-    base = darr.zeros(shape, chunks=CHUNK, dtype=np.float32)
+    base = darr.zeros(scene.grid.shape, chunks=CHUNK, dtype=np.float32)
     stack = darr.map_blocks(truth_block, base, scene=scene, new_axis=0,
                             chunks=((3,),) + base.chunks, dtype=np.float32)
-    crs = f"EPSG:{scene.epsg}"
-    kw = {"transform": scene.transform, "crs": crs}
     tags = {"vertical_datum": "WGS84 ellipsoid", "units": "m", "seed": str(scene.seed)}
     dsm = stack[1]
     lo, hi = write_arrays_cog(
         [
-            (stack[0], paths.dtm, dict(kw, nodata=np.nan, tags=tags)),
-            (dsm, paths.dsm, dict(kw, nodata=np.nan, tags=tags)),
-            (stack[2].astype(np.uint8), paths.landcover,
-             dict(kw, nodata=0, resampling="nearest",
-                  tags={c.name: str(int(c)) for c in LandCover})),
+            CogItem(stack[0], paths.dtm, _georef(scene, nodata=np.nan, tags=tags)),
+            CogItem(dsm, paths.dsm, _georef(scene, nodata=np.nan, tags=tags)),
+            CogItem(stack[2].astype(np.uint8), paths.landcover,
+                    _georef(scene, nodata=0, resampling="nearest",
+                            tags={c.name: str(int(c)) for c in LandCover})),
         ],
         extra=[darr.nanmin(dsm), darr.nanmax(dsm)],
     )
@@ -419,40 +296,23 @@ def build_truth_surface(scene: SceneDef, out: Path) -> SceneDef:
     return scene
 
 
-def _exist(*paths: Path) -> bool:
-    """Products of an earlier run of the same scene (written atomically, so complete)."""
-    return all(p.exists() for p in paths)
-
-
 # ---------------------------------------------------------------------------- C. radiance
 
 
 def radiance_block(dsm: np.ndarray, classes: np.ndarray, scene: SceneDef, image_index: int,
                    block_info: dict | None = None) -> np.ndarray:
-    """Ground radiance (reflectance x illumination) of one block with its 1-cell halo."""
+    """Ground radiance of one block; the block arrives with a 1-cell halo (map_overlap)."""
     (r0, r1), (c0, c1) = block_info[0]["array-location"][-2:]
-    x0, y0, res, _, _ = scene.grid
-    spec = scene.preset_obj.images[image_index]
-    # the block arrives with a 1-cell halo (map_overlap, boundary "nearest")
-    x = x0 + (np.arange(c0 - 1, c1 - 1) + 0.5) * res
-    y = y0 - (np.arange(r0 - 1, r1 - 1) + 0.5) * res
-    xx, yy = np.meshgrid(x, y)
-    dem = np.where(np.isfinite(dsm), dsm, np.nanmean(dsm) if np.isfinite(dsm).any() else 0.0)
-    shade = hillshade(dem, res, -res, spec.sun_azimuth_deg, spec.sun_elevation_deg)
-    cls = classes.astype(np.uint8)
-    refl = texture(xx, yy, cls, scene.seed)
-    if image_index == 1 and scene.date_change > 0:
-        w = date_change_weight(xx, yy, derive_seed(scene.seed, "date-change"), scene.date_change)
-        kind = date_change_kind(xx, yy, derive_seed(scene.seed, "date-change-kind"))
-        refl = apply_date_change(refl, w, kind)
-        cloud = w * (kind == ChangeKind.CLOUD)
-        shade = shade * (1 - cloud) + cloud  # clouds are not shaded by the terrain below
-    ambient = 0.2
-    return (refl * (ambient + (1 - ambient) * shade)).astype(np.float32)
+    xx, yy = scene.grid.cell_centres(r0 - 1, r1 - 1, c0 - 1, c1 - 1)
+    sun = scene.preset_spec.images[image_index]
+    change = scene.date_change if image_index == 1 else 0.0  # the second date changed
+    return ground_radiance(xx, yy, classes, dsm, scene.grid.res_m, sun.sun_azimuth_deg,
+                           sun.sun_elevation_deg, scene.seed, change).astype(np.float32)
 
 
 @task(name="radiance")
 def build_radiance(scene: SceneDef, out: Path, image_index: int) -> Path:
+    """The ground radiance of one date on the truth grid (COG, kept for reruns)."""
     paths = ScenePaths(Path(out))
     name = scene.image_names[image_index]
     if _exist(paths.radiance(name)):
@@ -463,100 +323,23 @@ def build_radiance(scene: SceneDef, out: Path, image_index: int) -> Path:
         radiance_block, dsm.data.astype(np.float64), cls.data, depth=1, boundary="nearest",
         dtype=np.float32, scene=scene, image_index=image_index, trim=True,
     )
-    write_arrays_cog([(rad, paths.radiance(name), {"transform": scene.transform,
-                                                   "crs": f"EPSG:{scene.epsg}", "nodata": np.nan})])
+    write_arrays_cog([CogItem(rad, paths.radiance(name), _georef(scene, nodata=np.nan))])
     return paths.radiance(name)
 
 
 # ---------------------------------------------------------------------------- D. rendering
 
 
-def _rays(model: PushbroomModel, rows: np.ndarray, cols: np.ndarray, epsg: int,
-          levels: tuple[float, float, float]) -> Rays:
-    """Lines of sight of an image block, localised every COL_STEP columns and interpolated."""
-    sub = np.unique(np.concatenate([cols[::COL_STEP], cols[-1:]])).astype(np.float64)
-    rr, cc = np.meshgrid(rows.astype(np.float64), sub, indexing="ij")
-    xs, ys = [], []
-    for h in levels:
-        lon, lat = model.localize(cc.ravel(), rr.ravel(), np.full(cc.size, h))
-        x, y = to_xy(epsg, lon, lat)
-        x = x.reshape(rr.shape)
-        y = y.reshape(rr.shape)
-        fx = np.stack([np.interp(cols, sub, xr) for xr in x])
-        fy = np.stack([np.interp(cols, sub, yr) for yr in y])
-        xs.append(fx.ravel())
-        ys.append(fy.ravel())
-    return Rays(np.stack(xs), np.stack(ys), levels)
-
-
-def _read_window(path: Path, transform: Affine, xmin: float, ymin: float, xmax: float,
-                 ymax: float) -> tuple[np.ndarray, float, float]:
-    """Float64 window (NaN outside) of a truth-grid raster and its top-left cell centre."""
-    res = transform.a
-    c0 = int(np.floor((xmin - transform.c) / res)) - 2
-    c1 = int(np.ceil((xmax - transform.c) / res)) + 2
-    r0 = int(np.floor((transform.f - ymax) / res)) - 2
-    r1 = int(np.ceil((transform.f - ymin) / res)) + 2
-    with rasterio.open(path) as src:
-        a = src.read(1, window=Window(c0, r0, c1 - c0, r1 - r0), boundless=True,
-                     fill_value=np.nan, masked=False).astype(np.float64)
-    return a, transform.c + (c0 + 0.5) * res, transform.f - (r0 + 0.5) * res
-
-
-def _ray_levels(scene: SceneDef) -> tuple[float, float, float]:
-    """Heights at which lines of sight are localised: just below, across and above the DSM."""
-    lo, hi = scene.dsm_range_m
-    return lo - 5.0, 0.5 * (lo + hi), hi + 5.0
-
-
-Bounds = tuple[float, float, float, float]
-
-
-def _cast_on_dsm(rays: Rays, scene: SceneDef, dsm_path: Path,
-                 tol_m: float) -> tuple[np.ndarray, np.ndarray, Bounds] | None:
-    """First hit (x, y) of each ray on the truth DSM, and the rays' ground bounds;
-    None when the DSM holds no height under them."""
-    bounds = (float(np.nanmin(rays.x_m)), float(np.nanmin(rays.y_m)),
-              float(np.nanmax(rays.x_m)), float(np.nanmax(rays.y_m)))
-    z, zx0, zy0 = _read_window(Path(dsm_path), scene.transform, *bounds)
-    if not np.isfinite(z).any():
-        return None
-    res = scene.transform.a
-    x, y, _ = first_hit(rays, SurfaceGrid(z, zx0, zy0, res, res),
-                        float(np.nanmax(z)) + 0.5, float(np.nanmin(z)) - 0.5, tol_m=tol_m)
-    return x, y, bounds
-
-
 def render_block(block: np.ndarray, scene: SceneDef, model_json: str, image_index: int,
                  dsm_path: str, radiance_path: str, block_info: dict | None = None) -> np.ndarray:
-    """DN of one image block: ray-cast each pixel on the truth DSM, sample the radiance."""
+    """DN of one image block (:func:`core.simulation.render.render_dn`)."""
     (r0, r1), (c0, c1) = block_info[0]["array-location"]
-    model = _model(model_json)
-    rows, cols = np.arange(r0, r1), np.arange(c0, c1)
-    rays = _rays(model, rows, cols, scene.epsg, _ray_levels(scene))
-    shape = (r1 - r0, c1 - c0)
-    bits = scene.bits
-    hit = _cast_on_dsm(rays, scene, Path(dsm_path), tol_m=0.01)
-    if hit is None:
-        return np.zeros(shape, dtype=np.uint8 if bits == 8 else np.uint16)
-    x, y, bounds = hit
-    tr = scene.transform
-    res = tr.a
-    rad, rx0, ry0 = _read_window(Path(radiance_path), tr, *bounds)
-    fj = (x - rx0) / res
-    fi = (ry0 - y) / res
-    ok = np.isfinite(fi) & np.isfinite(fj)
-    L = np.full(x.shape, np.nan)
-    L[ok] = map_coordinates(rad, [fi[ok], fj[ok]], order=1, mode="nearest", prefilter=False)
-    rr, cc = np.meshgrid(rows, cols, indexing="ij")
-    dn = radiance_to_dn(L.reshape(shape), 1.0, NOISE_DN[bits], bits,
-                        derive_seed(scene.seed, "sensor-noise", image_index), rr, cc)
-    return dn
-
-
-@lru_cache(maxsize=8)
-def _model(text: str) -> PushbroomModel:
-    return PushbroomModel.from_json(text)
+    return render_dn(
+        _model(model_json), np.arange(r0, r1), np.arange(c0, c1), ray_levels(scene.dsm_range_m),
+        Projection(scene.epsg).to_xy, partial(read_surface_window, dsm_path),
+        partial(read_surface_window, radiance_path), NOISE_DN[scene.bits], scene.bits,
+        derive_seed(scene.seed, "sensor-noise", image_index),
+    )
 
 
 @task(name="render-image")
@@ -579,8 +362,8 @@ def render_image(scene: SceneDef, out: Path, image_index: int) -> Path:
     rpc, report = fit_rpc(delivered, truth.n_cols, truth.n_rows, (lo - 100.0, hi + 100.0))
     tags = {"rpc_fit_max_px": f"{report.max_px:.2e}", "rpc_fit_rms_px": f"{report.rms_px:.2e}",
             "metadata": paths.delivered(name).name, "seed": str(scene.seed)}
-    write_arrays_cog([(img, paths.image(name), {"rpcs": RPC.from_gdal(rpc.to_gdal_tags()),
-                                                "nodata": 0, "tags": tags})])
+    write_arrays_cog([CogItem(img, paths.image(name), CogOptions(
+        rpcs=RPC.from_gdal(rpc.to_gdal_tags()), nodata=0, tags=tags))])
     return paths.image(name)
 
 
@@ -593,70 +376,23 @@ def make_checkpoints(scene: SceneDef, out: Path, n_wanted: int = 100) -> Path:
     paths = ScenePaths(Path(out))
     if _exist(paths.checkpoints):
         return paths.checkpoints
-    models = [PushbroomModel.from_json(paths.truth_model(n).read_text()) for n in scene.image_names]
-    rng = np.random.default_rng(derive_seed(scene.seed, "checkpoints"))
-    x0, y0, res, w, h = scene.grid
-    spec = _spec(scene)
-    chosen: list[dict[str, Any]] = []
-    for _ in range(20):
-        n = 4000
-        x = rng.uniform(x0, x0 + w * res, n)
-        y = rng.uniform(y0 - h * res, y0, n)
-        s = sample_surface(spec, x, y, to_lonlat(scene.epsg))
-        ok = (s.classes == LandCover.BARE_SOIL) & np.isfinite(s.dtm_m)
-        x, y, hh = x[ok], y[ok], s.dtm_m[ok]
-        lon, lat = to_lonlat(scene.epsg)(x, y)
-        img = [m.project(lon, lat, hh) for m in models]
-        inside = np.ones(x.shape, dtype=bool)
-        for (c, r), m in zip(img, models):
-            inside &= (c > 10) & (c < m.n_cols - 11) & (r > 10) & (r < m.n_rows - 11)
-        idx = np.flatnonzero(inside)
-        geoid = spec.geoid
-        for k in idx:
-            if not _visible(scene, paths, models, img, x, y, k):
-                continue
-            chosen.append({
-                "id": len(chosen) + 1,
-                "lon_deg": float(lon[k]), "lat_deg": float(lat[k]), "h_m": float(hh[k]),
-                "H_egm96_m": float(hh[k] - geoid.undulation_m(lon[k], lat[k])),
-                "x_m": float(x[k]), "y_m": float(y[k]),
-                "land_cover": "bare_soil",
-                **{name: {"col": float(img[i][0][k]), "row": float(img[i][1][k])}
-                   for i, name in enumerate(scene.image_names)},
-            })
-            if len(chosen) >= n_wanted:
-                break
-        if len(chosen) >= n_wanted:
-            break
-    if len(chosen) < 50:
-        raise InputError(
-            f"only {len(chosen)} visible bare-soil check points found in the overlap (50 "
+    models = {
+        n: PushbroomModel.from_json(paths.truth_model(n).read_text()) for n in scene.image_names}
+    proj = Projection(scene.epsg)
+    points = select_checkpoints(
+        _spec(scene), models, scene.grid, np.random.default_rng(derive_seed(scene.seed,
+                                                                            "checkpoints")),
+        proj.to_lonlat, proj.to_xy, partial(read_surface_window, paths.dsm),
+        ray_levels(scene.dsm_range_m), n_wanted=n_wanted,
+    )
+    if len(points) < 50:
+        raise InsufficientDataError(
+            f"only {len(points)} visible bare-soil check points found in the overlap (50 "
             "needed); the scene is mostly water, forest or town: choose another --center"
         )
-    doc = {
-        "crs": f"EPSG:{scene.epsg}", "heights": "h_m WGS84 ellipsoidal, H_egm96_m orthometric",
-        "image_coordinates": "0-based, pixel centres at integers, (col, row)",
-        "images": list(scene.image_names), "points": chosen,
-    }
-    atomic_write_text(paths.checkpoints, json.dumps(doc, indent=1))
+    doc = CheckPointSet(f"EPSG:{scene.epsg}", scene.image_names, tuple(points))
+    atomic_write_text(paths.checkpoints, json.dumps(doc.to_dict(), indent=1))
     return paths.checkpoints
-
-
-def _visible(scene: SceneDef, paths: ScenePaths, models: list[PushbroomModel],
-             img: list[tuple[np.ndarray, np.ndarray]], px: np.ndarray, py: np.ndarray,
-             k: int) -> bool:
-    """Whether point ``k`` is what its pixels see in every image (no tree or roof in front):
-    the first hit of each line of sight on the truth DSM lies within 1.5 cells of it."""
-    res = scene.grid[2]
-    for (c, r), m in zip(img, models, strict=True):
-        rays = _rays(m, np.array([r[k]]), np.array([c[k]]), scene.epsg, _ray_levels(scene))
-        hit = _cast_on_dsm(rays, scene, paths.dsm, tol_m=1e-3)
-        if hit is None:
-            return False
-        hx, hy, _ = hit
-        if not (np.isfinite(hx[0]) and np.hypot(hx[0] - px[k], hy[0] - py[k]) < 1.5 * res):
-            return False
-    return True
 
 
 # ---------------------------------------------------------------------------- F. lidar
@@ -664,14 +400,10 @@ def _visible(scene: SceneDef, paths: ScenePaths, models: list[PushbroomModel],
 
 def lidar_bounds(scene: SceneDef) -> tuple[float, float, float, float]:
     """The lidar strip (x_min, y_min, x_max, y_max) in the truth grid's CRS."""
-    x0, y0, res, w, h = scene.grid
-    strip = scene.preset_obj.lidar_strip_m
-    if strip is None:
-        return x0, y0 - h * res, x0 + w * res, y0
-    cx, cy = to_xy(scene.epsg, np.array([scene.centre[0]]), np.array([scene.centre[1]]))
-    across, along = strip
-    return (float(cx[0]) - across / 2, float(cy[0]) - along / 2, float(cx[0]) + across / 2,
-            float(cy[0]) + along / 2)
+    cx, cy = Projection(scene.epsg).to_xy(np.array([scene.centre.lon_deg]),
+                                          np.array([scene.centre.lat_deg]))
+    return lidar_extent(scene.grid.bounds_m(), float(cx[0]), float(cy[0]),
+                        scene.preset_spec.lidar_strip_m)
 
 
 @task(name="lidar")
@@ -682,36 +414,30 @@ def make_lidar(scene: SceneDef, out: Path, tile_m: float = 1000.0) -> Path:
         return paths.lidar
     spec = _spec(scene)
     xmin, ymin, xmax, ymax = lidar_bounds(scene)
-    spacing = scene.preset_obj.lidar_spacing_m
     crs = pyproj.CRS.from_user_input(f"EPSG:{scene.epsg}+5773")  # UTM + EGM96 height
     header = laspy.LasHeader(point_format=6, version="1.4")
     header.scales = np.array([0.001, 0.001, 0.001])
     header.offsets = np.array([np.floor(xmin), np.floor(ymin), 0.0])
     header.add_crs(crs)
-    header.creation_date = date.fromisoformat(scene.preset_obj.images[0].date)  # same bytes
+    header.creation_date = date.fromisoformat(scene.preset_spec.images[0].date)  # same bytes
     header.system_identifier = "gcpfree simulate"
     header.generating_software = "gcpfree"
     tmp = paths.lidar.with_name(f".{paths.lidar.name}.tmp")
     seed = derive_seed(scene.seed, "lidar")
-    n_total = 0
+    to_lonlat = Projection(scene.epsg).to_lonlat
     try:
         with laspy.open(tmp, mode="w", header=header) as writer:
             for ty in np.arange(ymin, ymax, tile_m):
                 for tx in np.arange(xmin, xmax, tile_m):
-                    pts = lidar_points(tx, ty, min(tx + tile_m, xmax), min(ty + tile_m, ymax),
-                                       seed, spacing_m=spacing)
-                    if len(pts) == 0:
+                    box = (tx, ty, min(tx + tile_m, xmax), min(ty + tile_m, ymax))
+                    tile = lidar_tile(spec, box, seed, scene.preset_spec.lidar_spacing_m,
+                                      to_lonlat)
+                    if tile is None:
                         continue
-                    s = sample_surface(spec, pts.x_m, pts.y_m, to_lonlat(scene.epsg))
-                    ret = lidar_returns(pts, s.dtm_m, s.dsm_m, s.classes, s.building_m > 0,
-                                        s.dark_roof, seed, LidarConfig())
-                    lon, lat = to_lonlat(scene.epsg)(ret.x_m, ret.y_m)
-                    H = ret.z_m - spec.geoid.undulation_m(lon, lat)
-                    rec = laspy.ScaleAwarePointRecord.zeros(len(ret.x_m), header=header)
-                    rec.x, rec.y, rec.z = ret.x_m, ret.y_m, H
-                    rec.classification = ret.las_class
+                    rec = laspy.ScaleAwarePointRecord.zeros(len(tile.returns), header=header)
+                    rec.x, rec.y, rec.z = tile.returns.x_m, tile.returns.y_m, tile.z_orthometric_m
+                    rec.classification = tile.returns.las_class
                     writer.write_points(rec)
-                    n_total += len(ret.x_m)
         tmp.replace(paths.lidar)
     finally:
         tmp.unlink(missing_ok=True)
@@ -752,7 +478,7 @@ def summarize(scene: SceneDef, out: Path) -> SimulationSummary:
             n_lidar = int(f.header.point_count)
     return SimulationSummary(
         out=str(paths.root), preset=scene.preset, seed=scene.seed,
-        centre_error_m={k: float(v["centre_error_m"]) for k, v in scene.injected.items()},
+        centre_error_m={k: v.centre_error_m for k, v in scene.injected.items()},
         images=tuple(str(paths.image(n)) for n in scene.image_names), checkpoints=n_cp,
         lidar_points=n_lidar, dsm_range_m=scene.dsm_range_m,
     )

@@ -25,6 +25,7 @@ from core.errors import InputError
 from core.simulation.hashing import derive_seed, hash_u64, hash_uniform
 
 __all__ = [
+    "broadcast_xy",
     "cell_uniform",
     "fbm",
     "fbm_threshold",
@@ -42,7 +43,8 @@ _CORNERS = ((0, 0), (1, 0), (0, 1), (1, 1))
 _SQRT2 = float(np.sqrt(2.0))
 
 
-def _xy(x_m: ArrayLike, y_m: ArrayLike) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+def broadcast_xy(x_m: ArrayLike, y_m: ArrayLike) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+    """Ground coordinates as float64 arrays broadcast against each other."""
     x = np.asarray(x_m, dtype=np.float64)
     y = np.asarray(y_m, dtype=np.float64)
     x, y = np.broadcast_arrays(x, y)
@@ -142,7 +144,7 @@ def gradient_noise(x_m: ArrayLike, y_m: ArrayLike, seed: int,
         A per-seed sub-lattice offset keeps the nodes off the frame origin.
     """
     _check_positive(wavelength_m=wavelength_m)
-    x, y = _xy(x_m, y_m)
+    x, y = broadcast_xy(x_m, y_m)
     ox = float(hash_uniform(derive_seed(seed, "offset-x")))
     oy = float(hash_uniform(derive_seed(seed, "offset-y")))
     return _lattice_noise(x / wavelength_m + ox, y / wavelength_m + oy, seed)
@@ -176,7 +178,7 @@ def fbm(x_m: ArrayLike, y_m: ArrayLike, seed: int, base_wavelength_m: float, oct
     """
     _check_positive(base_wavelength_m=base_wavelength_m)
     _check_octaves(octaves, persistence, lacunarity)
-    x, y = _xy(x_m, y_m)
+    x, y = broadcast_xy(x_m, y_m)
     total = np.zeros(x.shape, dtype=np.float64)
     weight_sum = 0.0
     for k in range(int(octaves)):
@@ -254,7 +256,7 @@ def fractal_detail_m(x_m: ArrayLike, y_m: ArrayLike, seed: int, amplitude_m: flo
         )
     if not 0.0 < hurst <= 1.0:
         raise InputError(f"hurst must be in (0, 1], got {hurst!r}")
-    x, y = _xy(x_m, y_m)
+    x, y = broadcast_xy(x_m, y_m)
     wavelengths = [max_wavelength_m]
     while wavelengths[-1] / 2.0 >= min_wavelength_m * (1.0 - 1e-9):
         wavelengths.append(wavelengths[-1] / 2.0)
@@ -272,6 +274,6 @@ def cell_uniform(x_m: ArrayLike, y_m: ArrayLike, seed: int, cell_m: float) -> ND
     Cells are ``[i*cell_m, (i+1)*cell_m) x [j*cell_m, (j+1)*cell_m)`` in the ground frame.
     """
     _check_positive(cell_m=cell_m)
-    x, y = _xy(x_m, y_m)
+    x, y = broadcast_xy(x_m, y_m)
     u = hash_uniform(seed, floor_index(x / cell_m), floor_index(y / cell_m))
     return np.where(np.isfinite(x) & np.isfinite(y), u, np.nan)

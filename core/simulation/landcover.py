@@ -33,7 +33,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from core.errors import InputError
-from core.simulation.fields import fbm, fbm_threshold, floor_index
+from core.simulation.fields import broadcast_xy, fbm, fbm_threshold, floor_index
 from core.simulation.hashing import derive_seed, hash_uniform
 
 __all__ = [
@@ -167,12 +167,6 @@ class BuildingSample:
     centre_y_m: NDArray[np.float64]
 
 
-def _xy(x_m: ArrayLike, y_m: ArrayLike) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
-    x, y = np.broadcast_arrays(np.asarray(x_m, dtype=np.float64),
-                               np.asarray(y_m, dtype=np.float64))
-    return x, y
-
-
 def _per_block(bi: NDArray[np.int64], bj: NDArray[np.int64],
                fn: Callable[[NDArray[np.int64], NDArray[np.int64]], dict[str, NDArray]]
                ) -> dict[str, NDArray]:
@@ -235,7 +229,7 @@ def sample_buildings(x_m: ArrayLike, y_m: ArrayLike, seed: int,
     All attributes hash the block indices only, so every point of a building
     agrees on them.
     """
-    x, y = _xy(x_m, y_m)
+    x, y = broadcast_xy(x_m, y_m)
     b = config.block_m
     finite = np.isfinite(x) & np.isfinite(y)
     bi = np.where(finite, floor_index(x / b), 0)
@@ -276,7 +270,7 @@ def classify(x_m: ArrayLike, y_m: ArrayLike, terrain_h_m: ArrayLike, slope_deg: 
     Returns:
         uint8 array of the broadcast shape.
     """
-    x, y = _xy(x_m, y_m)
+    x, y = broadcast_xy(x_m, y_m)
     h = np.broadcast_to(np.asarray(terrain_h_m, dtype=np.float64), x.shape)
     slope = np.broadcast_to(np.asarray(slope_deg, dtype=np.float64), x.shape)
     if config.water_level_m is None:
@@ -310,7 +304,7 @@ def canopy_height_m(x_m: ArrayLike, y_m: ArrayLike, classes: ArrayLike, seed: in
     Stand-scale variation (``stand_wavelength_m``) plus crown-scale bumps
     (``crown_wavelength_m``), squeezed smoothly into the range (never outside).
     """
-    x, y = _xy(x_m, y_m)
+    x, y = broadcast_xy(x_m, y_m)
     cls = np.broadcast_to(np.asarray(classes), x.shape)
     stand = fbm(x, y, derive_seed(seed, "canopy-stand"), config.stand_wavelength_m, 3)
     crown = fbm(x, y, derive_seed(seed, "canopy-crown"), config.crown_wavelength_m, 2)
@@ -323,7 +317,7 @@ def building_height_m(x_m: ArrayLike, y_m: ArrayLike, classes: ArrayLike, seed: 
                       config: LandCoverConfig = LandCoverConfig()) -> NDArray[np.float64]:
     """Building height above the terrain, metres: the building's hashed height on URBAN
     footprints (constant over each footprint), 0 on streets, yards and other classes."""
-    x, y = _xy(x_m, y_m)
+    x, y = broadcast_xy(x_m, y_m)
     cls = np.broadcast_to(np.asarray(classes), x.shape)
     bld = sample_buildings(x, y, seed, config)
     return np.where(cls == LandCover.URBAN, bld.height_m, 0.0)

@@ -25,8 +25,18 @@ from core.simulation.landcover import (
     LAS_WATER,
     LandCover,
 )
+from core.simulation.surface import SurfaceSpec, ToLonLat, sample_surface
 
-__all__ = ["LidarConfig", "LidarPoints", "LidarReturns", "lidar_points", "lidar_returns"]
+__all__ = [
+    "LidarConfig",
+    "LidarPoints",
+    "LidarReturns",
+    "LidarTile",
+    "lidar_extent",
+    "lidar_points",
+    "lidar_returns",
+    "lidar_tile",
+]
 
 
 @dataclass(frozen=True)
@@ -178,3 +188,39 @@ def lidar_returns(points: LidarPoints, ground_h_m: ArrayLike, surface_h_m: Array
     z = z_true + noise
     return LidarReturns(points.x_m[keep], points.y_m[keep], z[keep], z_true[keep], las[keep],
                         ci[keep], cj[keep])
+
+
+@dataclass(frozen=True, eq=False)
+class LidarTile:
+    """The returns of one tile and their orthometric heights (what a survey delivers)."""
+
+    returns: LidarReturns
+    z_orthometric_m: NDArray[np.float64]
+
+
+def lidar_tile(spec: SurfaceSpec, bounds_m: tuple[float, float, float, float], seed: int,
+               spacing_m: float, to_lonlat: ToLonLat,
+               config: LidarConfig = LidarConfig()) -> LidarTile | None:
+    """Survey the truth surface over the half-open box ``bounds_m`` (x_min, y_min, x_max, y_max):
+    points (:func:`lidar_points`), returns (:func:`lidar_returns`), heights made orthometric
+    with the geoid of ``spec``. None when the box holds no point."""
+    pts = lidar_points(*bounds_m, seed, spacing_m=spacing_m)
+    if len(pts) == 0:
+        return None
+    s = sample_surface(spec, pts.x_m, pts.y_m, to_lonlat)
+    ret = lidar_returns(pts, s.dtm_m, s.dsm_m, s.classes, s.building_m > 0, s.dark_roof, seed,
+                        config)
+    lon, lat = to_lonlat(ret.x_m, ret.y_m)
+    return LidarTile(ret, spec.geoid.ellipsoidal_to_orthometric(lon, lat, ret.z_m))
+
+
+def lidar_extent(grid_bounds_m: tuple[float, float, float, float], centre_x_m: float,
+                 centre_y_m: float,
+                 strip_m: tuple[float, float] | None) -> tuple[float, float, float, float]:
+    """The surveyed box: a strip of ``strip_m`` (across, along) centred on the scene centre, or
+    the whole grid when ``strip_m`` is None."""
+    if strip_m is None:
+        return grid_bounds_m
+    across, along = strip_m
+    return (centre_x_m - across / 2, centre_y_m - along / 2, centre_x_m + across / 2,
+            centre_y_m + along / 2)

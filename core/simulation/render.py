@@ -14,20 +14,28 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from core.errors import InputError
-from core.simulation.fields import cell_uniform, fbm, fbm_threshold
+from core.sensors.base import SensorModel
+from core.simulation.fields import broadcast_xy, cell_uniform, fbm, fbm_threshold
 from core.simulation.hashing import derive_seed, hash_normal
 from core.simulation.landcover import LandCover, LandCoverConfig, sample_buildings
+from core.simulation.raycast import SurfaceReader, ToXY, cast_on_surface, image_rays
 
 __all__ = [
+    "AMBIENT",
     "ChangeKind",
     "apply_date_change",
     "date_change_kind",
     "date_change_mask",
     "date_change_weight",
     "hillshade",
+    "ground_radiance",
+    "illuminate",
     "radiance_to_dn",
+    "render_dn",
     "texture",
 ]
+
+AMBIENT = 0.2  # diffuse share of the illumination
 
 _DEFAULT_LANDCOVER = LandCoverConfig()
 
@@ -90,12 +98,6 @@ def hillshade(dem_h_m: ArrayLike, dx_m: float, dy_m: float, sun_azimuth_deg: flo
     return np.clip(shade, 0.0, 1.0)  # NaN stays NaN
 
 
-def _xy(x_m: ArrayLike, y_m: ArrayLike) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
-    x, y = np.broadcast_arrays(np.asarray(x_m, dtype=np.float64),
-                               np.asarray(y_m, dtype=np.float64))
-    return x, y
-
-
 def texture(x_m: ArrayLike, y_m: ArrayLike, classes: ArrayLike, seed: int,
             config: LandCoverConfig = _DEFAULT_LANDCOVER) -> NDArray[np.float64]:
     """Ground-fixed reflectance in [0, 1] by land cover.
@@ -111,7 +113,7 @@ def texture(x_m: ArrayLike, y_m: ArrayLike, classes: ArrayLike, seed: int,
 
     ``config`` must be the one the classes came from (it fixes the street grid).
     """
-    x, y = _xy(x_m, y_m)
+    x, y = broadcast_xy(x_m, y_m)
     cls = np.broadcast_to(np.asarray(classes), x.shape)
     out = np.zeros(x.shape, dtype=np.float64)
 
@@ -169,7 +171,7 @@ def date_change_weight(x_m: ArrayLike, y_m: ArrayLike, seed: int, fraction: floa
     """
     if not edge_width > 0:
         raise InputError(f"edge_width must be positive, got {edge_width!r}")
-    x, y = _xy(x_m, y_m)
+    x, y = broadcast_xy(x_m, y_m)
     thr = fbm_threshold(fraction, _BLOB_OCTAVES)
     v = fbm(x, y, derive_seed(seed, "change-blobs"), blob_wavelength_m, _BLOB_OCTAVES)
     return np.clip((v - thr) / edge_width, 0.0, 1.0)
@@ -192,7 +194,7 @@ def date_change_kind(x_m: ArrayLike, y_m: ArrayLike, seed: int,
     """
     if len(kinds) == 0:
         raise InputError("kinds must name at least one ChangeKind")
-    x, y = _xy(x_m, y_m)
+    x, y = broadcast_xy(x_m, y_m)
     v = fbm(x, y, derive_seed(seed, "change-kind"), region_wavelength_m, 2)
     idx = np.zeros(x.shape, dtype=np.intp)
     for k in range(1, len(kinds)):
@@ -229,24 +231,60 @@ def apply_date_change(reflectance: ArrayLike, weight: ArrayLike,
     return np.clip(out, 0.0, 1.0)
 
 
-def radiance_to_dn(reflectance: ArrayLike, shade: ArrayLike, noise_sigma_dn: float, bits: int,
-                   seed: int, rows: ArrayLike, cols: ArrayLike, ambient: float = 0.2,
+def illuminate(reflectance: ArrayLike, shade: ArrayLike,
+               ambient: float = AMBIENT) -> NDArray[np.float64]:
+    """Ground radiance (relative units): ``reflectance * (ambient + (1 - ambient) * shade)``.
+
+    ``shade`` is the Lambertian shade in [0, 1] (:func:`hillshade`; 1 for flat, sunlit
+    ground), ``ambient`` the diffuse share of the illumination, in [0, 1].
+    """
+    if not 0.0 <= ambient <= 1.0:
+        raise InputError(f"ambient must be in [0, 1], got {ambient!r}")
+    r = np.asarray(reflectance, dtype=np.float64)
+    return r * (ambient + (1.0 - ambient) * np.asarray(shade, dtype=np.float64))
+
+
+def ground_radiance(x_m: ArrayLike, y_m: ArrayLike, classes: ArrayLike, surface_h_m: ArrayLike,
+                    cell_m: float, sun_azimuth_deg: float, sun_elevation_deg: float, seed: int,
+                    date_change: float = 0.0, ambient: float = AMBIENT) -> NDArray[np.float64]:
+    """Radiance of a north-up block of ground cells on one date.
+
+    ``x_m``, ``y_m`` are the cell centres, ``surface_h_m`` the surface heights (NaN cells take
+    the block mean, so shading stays defined), ``cell_m`` the grid spacing. The ground-fixed
+    :func:`texture` is shaded by the date's sun (:func:`hillshade`); with ``date_change`` > 0
+    (the second date) that fraction of the ground changes (:func:`apply_date_change`) and clouds
+    hide the terrain's shading. Each cell depends on its 3x3 neighbourhood only: run it over
+    tiles with a one-cell halo.
+    """
+    z = np.asarray(surface_h_m, dtype=np.float64)
+    dem = np.where(np.isfinite(z), z, np.nanmean(z) if np.isfinite(z).any() else 0.0)
+    shade = hillshade(dem, cell_m, -cell_m, sun_azimuth_deg, sun_elevation_deg)
+    refl = texture(x_m, y_m, np.asarray(classes).astype(np.uint8), seed)
+    if date_change > 0:
+        w = date_change_weight(x_m, y_m, derive_seed(seed, "date-change"), date_change)
+        kind = date_change_kind(x_m, y_m, derive_seed(seed, "date-change-kind"))
+        refl = apply_date_change(refl, w, kind)
+        cloud = w * (kind == ChangeKind.CLOUD)
+        shade = shade * (1 - cloud) + cloud  # clouds are not shaded by the terrain below
+    return illuminate(refl, shade, ambient)
+
+
+def radiance_to_dn(radiance: ArrayLike, noise_sigma_dn: float, bits: int, seed: int,
+                   rows: ArrayLike, cols: ArrayLike,
                    gain_dn: float | None = None) -> NDArray[np.uint8] | NDArray[np.uint16]:
-    """Digital numbers: ``rint(gain * r * (ambient + (1 - ambient) * shade) + noise)``, clipped.
+    """Digital numbers: ``rint(gain * radiance + noise)``, clipped to the range of ``bits``.
 
     The noise is ``noise_sigma_dn * hash_normal(seed, rows, cols)``: a pure
     function of the image pixel, so tiles of an image reproduce exactly. Use a
     different ``seed`` (``derive_seed(seed, "left")``) per image.
 
     Args:
-        reflectance: ground reflectance in [0, 1].
-        shade: Lambertian shade in [0, 1] (:func:`hillshade`); 1 for flat, sunlit.
+        radiance: ground radiance (:func:`illuminate`), 1 for a white surface in full sun.
         noise_sigma_dn: standard deviation of the sensor noise, DN (>= 0).
         bits: 8 (uint8 out) or 12 (uint16 out, values up to 4095).
         seed: noise seed.
         rows, cols: integer image row and column of each pixel (global to the image).
-        ambient: diffuse share of the illumination, in [0, 1].
-        gain_dn: DN of reflectance 1 in full sun; default 80 % of the range.
+        gain_dn: DN of radiance 1; default 80 % of the range.
 
     Returns:
         uint8 or uint16 array of the broadcast shape; NaN inputs give 0.
@@ -255,14 +293,32 @@ def radiance_to_dn(reflectance: ArrayLike, shade: ArrayLike, noise_sigma_dn: flo
         raise InputError(f"bits must be 8 or 12, got {bits!r}")
     if not noise_sigma_dn >= 0:
         raise InputError(f"noise_sigma_dn must be >= 0, got {noise_sigma_dn!r}")
-    if not 0.0 <= ambient <= 1.0:
-        raise InputError(f"ambient must be in [0, 1], got {ambient!r}")
     dn_max = float(2**bits - 1)
     gain = 0.8 * dn_max if gain_dn is None else float(gain_dn)
-    r = np.asarray(reflectance, dtype=np.float64)
-    s = np.asarray(shade, dtype=np.float64)
-    signal = gain * r * (ambient + (1.0 - ambient) * s)
+    signal = gain * np.asarray(radiance, dtype=np.float64)
     noise = noise_sigma_dn * hash_normal(seed, rows, cols)
     dn = np.clip(np.rint(signal + noise), 0.0, dn_max)
     dn = np.where(np.isnan(dn), 0.0, dn)
     return dn.astype(np.uint8 if bits == 8 else np.uint16)
+
+
+def render_dn(model: SensorModel, rows: NDArray, cols: NDArray, levels: tuple[float, float, float],
+              to_xy: ToXY, read_surface: SurfaceReader, read_radiance: SurfaceReader,
+              noise_sigma_dn: float, bits: int,
+              seed: int) -> NDArray[np.uint8] | NDArray[np.uint16]:
+    """DN of the image block ``rows x cols``: each pixel's line of sight is cast on the surface
+    (:func:`core.simulation.raycast.cast_on_surface`, occlusions included) and the ground
+    radiance is sampled bilinearly where it lands. ``read_surface``/``read_radiance`` give the
+    grids (frame of ``to_xy``) covering some ground bounds. Zero where no surface is under the
+    block.
+    """
+    shape = (rows.size, cols.size)
+    rays = image_rays(model, rows, cols, levels, to_xy)
+    hit = cast_on_surface(rays, read_surface, tol_m=0.01)
+    if hit is None:
+        return np.zeros(shape, dtype=np.uint8 if bits == 8 else np.uint16)
+    x, y = hit
+    radiance = read_radiance(rays.ground_bounds())
+    L = radiance.sample(x, y) if radiance is not None else np.full(x.shape, np.nan)
+    rr, cc = np.meshgrid(rows, cols, indexing="ij")
+    return radiance_to_dn(L.reshape(shape), noise_sigma_dn, bits, seed, rr, cc)

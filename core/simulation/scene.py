@@ -1,4 +1,5 @@
-"""Scene definitions of the simulator: presets, truth models, delivered-metadata errors.
+"""Scene definitions of the simulator: presets, truth models, delivered-metadata errors, the
+scene record (:class:`SceneDef`, saved as scene.json) and how a scene is sized.
 
 Pure numerics on the pushbroom model. The truth models carry what the delivered metadata
 lack (lens distortion with ``lens``, high-frequency attitude jitter with ``jitter``); the
@@ -8,15 +9,26 @@ at the scene centre and by attitude drifts, as archive SPOT metadata do.
 
 from __future__ import annotations
 
-from dataclasses import asdict, dataclass, replace
+import json
+from collections.abc import Mapping
+from dataclasses import asdict, dataclass, field, replace
+from typing import Any
 
 import numpy as np
-from numpy.typing import NDArray
+from numpy.typing import ArrayLike, NDArray
 
-from core.errors import InputError
-from core.geodesy import geodetic_to_ecef
+from core.dem import GeoDEM
+from core.errors import CoverageError, InputError
+from core.geodesy import BBox, geodetic_to_ecef, metres_per_degree
+from core.geoid import GeoidGrid
+from core.jsonio import parse_json
+from core.points import GeoPoint
+from core.sensors.base import footprint_lonlat
 from core.sensors.linear_array import LensDistortion
 from core.sensors.pushbroom import PushbroomModel
+from core.sensors.pushbroom_synthetic import SyntheticSpec, synthetic_pushbroom
+from core.simulation.hashing import derive_seed
+from core.simulation.landcover import water_level_for_fraction
 
 FloatArray = NDArray[np.float64]
 
@@ -102,10 +114,28 @@ class InjectedErrors:
     yaw_rate_rad_s: float
     centre_error_m: float
     jitter: tuple[tuple[int, float, float, float], ...]
-    distortion: dict
+    distortion: LensDistortion
 
     def to_dict(self) -> dict:
-        return asdict(self)
+        d = asdict(self)
+        d["jitter"] = [list(t) for t in self.jitter]
+        d["distortion"] = self.distortion.to_dict()
+        return d
+
+    @classmethod
+    def from_dict(cls, d: dict) -> InjectedErrors:
+        try:
+            return cls(
+                **{k: float(d[k]) for k in (
+                    "roll_bias_rad", "pitch_bias_rad", "yaw_bias_rad", "roll_rate_rad_s",
+                    "pitch_rate_rad_s", "yaw_rate_rad_s", "centre_error_m")},
+                jitter=tuple((int(t[0]), float(t[1]), float(t[2]), float(t[3]))
+                             for t in d["jitter"]),
+                distortion=LensDistortion.from_dict(d["distortion"], "injected.distortion"),
+            )
+        except (KeyError, TypeError, ValueError, IndexError) as exc:
+            raise InputError(f"injected errors record is malformed ({exc!r}); the scene.json "
+                             "was not written by this version of gcpfree simulate") from exc
 
 
 def truth_model(
@@ -114,11 +144,11 @@ def truth_model(
 ) -> PushbroomModel:
     """The true geometry of one image (with the lens distortion and jitter the metadata lack)."""
     lon, lat, h = centre
-    model = PushbroomModel.synthetic(
-        lon, lat, center_h_m=h, n_cols=preset.n_cols, n_rows=preset.n_rows, gsd_m=preset.gsd_m,
+    model = synthetic_pushbroom(SyntheticSpec(
+        lon, lat, centre_h_m=h, n_cols=preset.n_cols, n_rows=preset.n_rows, gsd_m=preset.gsd_m,
         incidence_deg=spec.incidence_deg, pitch_deg=spec.pitch_deg,
         epoch_utc=f"{spec.date}T10:00:00Z",
-    )
+    ))
     if cfg.lens:
         # radial k3 r^3 worth lens_edge_px at the edge of the detector line (r in normalised
         # focal-plane units, measured on this camera), decentering a tenth of it
@@ -206,5 +236,230 @@ def delivered_model(
     b = direction * scale
     return delivered, InjectedErrors(
         float(b[0]), float(b[1]), float(b[2]), float(rates[0]), float(rates[1]), float(rates[2]),
-        err, tuple(getattr(att, "jitter", ())), asdict(truth.distortion),
+        err, tuple(att.jitter), truth.distortion,
     )
+
+
+# ---------------------------------------------------------------------------- the scene
+
+
+@dataclass(frozen=True)
+class TruthGrid:
+    """The north-up grid of the truth rasters in the scene's UTM zone (metres).
+
+    ``(x_left_m, y_top_m)`` is the top-left corner of the top-left cell; cells are ``res_m``
+    squares, ``width`` columns by ``height`` rows.
+    """
+
+    x_left_m: float
+    y_top_m: float
+    res_m: float
+    width: int
+    height: int
+
+    def __post_init__(self) -> None:
+        if not (self.res_m > 0 and self.width > 0 and self.height > 0):
+            raise InputError(f"a truth grid needs res_m > 0 and a positive size, got {self}")
+
+    @property
+    def shape(self) -> tuple[int, int]:
+        return int(self.height), int(self.width)
+
+    def geotransform(self) -> tuple[float, float, float, float, float, float]:
+        """Affine coefficients (a, b, c, d, e, f) with the origin at the top-left corner."""
+        return (self.res_m, 0.0, self.x_left_m, 0.0, -self.res_m, self.y_top_m)
+
+    def bounds_m(self) -> tuple[float, float, float, float]:
+        """(x_min, y_min, x_max, y_max) of the grid's outer edges."""
+        return (self.x_left_m, self.y_top_m - self.height * self.res_m,
+                self.x_left_m + self.width * self.res_m, self.y_top_m)
+
+    def cell_centres(self, r0: int, r1: int, c0: int, c1: int) -> tuple[FloatArray, FloatArray]:
+        """(x, y) of the centres of rows r0..r1-1 and columns c0..c1-1, as 2-D arrays."""
+        x = self.x_left_m + (np.arange(c0, c1) + 0.5) * self.res_m
+        y = self.y_top_m - (np.arange(r0, r1) + 0.5) * self.res_m
+        xx, yy = np.meshgrid(x, y)
+        return xx, yy
+
+    @classmethod
+    def covering(cls, x_m: FloatArray, y_m: FloatArray, res_m: float, margin_m: float) -> TruthGrid:
+        """The grid of ``res_m`` cells, snapped to multiples of ``res_m``, that covers the points
+        with ``margin_m`` to spare on every side."""
+        x0 = np.floor((x_m.min() - margin_m) / res_m) * res_m
+        y1 = np.ceil((y_m.max() + margin_m) / res_m) * res_m
+        width = int(np.ceil((x_m.max() + margin_m - x0) / res_m))
+        height = int(np.ceil((y1 - (y_m.min() - margin_m)) / res_m))
+        return cls(float(x0), float(y1), float(res_m), width, height)
+
+    def to_list(self) -> list[float | int]:
+        return [self.x_left_m, self.y_top_m, self.res_m, self.width, self.height]
+
+    @classmethod
+    def from_list(cls, v: list) -> TruthGrid:
+        x0, y0, res, w, h = v
+        return cls(float(x0), float(y0), float(res), int(w), int(h))
+
+
+@dataclass(frozen=True)
+class SceneDef:
+    """Everything later steps need about a simulated scene; saved as DIR/truth/scene.json.
+
+    ``dem_window`` is the part of the DEM read (degrees); relief is scaled by
+    ``relief_factor`` around the orthometric height ``H_ref_m``; ``centre`` is the point the
+    centre pixels see; ``epsg`` the UTM zone of the truth ``grid``; ``dsm_range_m`` the
+    ellipsoidal range of the truth DSM once built; ``injected`` the metadata errors per image.
+    """
+
+    preset: str
+    seed: int
+    dem_path: str
+    dem_window: BBox
+    relief_factor: float
+    H_ref_m: float
+    centre: GeoPoint
+    epsg: int
+    grid: TruthGrid
+    water_level_m: float | None
+    bits: int
+    date_change: float
+    errors: ErrorConfig
+    image_names: tuple[str, str]
+    dsm_range_m: tuple[float, float] | None = None
+    injected: Mapping[str, InjectedErrors] = field(default_factory=dict)
+
+    @property
+    def preset_spec(self) -> Preset:
+        return PRESETS[self.preset]
+
+    def to_dict(self) -> dict[str, Any]:
+        """The scene.json layout (keys and value shapes are a documented output)."""
+        return {
+            "preset": self.preset, "seed": self.seed, "dem_path": self.dem_path,
+            "dem_window": list(self.dem_window.as_tuple()), "relief_factor": self.relief_factor,
+            "H_ref_m": self.H_ref_m, "centre": self.centre.to_list(), "epsg": self.epsg,
+            "grid": self.grid.to_list(), "water_level_m": self.water_level_m, "bits": self.bits,
+            "date_change": self.date_change, "errors": asdict(self.errors),
+            "image_names": list(self.image_names),
+            "dsm_range_m": None if self.dsm_range_m is None else list(self.dsm_range_m),
+            "injected": {k: v.to_dict() for k, v in self.injected.items()},
+        }
+
+    def to_json(self) -> str:
+        return json.dumps(self.to_dict(), indent=1)
+
+    @classmethod
+    def from_dict(cls, d: Mapping[str, Any]) -> SceneDef:
+        try:
+            errors = dict(d["errors"])
+            errors["centre_error_m"] = tuple(errors["centre_error_m"])
+            rng = d.get("dsm_range_m")
+            return cls(
+                preset=str(d["preset"]), seed=int(d["seed"]), dem_path=str(d["dem_path"]),
+                dem_window=BBox(*(float(v) for v in d["dem_window"])),
+                relief_factor=float(d["relief_factor"]), H_ref_m=float(d["H_ref_m"]),
+                centre=GeoPoint.from_list(d["centre"]), epsg=int(d["epsg"]),
+                grid=TruthGrid.from_list(d["grid"]),
+                water_level_m=None if d["water_level_m"] is None else float(d["water_level_m"]),
+                bits=int(d["bits"]), date_change=float(d["date_change"]),
+                errors=ErrorConfig(**errors),
+                image_names=tuple(str(n) for n in d["image_names"]),  # type: ignore[arg-type]
+                dsm_range_m=None if rng is None else (float(rng[0]), float(rng[1])),
+                injected={str(k): InjectedErrors.from_dict(v) for k, v in d["injected"].items()},
+            )
+        except (KeyError, TypeError, ValueError) as exc:
+            raise InputError(f"scene definition is malformed ({exc!r}); it was not written by "
+                             "this version of gcpfree simulate") from exc
+
+    @classmethod
+    def from_json(cls, text: str) -> SceneDef:
+        return cls.from_dict(parse_json(text, "scene.json"))
+
+
+def dem_window(preset: Preset, lon_deg: float, lat_deg: float) -> BBox:
+    """A lon/lat window around the scene centre wide enough for both footprints of ``preset``
+    (1.6 image half-widths plus 3 km); :func:`footprint_points` checks it afterwards."""
+    half_m = 0.5 * max(preset.n_cols, preset.n_rows) * preset.gsd_m * 1.6 + 3000.0
+    m_lon, m_lat = metres_per_degree(lat_deg)
+    half_lat, half_lon = float(half_m / m_lat), float(half_m / m_lon)
+    return BBox(lon_deg - half_lon, lat_deg - half_lat, lon_deg + half_lon, lat_deg + half_lat)
+
+
+def scale_relief(H_m: ArrayLike, H_ref_m: float, relief_factor: float) -> FloatArray:
+    """Heights with their relief scaled by ``relief_factor`` around ``H_ref_m``."""
+    return H_ref_m + relief_factor * (np.asarray(H_m, dtype=np.float64) - H_ref_m)
+
+
+@dataclass(frozen=True)
+class TerrainLevels:
+    """Heights that size a scene: metres, ellipsoidal except ``H_ref_m`` (orthometric)."""
+
+    H_ref_m: float  # median orthometric height of the DEM window (relief scaled around it)
+    h_centre_m: float  # terrain under the scene centre
+    h_lo_m: float  # below the lowest terrain
+    h_hi_m: float  # above the highest canopy and roof
+    water_level_m: float  # level below which 2 % of the window lies
+
+
+def terrain_levels(H_m: FloatArray, transform: tuple[float, ...], geoid: GeoidGrid,
+                   lon_deg: float, lat_deg: float, relief_factor: float) -> TerrainLevels:
+    """The levels of a DEM window (orthometric ``H_m`` on a geotransform ``(a, b, c, d, e, f)``,
+    north-up, NaN voids) after relief scaling, and the ellipsoidal height under the centre."""
+    if np.isnan(H_m).all():
+        raise InputError(f"the DEM has no valid height around {lon_deg:.4f}, {lat_deg:.4f}")
+    H_ref = float(np.nanmedian(H_m))
+    Hs = scale_relief(H_m, H_ref, relief_factor)
+    h_centre = float(GeoDEM.from_transform(Hs, transform).height_m(lon_deg, lat_deg)
+                     + geoid.undulation_m(lon_deg, lat_deg))
+    if not np.isfinite(h_centre):
+        raise InputError(f"the scene centre {lon_deg:.4f}, {lat_deg:.4f} falls on a DEM void or "
+                         "outside the DEM; choose another --center")
+    a, _, c, _, e, f = transform[:6]
+    rows, cols = np.mgrid[0 : H_m.shape[0], 0 : H_m.shape[1]]
+    h_nodes = Hs + geoid.undulation_m(c + (cols + 0.5) * a, f + (rows + 0.5) * e)
+    return TerrainLevels(
+        H_ref_m=H_ref, h_centre_m=h_centre,
+        h_lo_m=float(np.nanmin(h_nodes)) - 20.0,
+        h_hi_m=float(np.nanmax(h_nodes)) + 60.0,  # canopy, buildings, detail
+        water_level_m=water_level_for_fraction(h_nodes, 0.02),
+    )
+
+
+@dataclass(frozen=True, eq=False)
+class ImageModels:
+    """One image of a simulated pair: its true geometry, its metadata, what differs."""
+
+    truth: PushbroomModel
+    delivered: PushbroomModel
+    injected: InjectedErrors
+
+
+def scene_models(preset: Preset, centre: GeoPoint, errors: ErrorConfig,
+                 seed: int) -> dict[str, ImageModels]:
+    """Truth and delivered models of each image of ``preset``, drawn from ``seed``."""
+    out = {}
+    for spec in preset.images:
+        rng = np.random.default_rng(derive_seed(seed, "geometry", spec.name))
+        t = truth_model(spec, preset, (centre.lon_deg, centre.lat_deg, centre.h_m), errors, rng)
+        d, inj = delivered_model(t, preset, errors, rng, centre.h_m)
+        out[spec.name] = ImageModels(t, d, inj)
+    return out
+
+
+def footprint_points(models: list[PushbroomModel], h_lo_m: float,
+                     h_hi_m: float) -> tuple[FloatArray, FloatArray]:
+    """(lon, lat) along the edges of every image at both heights: the scene's ground extent."""
+    lons, lats = zip(*(footprint_lonlat(m, m.n_cols, m.n_rows, (h_lo_m, h_hi_m)) for m in models),
+                     strict=True)
+    return np.concatenate(lons), np.concatenate(lats)
+
+
+def check_window_covers(window: BBox, lon: FloatArray, lat: FloatArray, dem_name: str) -> None:
+    """CoverageError when the footprint points fall outside the DEM window read."""
+    need = BBox(float(lon.min()), float(lat.min()), float(lon.max()), float(lat.max()))
+    if not window.contains(need):
+        raise CoverageError(
+            f"the DEM does not cover the simulated scene: it needs lon {need.lon_min:.4f}.."
+            f"{need.lon_max:.4f}, lat {need.lat_min:.4f}..{need.lat_max:.4f} but {dem_name} gives "
+            f"lon {window.lon_min:.4f}..{window.lon_max:.4f}, lat {window.lat_min:.4f}.."
+            f"{window.lat_max:.4f}; use a larger DEM, a smaller preset or another --center"
+        )

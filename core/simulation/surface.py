@@ -20,6 +20,7 @@ from numpy.typing import NDArray
 
 from core.dem import GeoDEM
 from core.errors import InputError
+from core.geodesy import metres_per_degree
 from core.geoid import GeoidGrid
 from core.simulation.fields import fractal_detail_m
 from core.simulation.hashing import derive_seed
@@ -89,9 +90,9 @@ def slope_deg(spec: SurfaceSpec, lon: FloatArray, lat: FloatArray) -> FloatArray
     d = spec.dem_H
     hx = 0.5 * abs(d.dlon_deg)
     hy = 0.5 * abs(d.dlat_deg)
-    dzdx = (d.height_m(lon + hx, lat) - d.height_m(lon - hx, lat)) / (
-        2 * hx * 111_320.0 * np.cos(np.radians(lat)))
-    dzdy = (d.height_m(lon, lat + hy) - d.height_m(lon, lat - hy)) / (2 * hy * 110_574.0)
+    m_lon, m_lat = metres_per_degree(lat)
+    dzdx = (d.height_m(lon + hx, lat) - d.height_m(lon - hx, lat)) / (2 * hx * m_lon)
+    dzdy = (d.height_m(lon, lat + hy) - d.height_m(lon, lat - hy)) / (2 * hy * m_lat)
     g = np.hypot(dzdx, dzdy)
     return np.degrees(np.arctan(np.where(np.isfinite(g), g, 0.0)))
 

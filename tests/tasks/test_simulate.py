@@ -13,12 +13,12 @@ import rasterio
 from rasterio.transform import RPCTransformer, from_origin
 from scipy.ndimage import map_coordinates
 
-from core.errors import InputError
+from core.errors import CoverageError, InputError
 from core.sensors.pushbroom import PushbroomModel
 from core.simulation.landcover import LandCover
 from core.simulation.scene import ErrorConfig
 from tasks import simulate as S
-from tasks.geoid import BUNDLED_SRTM_DIR, load_geoid
+from tasks.geoid import BUNDLED_SRTM_DIR, EGM96_GTX, load_geoid
 
 DEM = BUNDLED_SRTM_DIR / "N44E005.hgt"
 CENTRE = (5.25, 44.2)
@@ -55,15 +55,17 @@ def models(out: Path, kind: str):
 def test_delivered_metadata_error_at_centre(scene_dir):
     out, scene = scene_dir
     truth, delivered = models(out, "truth"), models(out, "delivered")
-    for name, t, d in zip(scene.image_names, truth, delivered):
-        err = scene.injected[name]["centre_error_m"]
+    geod = pyproj.Geod(ellps="WGS84")
+    for name, t, d in zip(scene.image_names, truth, delivered, strict=True):
+        err = scene.injected[name].centre_error_m
         assert 100.0 <= err <= 300.0
         c, r = (t.n_cols - 1) / 2, (t.n_rows - 1) / 2
-        h = scene.centre[2]
+        h = scene.centre.h_m
         lt, at = t.localize(c, r, h)
         ld, ad = d.localize(c, r, h)
-        dist = np.hypot((ld - lt) * 111_320 * np.cos(np.radians(at)), (ad - at) * 111_132)
-        assert float(dist) == pytest.approx(err, rel=0.01)
+        # geodesic distance on the ellipsoid (PROJ), scaled to height h
+        _, _, dist = geod.inv(float(lt), float(at), float(ld), float(ad))
+        assert dist * (1 + h / 6.371e6) == pytest.approx(err, rel=2e-3)
         assert t.attitude.jitter and not d.attitude.jitter  # errors the metadata lack
         assert t.distortion.k3 != 0 and d.distortion.k3 == 0
 
@@ -78,26 +80,55 @@ def test_truth_models_round_trip(scene_dir):
             assert np.hypot(c2 - c, r2 - r).max() < 1e-3
 
 
-def test_checkpoints_project_to_their_image_coordinates(scene_dir):
+def test_checkpoints_are_what_their_pixels_see(scene_dir):
+    """Independent of the simulator's ray caster: each check point's line of sight through its
+    stored pixel (the truth model's ``localize``, not ``project``) is walked down in 0.25 m
+    steps against the truth DSM read by GDAL and interpolated here; it first meets the surface
+    at the check point."""
     out, scene = scene_dir
     doc = json.loads((out / "truth" / "checkpoints.json").read_text())
     pts = doc["points"]
-    assert len(pts) >= 50
+    assert len(pts) >= 50 and doc["images"] == list(scene.image_names)
     lon = np.array([p["lon_deg"] for p in pts])
     lat = np.array([p["lat_deg"] for p in pts])
     h = np.array([p["h_m"] for p in pts])
-    for name, m in zip(scene.image_names, models(out, "truth")):
-        c, r = m.project(lon, lat, h)
+    to_utm = pyproj.Transformer.from_crs("EPSG:4326", doc["crs"], always_xy=True)
+    with rasterio.open(out / "truth" / "dsm.tif") as src:
+        dsm, t = src.read(1).astype(float), src.transform
+    steps = np.arange(300.0, -30.0, -0.25)  # metres above / below the point
+    for name, m in zip(scene.image_names, models(out, "truth"), strict=True):
         cs = np.array([p[name]["col"] for p in pts])
         rs = np.array([p[name]["row"] for p in pts])
-        assert np.hypot(c - cs, r - rs).max() < 1e-3
         assert ((cs > 0) & (cs < m.n_cols - 1) & (rs > 0) & (rs < m.n_rows - 1)).all()
-    # they lie on the truth terrain and carry consistent EGM96 heights
-    n = load_geoid().undulation_m(lon, lat)
-    np.testing.assert_allclose([p["H_egm96_m"] for p in pts], h - n, atol=1e-6)
-    with rasterio.open(out / "truth" / "dtm.tif") as src:
-        dtm = np.array([v[0] for v in src.sample([(p["x_m"], p["y_m"]) for p in pts])])
-    assert np.median(np.abs(dtm - h)) < 2.0
+        # the stored pixel's line of sight passes through the point at its height
+        lo, la = m.localize(cs, rs, h)
+        x, y = to_utm.transform(lo, la)
+        px, py = to_utm.transform(lon, lat)
+        assert np.hypot(x - px, y - py).max() < 0.001 * 40.0  # 1e-3 px at 40 m
+        # and meets the DSM there first
+        hh = h[:, None] + steps[None, :]
+        lo, la = m.localize(np.repeat(cs, steps.size), np.repeat(rs, steps.size), hh.ravel())
+        x, y = to_utm.transform(lo, la)
+        col_f, row_f = ~t * (np.asarray(x), np.asarray(y))
+        z = map_coordinates(dsm, [row_f - 0.5, col_f - 0.5], order=1, cval=np.nan)
+        below = (hh.ravel() <= z).reshape(hh.shape)
+        first = np.argmax(below, axis=1)
+        assert below.any(axis=1).all()
+        k = np.arange(len(pts))
+        h_hit = hh[k, first]
+        x_hit = np.asarray(x).reshape(hh.shape)[k, first]
+        y_hit = np.asarray(y).reshape(hh.shape)[k, first]
+        # visible: the first hit is within 1.5 cells of the point (a tree or roof in front
+        # would stop the ray tens of metres away), at the point's height within the
+        # bilinear DSM's rendering of sub-cell relief
+        assert np.hypot(x_hit - px, y_hit - py).max() < 1.5 * scene.grid.res_m, name
+        assert np.median(np.abs(h_hit - h)) < 0.5, name
+        assert np.percentile(np.abs(h_hit - h), 90) < 2.0, name
+    # they carry consistent EGM96 heights (PROJ's vgridshift on the bundled grid)
+    egm = pyproj.Transformer.from_pipeline(
+        f"+proj=vgridshift +grids={EGM96_GTX} +multiplier=-1")
+    _, _, H = egm.transform(lon, lat, h)
+    np.testing.assert_allclose([p["H_egm96_m"] for p in pts], H, atol=1e-6)
 
 
 def test_images_carry_the_rpc_of_their_delivered_metadata(scene_dir):
@@ -209,12 +240,13 @@ def test_lidar_reads_back_with_crs_and_classes(scene_dir):
     assert classes <= {2, 5, 6, 9} and {2, 5} <= classes
     x, y, z = np.asarray(las.x), np.asarray(las.y), np.asarray(las.z)
     # density: irregular, about the preset's spacing
-    _, _, res, w, h = scene.grid
-    spacing = scene.preset_obj.lidar_spacing_m
-    assert 0.6 < len(x) / (w * h * res * res / spacing**2) < 1.05
+    g = scene.grid
+    spacing = scene.preset_spec.lidar_spacing_m
+    assert 0.6 < len(x) / (g.width * g.height * g.res_m**2 / spacing**2) < 1.05
     # heights are EGM96: adding N gives the ellipsoidal truth DSM at ground points
     ground = np.flatnonzero(las.classification == 2)[::50]
-    lon, lat = S.to_lonlat(scene.epsg)(x[ground], y[ground])
+    lon, lat = pyproj.Transformer.from_crs(scene.epsg, 4326, always_xy=True).transform(
+        x[ground], y[ground])
     h = z[ground] + load_geoid().undulation_m(lon, lat)
     with rasterio.open(out / "truth" / "dtm.tif") as s:
         dtm = np.array([v[0] for v in s.sample(list(zip(x[ground], y[ground])))])
@@ -276,7 +308,7 @@ def test_any_geographic_dem_geotiff(tmp_path):
 def test_dem_that_does_not_cover_the_scene(tmp_path):
     dem = tmp_path / "small.tif"
     write_dem(dem, 10.0, 46.1, 1.5 / 3600, (120, 120))  # 0.05 deg: far too small
-    with pytest.raises(InputError, match="does not cover the simulated scene"):
+    with pytest.raises(CoverageError, match="does not cover the simulated scene"):
         S.define_scene.fn(dem, tmp_path / "o", "tiny", 0, ErrorConfig())
 
 

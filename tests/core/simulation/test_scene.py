@@ -1,5 +1,7 @@
 """Scene definitions: truth models with jitter/lens, delivered metadata with known errors."""
 
+import json
+
 import numpy as np
 import pytest
 
@@ -9,7 +11,6 @@ from core.sensors.pushbroom import PushbroomModel
 from core.simulation.scene import (
     PRESETS,
     ErrorConfig,
-    centre_displacement_m,
     delivered_model,
     truth_model,
 )
@@ -52,8 +53,15 @@ def test_delivered_error_at_centre_is_within_100_300_m(tiny_truth, seed):
     rng = np.random.default_rng(seed)
     delivered, inj = delivered_model(tiny_truth, PRESETS["tiny"], ErrorConfig(), rng, 600.0)
     assert 100.0 <= inj.centre_error_m <= 300.0
-    assert inj.centre_error_m == pytest.approx(
-        centre_displacement_m(tiny_truth, delivered, 600.0), rel=1e-9)
+    # independently: where the delivered model sees the true centre ground point, in pixels
+    # of the true model's ground sampling (40 m), without centre_displacement_m
+    c0 = (tiny_truth.n_cols - 1) / 2
+    lon, lat = tiny_truth.localize(c0, c0, 600.0)
+    cd, rd = delivered.project(lon, lat, 600.0)
+    lon_d, lat_d = tiny_truth.localize(cd, rd, 600.0)  # the ground the delivered pixel maps to
+    g = np.array(geodetic_to_ecef(lon, lat, 600.0)).ravel()
+    g_d = np.array(geodetic_to_ecef(lon_d, lat_d, 600.0)).ravel()
+    assert np.linalg.norm(g - g_d) == pytest.approx(inj.centre_error_m, rel=0.02)
     # the delivered metadata know neither the jitter nor the lens
     assert delivered.attitude.jitter == () and delivered.distortion.k3 == 0.0
     assert abs(inj.roll_rate_rad_s) + abs(inj.pitch_rate_rad_s) > 0
@@ -123,3 +131,53 @@ def test_spot_preset_is_an_across_track_pair():
     bh, along = _base_to_height("spot")
     assert 0.6 < bh < 1.1  # +25.5 / -20 deg incidence from two orbits
     assert along < 0.5
+
+
+def test_scene_def_json_keeps_its_documented_layout_and_round_trips():
+    from core.geodesy import BBox
+    from core.points import GeoPoint
+    from core.sensors.linear_array import LensDistortion
+    from core.simulation.scene import InjectedErrors, SceneDef, TruthGrid
+
+    inj = InjectedErrors(1e-5, -2e-5, 3e-6, 1e-7, 0.0, -1e-7, 123.4,
+                         ((0, 1e-6, 5.5, 0.25),), LensDistortion(k3=0.01, p1=1e-4))
+    scene = SceneDef(
+        preset="tiny", seed=3, dem_path="/d/N44E005.hgt",
+        dem_window=BBox(4.9995833, 43.9995833, 5.5279167, 44.40125), relief_factor=1.0,
+        H_ref_m=602.0, centre=GeoPoint(5.25, 44.2, 858.9), epsg=32631,
+        grid=TruthGrid(664280.0, 4911760.0, 20.0, 1550, 1519), water_level_m=127.5, bits=8,
+        date_change=0.1, errors=ErrorConfig(lens=True), image_names=("left", "right"),
+        dsm_range_m=(127.5, 1952.9), injected={"left": inj, "right": inj},
+    )
+    d = json.loads(scene.to_json())
+    assert list(d) == ["preset", "seed", "dem_path", "dem_window", "relief_factor", "H_ref_m",
+                       "centre", "epsg", "grid", "water_level_m", "bits", "date_change",
+                       "errors", "image_names", "dsm_range_m", "injected"]
+    assert d["grid"] == [664280.0, 4911760.0, 20.0, 1550, 1519]
+    assert d["centre"] == [5.25, 44.2, 858.9]
+    assert d["errors"]["centre_error_m"] == [100.0, 300.0]
+    assert d["injected"]["left"]["distortion"] == {"k1": 0.0, "k3": 0.01, "p1": 1e-4, "p2": 0.0}
+    assert d["injected"]["left"]["jitter"] == [[0, 1e-6, 5.5, 0.25]]
+    back = SceneDef.from_json(scene.to_json())
+    assert back == scene and back.to_json() == scene.to_json()
+    from core.errors import InputError
+
+    with pytest.raises(InputError, match="malformed"):
+        SceneDef.from_json(json.dumps({k: v for k, v in d.items() if k != "grid"}))
+
+
+def test_truth_grid_covers_the_points_with_the_margin_on_the_lattice():
+    from core.simulation.scene import TruthGrid
+
+    rng = np.random.default_rng(5)
+    x, y = rng.uniform(650_003.3, 661_007.7, 500), rng.uniform(4_900_001.1, 4_912_345.6, 500)
+    g = TruthGrid.covering(x, y, 20.0, 200.0)
+    xmin, ymin, xmax, ymax = g.bounds_m()
+    assert xmin % 20.0 == 0 and ymax % 20.0 == 0
+    assert xmin <= x.min() - 200.0 < xmin + 20.0 and ymax - 20.0 < y.max() + 200.0 <= ymax
+    assert xmax >= x.max() + 200.0 and ymin <= y.min() - 200.0
+    xx, yy = g.cell_centres(0, 2, 0, 3)
+    assert xx[0].tolist() == [xmin + 10.0, xmin + 30.0, xmin + 50.0]
+    assert yy[:, 0].tolist() == [ymax - 10.0, ymax - 30.0]
+    a, b, c, d_, e, f = g.geotransform()
+    assert (a, b, c, d_, e, f) == (20.0, 0.0, xmin, 0.0, -20.0, ymax)

@@ -16,6 +16,7 @@ from core.simulation.render import (
     date_change_mask,
     date_change_weight,
     hillshade,
+    illuminate,
     radiance_to_dn,
     texture,
 )
@@ -132,12 +133,12 @@ def test_apply_date_change() -> None:
 def test_dn_range_dtype_and_noise(bits: int, dtype: type) -> None:
     rows, cols = np.mgrid[0:300, 0:300]
     r = np.full(rows.shape, 0.4)
-    dn = radiance_to_dn(r, 1.0, 2.0, bits, SEED, rows, cols)
+    dn = radiance_to_dn(illuminate(r, 1.0), 2.0, bits, SEED, rows, cols)
     assert dn.dtype == dtype
     gain = 0.8 * (2**bits - 1)
     assert dn.astype(float).mean() == pytest.approx(0.4 * gain, abs=0.05)
     assert dn.astype(float).std() == pytest.approx(np.sqrt(4.0 + 1 / 12), rel=0.05)
-    sat = radiance_to_dn(np.array([0.0, 1.0, 5.0, np.nan]), 1.0, 50.0, bits, SEED,
+    sat = radiance_to_dn(np.array([0.0, 1.0, 5.0, np.nan]), 50.0, bits, SEED,
                          0, np.arange(4))
     assert sat.max() <= 2**bits - 1 and sat[2] == 2**bits - 1 and sat[3] == 0
 
@@ -146,18 +147,21 @@ def test_dn_noise_is_per_pixel(splits: tuple[int, int]) -> None:
     rows, cols = np.mgrid[0:256, 0:256]
     r = np.linspace(0, 1, 256)[None, :] * np.ones((256, 1))
     shade = np.full(r.shape, 0.7)
-    whole = radiance_to_dn(r, shade, 3.0, 12, SEED, rows, cols)
+    whole = radiance_to_dn(illuminate(r, shade), 3.0, 12, SEED, rows, cols)
     a, b = splits
-    tile = radiance_to_dn(r[a:, b:], shade[a:, b:], 3.0, 12, SEED, rows[a:, b:], cols[a:, b:])
+    tile = radiance_to_dn(illuminate(r[a:, b:], shade[a:, b:]), 3.0, 12, SEED, rows[a:, b:],
+                          cols[a:, b:])
     assert tile.tobytes() == whole[a:, b:].tobytes()
-    other = radiance_to_dn(r, shade, 3.0, 12, SEED + 1, rows, cols)
+    other = radiance_to_dn(illuminate(r, shade), 3.0, 12, SEED + 1, rows, cols)
     assert np.mean(other == whole) < 0.5
-    shaded = radiance_to_dn(r, 0.0, 0.0, 12, SEED, rows, cols)
+    shaded = radiance_to_dn(illuminate(r, 0.0), 0.0, 12, SEED, rows, cols)
     assert shaded.max() <= np.rint(0.2 * 0.8 * 4095)
 
 
 def test_dn_input_errors() -> None:
     with pytest.raises(InputError, match="bits"):
-        radiance_to_dn(0.5, 1.0, 1.0, 16, SEED, 0, 0)
+        radiance_to_dn(0.5, 1.0, 16, SEED, 0, 0)
     with pytest.raises(InputError, match="noise_sigma_dn"):
-        radiance_to_dn(0.5, 1.0, -1.0, 8, SEED, 0, 0)
+        radiance_to_dn(0.5, -1.0, 8, SEED, 0, 0)
+    with pytest.raises(InputError, match="ambient"):
+        illuminate(0.5, 1.0, ambient=1.5)
