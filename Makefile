@@ -5,12 +5,9 @@ PY     := $(VENV)/bin/python
 STAMP  := $(VENV)/.installed
 OUT    ?= out
 
+# where the demo keeps Prefect's state; every other Prefect/Dask default is set in one place,
+# flows/_env.py (the CLI and the test suite call it)
 export PREFECT_HOME ?= $(CURDIR)/.prefect
-export PREFECT_SERVER_ANALYTICS_ENABLED := false
-export DO_NOT_TRACK := 1
-export PREFECT_LOGGING_TO_API_WHEN_MISSING_FLOW := ignore
-export PREFECT_SERVER_EPHEMERAL_STARTUP_TIMEOUT_SECONDS := 90
-export DASK_LOGGING__DISTRIBUTED := warning
 
 .PHONY: demo test bench venv clean
 

@@ -1,19 +1,33 @@
-"""Process-wide defaults for Prefect and Dask: local, offline, quiet. Call before importing prefect."""
+"""The one place that sets the process-wide Prefect and Dask defaults: local, offline, quiet.
+
+Call :func:`configure_environment` before importing prefect (the CLI does it first thing,
+the test suite in its conftest). Values the user set win, except the state folder when one is
+given explicitly.
+"""
 
 from __future__ import annotations
 
 import os
+from pathlib import Path
 
 DEFAULTS = {
-    "PREFECT_SERVER_ANALYTICS_ENABLED": "false",
-    "DO_NOT_TRACK": "1",
+    "PREFECT_SERVER_ANALYTICS_ENABLED": "false",  # server telemetry tries the internet otherwise
+    "DO_NOT_TRACK": "1",  # SDK telemetry
     "PREFECT_LOGGING_TO_API_WHEN_MISSING_FLOW": "ignore",
-    "PREFECT_SERVER_EPHEMERAL_STARTUP_TIMEOUT_SECONDS": "90",
-    "DASK_LOGGING__DISTRIBUTED": "warning",
+    "PREFECT_SERVER_EPHEMERAL_STARTUP_TIMEOUT_SECONDS": "90",  # 20 s (default) times out
+    "DASK_LOGGING__DISTRIBUTED": "warning",  # otherwise ~90 log lines per small flow
 }
 
 
-def configure_environment() -> None:
-    """Set offline, quiet defaults without overriding what the user set."""
+def configure_environment(prefect_home: str | Path | None = None) -> None:
+    """Set offline, quiet defaults without overriding what the user set.
+
+    With ``prefect_home``, Prefect's state (its SQLite database, profiles) and Dask's
+    temporary files go to that folder, whatever the environment says (tests, benchmarks).
+    """
     for k, v in DEFAULTS.items():
         os.environ.setdefault(k, v)
+    if prefect_home is not None:
+        home = Path(prefect_home)
+        os.environ["PREFECT_HOME"] = str(home)
+        os.environ["DASK_TEMPORARY_DIRECTORY"] = str(home / "dask")

@@ -2,20 +2,14 @@
 
 from __future__ import annotations
 
-import os
 import tempfile
 from pathlib import Path
 
-_HOME = Path(tempfile.mkdtemp(prefix="gcpfree-tests-prefect-"))
-os.environ["PREFECT_HOME"] = str(_HOME)
-os.environ["DASK_TEMPORARY_DIRECTORY"] = str(_HOME / "dask")
-os.environ.setdefault("PREFECT_SERVER_ANALYTICS_ENABLED", "false")
-os.environ.setdefault("DO_NOT_TRACK", "1")
-os.environ.setdefault("PREFECT_LOGGING_TO_API_WHEN_MISSING_FLOW", "ignore")
-os.environ.setdefault("PREFECT_SERVER_EPHEMERAL_STARTUP_TIMEOUT_SECONDS", "90")
-os.environ.setdefault("DASK_LOGGING__DISTRIBUTED", "warning")
+from flows._env import configure_environment
 
-import pytest
+configure_environment(prefect_home=tempfile.mkdtemp(prefix="gcpfree-tests-prefect-"))
+
+import pytest  # noqa: E402  (after the environment is configured)
 
 DATA = Path(__file__).parent / "data"
 REPO = Path(__file__).resolve().parents[1]
