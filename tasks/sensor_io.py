@@ -1,4 +1,5 @@
-"""Read RPC sensor models from files: OSSIM ``.geom``, GeoTIFF RPC tags, DIMAP v2 RPC XML.
+"""Read sensor models from files: RPCs (OSSIM ``.geom``, GeoTIFF RPC tags, DIMAP v2 RPC XML),
+SPOT Level 1A ``METADATA.DIM`` and gcpfree JSON; find the model of an image (:func:`load_model`).
 
 Where each source's pixel coordinates start, and how :func:`read_rpc` brings them to the
 raster's own pixels (0-based, pixel centres at integers):
@@ -17,13 +18,19 @@ raster's own pixels (0-based, pixel centres at integers):
 from __future__ import annotations
 
 import warnings
+from dataclasses import dataclass
 from pathlib import Path
 
 import rasterio
 from rasterio.errors import NotGeoreferencedWarning, RasterioIOError
 
 from core.errors import InputError
+from core.jsonio import parse_json
+from core.sensors.base import SensorModel
+from core.sensors.pushbroom import PushbroomModel
 from core.sensors.rpc import RPCModel
+from core.sensors.spot import SpotScene, spot_pushbroom
+from tasks.dimap import dimap_beside, read_dimap
 
 
 def _read_text(path: Path, what: str) -> str:
@@ -116,3 +123,112 @@ def read_rpc(image_path: str | Path, dimap_xml: str | Path | None = None) -> RPC
     if col0 or row0:
         model = model.with_image_offset(col0, row0)
     return model
+
+
+# ---------------------------------------------------------------------------- any sensor model
+
+MODEL_SUFFIXES = (".dim", ".json", ".geom", ".xml")
+
+
+@dataclass(frozen=True, eq=False)
+class LoadedModel:
+    """A sensor model found for an image or read from a model file, and where it came from.
+
+    ``family`` is ``"pushbroom"`` or ``"rpc"``; ``source`` the file the model was read from;
+    ``image`` the raster when one was given or found; ``size`` (cols, rows) of the image the
+    model describes; ``spot`` the SPOT metadata when the model came from a ``METADATA.DIM``;
+    ``band`` the band whose look angles were used.
+    """
+
+    model: SensorModel
+    family: str
+    source: Path
+    image: Path | None
+    size: tuple[int, int]
+    spot: SpotScene | None = None
+    band: int | None = None
+
+
+def _raster_size(path: Path) -> tuple[int, int]:
+    try:
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore", NotGeoreferencedWarning)
+            with rasterio.open(path) as src:
+                return src.width, src.height
+    except RasterioIOError as exc:
+        raise InputError(f"cannot open raster {path}: {exc}; check the path") from exc
+
+
+def _from_dimap(path: Path, image: Path | None, band: int | None) -> LoadedModel:
+    scene = read_dimap(path)
+    model = spot_pushbroom(scene, band)
+    if image is not None and _raster_size(image) != (scene.n_cols, scene.n_rows):
+        raise InputError(f"{image} is {_raster_size(image)} px but {path} describes "
+                         f"{scene.n_cols}x{scene.n_rows}: they are not the same scene")
+    return LoadedModel(model, "pushbroom", path, image, (scene.n_cols, scene.n_rows), scene,
+                       scene.look(band).band_index)
+
+
+def _from_json(path: Path, image: Path | None) -> LoadedModel:
+    d = parse_json(_read_text(path, "model JSON file"), str(path))
+    if isinstance(d, dict) and d.get("type") == "rpc":
+        rpc = RPCModel.from_dict(d)
+        size = _raster_size(image) if image else _rpc_size(rpc)
+        return LoadedModel(rpc, "rpc", path, image, size)
+    try:
+        model = PushbroomModel.from_dict(d)
+    except InputError as exc:
+        raise InputError(f"{path}: {exc}") from exc
+    return LoadedModel(model, "pushbroom", path, image, (model.n_cols, model.n_rows))
+
+
+def _rpc_size(rpc: RPCModel) -> tuple[int, int]:
+    """The image size an RPC's normalisation implies (its offsets are the image centre)."""
+    return int(round(2 * rpc.col_off + 1)), int(round(2 * rpc.row_off + 1))
+
+
+def load_model(path: str | Path, *, model: str | Path | None = None,
+               band: int | None = None) -> LoadedModel:
+    """The sensor model of an image, or of a model file given alone.
+
+    ``path`` may be an image or a model file (``.DIM``, gcpfree ``.json``, ``.geom``, DIMAP v2
+    ``RPC_*.XML``); ``model`` names the model file of an image explicitly. For an image the
+    model is looked for beside it, first found wins: ``METADATA.DIM`` in the folder of an
+    ``IMAGERY.*`` file or a ``.DIM`` of the same name (SPOT Level 1A, rigorous), a gcpfree
+    pushbroom ``.json`` of the same name, then its RPC (:func:`read_rpc`). ``band`` chooses the
+    look angles of a multispectral SPOT product (BAND_INDEX, 1-based; default the first).
+    """
+    path = Path(path)
+    if not path.exists():
+        raise InputError(f"{path} does not exist; give an image or a sensor model file")
+    if path.suffix.lower() in MODEL_SUFFIXES and model is None:
+        model, image = path, None
+    else:
+        image = path
+    if model is not None:
+        model = Path(model)
+        if not model.is_file():
+            raise InputError(f"model file {model} does not exist")
+        suffix = model.suffix.lower()
+        if suffix == ".dim":
+            return _from_dimap(model, image, band)
+        if suffix == ".json":
+            return _from_json(model, image)
+        if suffix == ".geom" or suffix == ".xml":
+            rpc = (rpc_from_geom_file(model) if suffix == ".geom"
+                   else rpc_from_dimap_file(model))
+            if image is not None:
+                rpc = read_rpc(image, dimap_xml=model) if suffix == ".xml" else rpc
+                return LoadedModel(rpc, "rpc", model, image, _raster_size(image))
+            return LoadedModel(rpc, "rpc", model, None, _rpc_size(rpc))
+        raise InputError(f"{model}: unknown model format; give a .DIM (SPOT), a gcpfree .json, "
+                         "an OSSIM .geom or a DIMAP v2 RPC .XML")
+    dim = dimap_beside(image)
+    if dim is not None:
+        return _from_dimap(dim, image, band)
+    js = image.with_suffix(".json")
+    if js.is_file():
+        return _from_json(js, image)
+    geom = image.with_suffix(".geom")
+    return LoadedModel(read_rpc(image), "rpc", geom if geom.is_file() else image, image,
+                       _raster_size(image))

@@ -31,6 +31,7 @@ FloatArray = NDArray[np.float64]
 GM_EARTH_M3_S2 = 3.986004418e14
 OMEGA_EARTH_RAD_S = 7.2921150e-5
 LAGRANGE_POINTS = 8
+VELOCITY_FRAMES = ("ecef", "inertial")
 
 
 def _readonly(a: ArrayLike) -> FloatArray:
@@ -60,12 +61,18 @@ class Orbit:
     SPOT practice). At least 2 vectors are needed; fewer than 8 lower the polynomial degree.
     Times outside the sampled span are extrapolated, which loses accuracy quickly beyond one
     sample spacing: deliver vectors that cover the acquisition with a few samples of margin.
+
+    ``velocity_frame`` says what the velocities are, both in ECEF axes: ``"ecef"``, the
+    Earth-relative dP/dt (SPOT 5, the simulator), or ``"inertial"``, dP/dt + w x P (SPOT 1-4
+    ephemeris). The local orbital frame is built from the velocity as delivered, as the
+    producer defines it; :meth:`ground_velocity` gives dP/dt either way.
     """
 
     times_s: FloatArray
     positions_m: FloatArray
     velocities_m_s: FloatArray
     epoch_utc: str = ""
+    velocity_frame: str = "ecef"
 
     def __post_init__(self) -> None:
         t = _readonly(self.times_s)
@@ -82,6 +89,9 @@ class Orbit:
             raise InputError("orbit state vectors hold NaN or inf; remove the bad records")
         if np.any(np.diff(t) <= 0):
             raise InputError("orbit times_s must be strictly increasing; sort and deduplicate them")
+        if self.velocity_frame not in VELOCITY_FRAMES:
+            raise InputError(f"orbit velocity_frame {self.velocity_frame!r} unknown; use one of "
+                             f"{VELOCITY_FRAMES}")
         object.__setattr__(self, "times_s", t)
         object.__setattr__(self, "positions_m", p)
         object.__setattr__(self, "velocities_m_s", v)
@@ -99,12 +109,19 @@ class Orbit:
         vel = np.einsum("mk,mkj->mj", w, self.velocities_m_s[idx])
         return pos, vel
 
+    def ground_velocity(self, pos_m: FloatArray, vel_m_s: FloatArray) -> FloatArray:
+        """Earth-relative dP/dt (m, 3) from interpolated positions and delivered velocities."""
+        if self.velocity_frame == "inertial":
+            return vel_m_s - np.cross(np.array([0.0, 0.0, OMEGA_EARTH_RAD_S]), pos_m)
+        return vel_m_s
+
     def to_dict(self) -> dict:
         return {
             "epoch_utc": self.epoch_utc,
             "times_s": self.times_s.tolist(),
             "positions_m": self.positions_m.tolist(),
             "velocities_m_s": self.velocities_m_s.tolist(),
+            **({"velocity_frame": self.velocity_frame} if self.velocity_frame != "ecef" else {}),
         }
 
     @classmethod
@@ -114,6 +131,7 @@ class Orbit:
             positions_m=get_float_array(d, "positions_m", path, ndim=2),
             velocities_m_s=get_float_array(d, "velocities_m_s", path, ndim=2),
             epoch_utc=get_str(d, "epoch_utc", path, default=""),
+            velocity_frame=get_str(d, "velocity_frame", path, default="ecef"),
         )
 
 
@@ -242,6 +260,84 @@ def _jitter_from(d: object, path: str) -> tuple[tuple[int, float, float, float],
             f"{path}.jitter must be a list of [axis, amplitude_rad, frequency_hz, phase_rad]"
         )
     return tuple((int(t[0]), float(t[1]), float(t[2]), float(t[3])) for t in raw)
+
+
+@dataclass(frozen=True, eq=False)
+class SampledAttitude:
+    """Roll, pitch, yaw (radians, this module's convention) sampled in time, interpolated
+    linearly (as the SPOT producer prescribes for its attitude samples).
+
+    ``times_s`` (n >= 2, strictly increasing, seconds since the orbit epoch); the angle arrays
+    have one value per time. Before the first and after the last sample the end values hold:
+    deliver samples that cover the acquisition. ``t_ref_s`` is the time around which the
+    adjustment's corrections (bias, rate, quad) are polynomials, as for :class:`Attitude`.
+    """
+
+    times_s: FloatArray
+    roll_rad: FloatArray
+    pitch_rad: FloatArray
+    yaw_rad: FloatArray
+    t_ref_s: float
+
+    def __post_init__(self) -> None:
+        t = _readonly(self.times_s)
+        if t.ndim != 1 or t.size < 2 or not np.all(np.isfinite(t)):
+            raise InputError(f"sampled attitude needs >= 2 finite times, got shape {t.shape}")
+        if np.any(np.diff(t) <= 0):
+            raise InputError("sampled attitude times must be strictly increasing; sort and "
+                             "deduplicate the attitude records")
+        object.__setattr__(self, "times_s", t)
+        for name in ("roll_rad", "pitch_rad", "yaw_rad"):
+            a = _readonly(getattr(self, name))
+            if a.shape != t.shape or not np.all(np.isfinite(a)):
+                raise InputError(f"sampled attitude {name} must hold {t.size} finite angles, one "
+                                 f"per time; got shape {a.shape}")
+            object.__setattr__(self, name, a)
+        object.__setattr__(self, "t_ref_s", float(self.t_ref_s))
+
+    def angles(self, t_s: FloatArray, delta: FloatArray | None = None) -> FloatArray:
+        """(3, m) roll, pitch, yaw radians at times t (m,); ``delta`` (3, 3) adds the
+        polynomials [bias, rate, quad] of t - t_ref to each axis."""
+        t = np.asarray(t_s, dtype=np.float64)
+        out = np.stack([np.interp(t, self.times_s, a)
+                        for a in (self.roll_rad, self.pitch_rad, self.yaw_rad)])
+        if delta is not None:
+            dt = t - self.t_ref_s
+            out = out + (delta[:, 0:1] + dt * (delta[:, 1:2] + dt * delta[:, 2:3]))
+        return out
+
+    def to_dict(self) -> dict:
+        return {
+            "type": "sampled",
+            "t_ref_s": self.t_ref_s,
+            "times_s": self.times_s.tolist(),
+            "roll_rad": self.roll_rad.tolist(),
+            "pitch_rad": self.pitch_rad.tolist(),
+            "yaw_rad": self.yaw_rad.tolist(),
+        }
+
+    @classmethod
+    def from_dict(cls, d: object, path: str = "attitude") -> SampledAttitude:
+        return cls(
+            times_s=get_float_array(d, "times_s", path, ndim=1),
+            roll_rad=get_float_array(d, "roll_rad", path, ndim=1),
+            pitch_rad=get_float_array(d, "pitch_rad", path, ndim=1),
+            yaw_rad=get_float_array(d, "yaw_rad", path, ndim=1),
+            t_ref_s=get_float(d, "t_ref_s", path),
+        )
+
+
+AttitudeModel = Attitude | SampledAttitude
+
+
+def attitude_from_dict(d: object, path: str = "attitude") -> AttitudeModel:
+    """An attitude from its dict: ``type`` ``"sampled"``, or polynomial when absent."""
+    kind = get_str(d, "type", path, default="polynomial")
+    if kind == "sampled":
+        return SampledAttitude.from_dict(d, path)
+    if kind == "polynomial":
+        return Attitude.from_dict(d, path)
+    raise InputError(f"key '{path}.type' must be 'polynomial' or 'sampled', got {kind!r}")
 
 
 def circular_orbit_ecef(

@@ -2,8 +2,9 @@
 
 A line ``row`` is acquired at ``t0_s + row * line_period_s``. At that time the satellite is at the
 interpolated ECEF position of :class:`~core.sensors.orbit.Orbit`, the camera is turned by the
-roll/pitch/yaw polynomials of :class:`~core.sensors.orbit.Attitude` relative to the local orbital
-frame, and detector ``col`` looks along the camera-frame vector ``(x_i, y_i, 1)`` given by
+roll/pitch/yaw of :class:`~core.sensors.orbit.Attitude` (polynomials) or
+:class:`~core.sensors.orbit.SampledAttitude` (time series, as SPOT metadata give) relative to
+the local orbital frame, and detector ``col`` looks along the camera-frame vector ``(x_i, y_i, 1)`` given by
 :mod:`core.sensors.linear_array` (camera geometry + lens distortion). Frames and sign
 conventions are written out in the docstrings of those two modules.
 
@@ -11,7 +12,8 @@ Adjustable parameters (:data:`PARAM_NAMES`, a selection of which is ``model.adju
 *corrections* added to the delivered model, zero for a model as delivered:
 
 - ``roll_bias, pitch_bias, yaw_bias`` (rad), ``*_rate`` (rad/s), ``*_quad`` (rad/s^2): added to
-  the coefficients c0, c1, c2 of the attitude polynomials (so around ``attitude.t_ref_s``);
+  the angles as polynomials of ``t - attitude.t_ref_s`` (for polynomial attitude: to the
+  coefficients c0, c1, c2), so they apply the same way on top of sampled attitude;
 - ``orbit_along_m, orbit_across_m, orbit_radial_m``: a constant position offset along the
   orbital frame axes X, Y and -Z (radial = up) of the delivered orbit (the frame itself is not
   re-rotated);
@@ -27,8 +29,10 @@ JSON format (``to_json`` / ``from_json``; also what the scene simulator writes):
       "orbit": {"epoch_utc": "2024-06-01T10:30:00Z",  # times_s are seconds since this
                 "times_s": [t, ...], "positions_m": [[x, y, z], ...],
                 "velocities_m_s": [[vx, vy, vz], ...]},              # ECEF
-      "attitude": {"t_ref_s": 120.0, "roll_rad": [c0, c1, ...],
+      "attitude": {"t_ref_s": 120.0, "roll_rad": [c0, c1, ...],   # polynomials, or
                    "pitch_rad": [c0, ...], "yaw_rad": [c0, ...]},
+               # {"type": "sampled", "t_ref_s": 120.0, "times_s": [...], "roll_rad": [...],
+               #  "pitch_rad": [...], "yaw_rad": [...]}  (linear interpolation; SPOT metadata)
       "camera": {"type": "parametric", "focal_length_m": 1.08, "detector_pitch_m": 6.5e-6,
                  "n_cols": 6000, "principal_col": 2999.5, "along_track_offset_m": 0.0,
                  "rotation_rad": 0.0}
@@ -74,7 +78,15 @@ from core.sensors.linear_array import (
     ideal_from_detector,
     ideal_partials,
 )
-from core.sensors.orbit import Attitude, Orbit, orbital_frame, rotation_rpy
+from core.sensors.orbit import (
+    Attitude,
+    AttitudeModel,
+    Orbit,
+    SampledAttitude,
+    attitude_from_dict,
+    orbital_frame,
+    rotation_rpy,
+)
 
 FloatArray = NDArray[np.float64]
 
@@ -196,7 +208,7 @@ class PushbroomModel:
     """
 
     orbit: Orbit
-    attitude: Attitude
+    attitude: AttitudeModel
     camera: Camera
     n_rows: int
     t0_s: float
@@ -398,7 +410,7 @@ class PushbroomModel:
         lon, lat = self._localize_flat(c, t, h)
         g = np.stack(geodetic_to_ecef(lon, lat, h), axis=1)
         pos, vel = self.orbit.interpolate(t)
-        inc, across, rng = incidence_angles(pos, vel, g, lon, lat)
+        inc, across, rng = incidence_angles(pos, self.orbit.ground_velocity(pos, vel), g, lon, lat)
         return np.degrees(inc).reshape(shape), np.degrees(across).reshape(shape), rng.reshape(shape)
 
     # -- Jacobians ----------------------------------------------------------------------------
@@ -515,7 +527,7 @@ class PushbroomModel:
         timing = get_dict(d, "timing")
         return cls(
             orbit=Orbit.from_dict(get_dict(d, "orbit")),
-            attitude=Attitude.from_dict(get_dict(d, "attitude")),
+            attitude=attitude_from_dict(get_dict(d, "attitude")),
             camera=camera,
             n_rows=get_int(get_dict(d, "image"), "n_rows", "image"),
             t0_s=get_float(timing, "t0_s", "timing"),
