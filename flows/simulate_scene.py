@@ -18,6 +18,7 @@ from tasks.simulate import (
     make_lidar,
     render_image,
     summarize,
+    write_spot_metadata,
 )
 
 BUNDLED_DEM = BUNDLED_SRTM_DIR / "N44E005.hgt"
@@ -47,6 +48,7 @@ def simulate_scene(params: SimulationParams) -> SimulationSummary:
     errors = ErrorConfig(lens=params.lens, jitter=params.jitter)
     scene = define_scene(Path(params.dem), out, params.preset, params.seed, errors,
                          params.relief_factor, params.bits, params.date_change, params.center)
+    write_spot_metadata(scene, out)
     scene = build_truth_surface(scene, out)
     for i in range(len(scene.image_names)):
         build_radiance(scene, out, i)

@@ -9,6 +9,7 @@ DEM and raster windows, projections (pyproj) and writing stay here.
 from __future__ import annotations
 
 import json
+import threading
 import warnings
 from dataclasses import dataclass, replace
 from datetime import date
@@ -33,6 +34,7 @@ from core.geodesy import BBox, utm_epsg
 from core.points import CheckPointSet, GeoPoint
 from core.sensors.pushbroom import PushbroomModel
 from core.sensors.rpcfit import fit_rpc
+from core.sensors.spot import spot_scene_from_model
 from core.simulation.checkpoints import select_checkpoints
 from core.simulation.hashing import derive_seed
 from core.simulation.landcover import LandCover, LandCoverConfig
@@ -53,6 +55,7 @@ from core.simulation.scene import (
 )
 from core.simulation.surface import SurfaceSpec, sample_surface
 from tasks.crs import Projection
+from tasks.dimap import write_dimap
 from tasks.geoid import load_geoid
 from tasks.raster_io import (
     CogItem,
@@ -89,6 +92,9 @@ class ScenePaths:
 
     def delivered(self, name: str) -> Path:
         return self.root / f"{name}.json"
+
+    def dimap(self, name: str) -> Path:
+        return self.root / f"{name}.DIM"
 
     def truth_model(self, name: str) -> Path:
         return self.truth / f"{name}_truth.json"
@@ -168,9 +174,18 @@ def read_dem_window(path: Path, window: BBox | None) -> tuple[np.ndarray, tuple,
     return H, tuple(tr)[:6], box
 
 
-@lru_cache(maxsize=4)
+_SPEC_LOCK = threading.Lock()
+
+
 def load_surface_spec(scene_json: str) -> SurfaceSpec:
-    """The truth-surface definition of a scene (reads its DEM window once per process)."""
+    """The truth-surface definition of a scene, read once per process even when many Dask
+    threads ask for it at once (the DEM fill silences a GDAL warning, which is not thread-safe)."""
+    with _SPEC_LOCK:
+        return _load_surface_spec(scene_json)
+
+
+@lru_cache(maxsize=4)
+def _load_surface_spec(scene_json: str) -> SurfaceSpec:
     scene = SceneDef.from_json(scene_json)
     H, tr, _ = read_dem_window(Path(scene.dem_path), scene.dem_window)
     return SurfaceSpec(
@@ -255,6 +270,25 @@ def define_scene(
     return SceneDef.from_json(scene.to_json())  # the same value a resumed run reads back
 
 
+@task(name="spot-metadata")
+def write_spot_metadata(scene: SceneDef, out: Path) -> tuple[Path, ...]:
+    """Each delivered model also as SPOT Level 1A metadata (``DIR/<image>.DIM``, SPOT 1-4 style,
+    or SPOT 5 style for the hrs preset), so the chain reads simulated scenes as archive ones."""
+    paths = ScenePaths(Path(out))
+    preset = scene.preset_spec
+    for i, (name, spec) in enumerate(zip(scene.image_names, preset.images, strict=True)):
+        if _exist(paths.dimap(name)):
+            continue
+        delivered = PushbroomModel.from_json(paths.delivered(name).read_text())
+        spot = spot_scene_from_model(
+            delivered, mission_index=preset.spot_mission, instrument=preset.spot_instrument,
+            instrument_index=i + 1, dataset_name=(f"SIMULATED {scene.preset} {name} seed "
+                                                  f"{scene.seed} (gcpfree simulate)"),
+            sun_azimuth_deg=spec.sun_azimuth_deg, sun_elevation_deg=spec.sun_elevation_deg)
+        write_dimap(spot, paths.dimap(name), image_name=paths.image(name).name)
+    return tuple(paths.dimap(n) for n in scene.image_names)
+
+
 # ---------------------------------------------------------------------------- B. truth surface
 
 
@@ -276,6 +310,7 @@ def build_truth_surface(scene: SceneDef, out: Path) -> SceneDef:
     paths = ScenePaths(Path(out))
     if scene.dsm_range_m is not None and _exist(paths.dtm, paths.dsm, paths.landcover):
         return scene
+    _spec(scene)  # read the DEM once here, before the Dask threads need it
     base = darr.zeros(scene.grid.shape, chunks=CHUNK, dtype=np.float32)
     stack = darr.map_blocks(truth_block, base, scene=scene, new_axis=0,
                             chunks=((3,),) + base.chunks, dtype=np.float32)

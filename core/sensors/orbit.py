@@ -228,6 +228,20 @@ class Attitude:
             out[axis] = out[axis] + amp * np.sin(2.0 * np.pi * freq * dt + phase)
         return out
 
+    def rates(self, t_s: FloatArray, delta: FloatArray | None = None) -> FloatArray:
+        """(3, m) time derivatives (rad/s) of :meth:`angles` at times t (m,)."""
+        c = self._coeffs if delta is None else self._coeffs.copy()
+        if delta is not None:
+            c[:, :3] += delta
+        dt = np.asarray(t_s, dtype=np.float64) - self.t_ref_s
+        out = np.zeros((3,) + dt.shape)
+        for k in range(c.shape[1] - 1, 0, -1):  # Horner on the derivative
+            out = out * dt + k * c[:, k].reshape((3,) + (1,) * dt.ndim)
+        for axis, amp, freq, phase in self.jitter:
+            w = 2.0 * np.pi * freq
+            out[axis] = out[axis] + amp * w * np.cos(w * dt + phase)
+        return out
+
     def to_dict(self) -> dict:
         return {
             "t_ref_s": self.t_ref_s,
@@ -295,6 +309,15 @@ class SampledAttitude:
             object.__setattr__(self, name, a)
         object.__setattr__(self, "t_ref_s", float(self.t_ref_s))
 
+    def __eq__(self, other: object) -> bool:
+        if not isinstance(other, SampledAttitude):
+            return NotImplemented
+        return self.t_ref_s == other.t_ref_s and all(
+            np.array_equal(getattr(self, k), getattr(other, k))
+            for k in ("times_s", "roll_rad", "pitch_rad", "yaw_rad"))
+
+    __hash__ = None  # type: ignore[assignment]
+
     def angles(self, t_s: FloatArray, delta: FloatArray | None = None) -> FloatArray:
         """(3, m) roll, pitch, yaw radians at times t (m,); ``delta`` (3, 3) adds the
         polynomials [bias, rate, quad] of t - t_ref to each axis."""
@@ -304,6 +327,19 @@ class SampledAttitude:
         if delta is not None:
             dt = t - self.t_ref_s
             out = out + (delta[:, 0:1] + dt * (delta[:, 1:2] + dt * delta[:, 2:3]))
+        return out
+
+    def rates(self, t_s: FloatArray, delta: FloatArray | None = None) -> FloatArray:
+        """(3, m) time derivatives (rad/s) of :meth:`angles`: the slope of the sample interval
+        holding t (the later one at a sample time), 0 outside the samples."""
+        t = np.asarray(t_s, dtype=np.float64)
+        i = np.clip(np.searchsorted(self.times_s, t, side="right") - 1, 0, self.times_s.size - 2)
+        dt_seg = np.diff(self.times_s)[i]
+        inside = (t >= self.times_s[0]) & (t < self.times_s[-1])
+        out = np.stack([np.where(inside, np.diff(a)[i] / dt_seg, 0.0)
+                        for a in (self.roll_rad, self.pitch_rad, self.yaw_rad)])
+        if delta is not None:
+            out = out + (delta[:, 1:2] + 2.0 * (t - self.t_ref_s) * delta[:, 2:3])
         return out
 
     def to_dict(self) -> dict:

@@ -158,6 +158,15 @@ def _check_adjust(names: tuple[str, ...]) -> tuple[str, ...]:
     return names
 
 
+def _rotation_axes(ang: FloatArray) -> tuple[FloatArray, FloatArray, FloatArray]:
+    """Axes (m, 3) of roll, pitch and yaw, in the camera frame, at angles ``ang`` (3, m): a change
+    d of angle k turns a camera-frame vector v by ``-axis_k x v d``."""
+    cr, sr, cp, sp = np.cos(ang[0]), np.sin(ang[0]), np.cos(ang[1]), np.sin(ang[1])
+    zero, one = np.zeros_like(cr), np.ones_like(cr)
+    return (np.stack([one, zero, zero], axis=1), np.stack([zero, cr, -sr], axis=1),
+            np.stack([-sp, sr * cp, cr * cp], axis=1))
+
+
 def _flat(*arrays: ArrayLike) -> tuple[tuple[int, ...], list[FloatArray]]:
     b = np.broadcast_arrays(*(np.asarray(a, dtype=np.float64) for a in arrays))
     return b[0].shape, [np.ascontiguousarray(a).ravel() for a in b]
@@ -324,9 +333,25 @@ class PushbroomModel:
         return v[:, 0] / v[:, 2], v[:, 1] / v[:, 2], v[:, 2]
 
     def _d_observe_dt(self, t: FloatArray, g: FloatArray) -> tuple[FloatArray, FloatArray]:
-        xp, yp, _ = self._observe(t + _FD_TIME_S, g)
-        xm, ym, _ = self._observe(t - _FD_TIME_S, g)
-        return (xp - xm) / (2 * _FD_TIME_S), (yp - ym) / (2 * _FD_TIME_S)
+        """d(x/z, y/z)/dt of the observation: the platform's motion by a central difference
+        with the attitude held (orbit and frame are smooth), plus the attitude's own rates
+        through the rotation axes (exact for sampled attitude, whose rate jumps at samples)."""
+        pos, cam2ecef, rot, ang = self._platform(t)
+        v = np.einsum("mji,mj->mi", cam2ecef, g - pos)
+        held = []
+        for step in (_FD_TIME_S, -_FD_TIME_S):
+            p_s, c_s, r_s, _ = self._platform(t + step)
+            frame = c_s @ np.swapaxes(r_s, 1, 2)  # the orbital frame at t + step
+            w = np.einsum("mji,mj->mi", frame @ rot, g - p_s)
+            held.append((w[:, 0] / w[:, 2], w[:, 1] / w[:, 2]))
+        dx = (held[0][0] - held[1][0]) / (2 * _FD_TIME_S)
+        dy = (held[0][1] - held[1][1]) / (2 * _FD_TIME_S)
+        rates = self.attitude.rates(t, self.corrections.attitude_delta())
+        for axis, rate in zip(_rotation_axes(ang), rates, strict=True):
+            dv = -np.cross(axis, v) * rate[:, None]
+            dx = dx + (dv[:, 0] * v[:, 2] - v[:, 0] * dv[:, 2]) / v[:, 2] ** 2
+            dy = dy + (dv[:, 1] * v[:, 2] - v[:, 1] * dv[:, 2]) / v[:, 2] ** 2
+        return dx, dy
 
     def _ideal_and_dcol(self, col: FloatArray) -> tuple[FloatArray, ...]:
         x, y = self.camera.detector_xy(col)
@@ -443,13 +468,7 @@ class PushbroomModel:
         dox, doy = self._d_observe_dt(t, g)
         xd, yd = self.camera.detector_xy(col)
         xi, yi, dxi, dyi = self._ideal_and_dcol(col)
-        cr, sr, cp, sp = np.cos(ang[0]), np.sin(ang[0]), np.cos(ang[1]), np.sin(ang[1])
-        zero, one = np.zeros_like(cr), np.ones_like(cr)
-        axes = (  # rotation axes of roll, pitch, yaw expressed in the camera frame
-            np.stack([one, zero, zero], axis=1),
-            np.stack([zero, cr, -sr], axis=1),
-            np.stack([-sp, sr * cp, cr * cp], axis=1),
-        )
+        axes = _rotation_axes(ang)
         lens = ideal_partials(xd, yd, xi, yi, self.corrections.focal_scale)
         dt_ref = t - self.attitude.t_ref_s
         fp = np.empty((t.size, 2, len(self.adjust)))

@@ -57,6 +57,8 @@ class Preset:
     images: tuple[ImageSpec, ImageSpec]
     lidar_strip_m: tuple[float, float] | None  # (across, along) size; None = whole scene
     lidar_spacing_m: float = 3.0
+    spot_mission: int = 2  # the SPOT product the delivered metadata imitate (METADATA.DIM)
+    spot_instrument: str = "HRV"
 
     def __post_init__(self) -> None:
         if self.n_cols < 16 or self.n_rows < 16 or self.gsd_m <= 0 or self.truth_res_m <= 0:
@@ -75,7 +77,7 @@ PRESETS: dict[str, Preset] = {
         "hrs", 6000, 6000, 10.0, 10.0,
         (ImageSpec("left", 0.0, 20.0, "2023-07-12", 140.0, 63.0),
          ImageSpec("right", 0.0, -20.0, "2023-07-12", 140.0, 63.0)),
-        (5_000.0, 13_000.0),
+        (5_000.0, 13_000.0), spot_mission=5, spot_instrument="HRS",
     ),
     # the same physics at 600x600 px and 40 m, for CI
     # (lidar over the whole scene, its spacing scaled with the GSD to stay CI-sized)

@@ -17,7 +17,8 @@ def test_flow_is_deterministic(prefect_harness, tmp_path):
     assert all(100 <= e <= 300 for e in summary.centre_error_m.values())
     b = tmp_path / "b"
     run_scene(b, seed=11, date_change=0.1)  # the same scene through the tasks directly
-    files = ["left.tif", "right.tif", "left.json", "right.json", "truth/dsm.tif",
+    files = ["left.tif", "right.tif", "left.json", "right.json", "left.DIM", "right.DIM",
+             "truth/dsm.tif",
              "truth/dtm.tif", "truth/landcover.tif", "truth/checkpoints.json",
              "truth/lidar.laz", "truth/left_truth.json"]
     for f in files:

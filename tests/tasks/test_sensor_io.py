@@ -147,3 +147,68 @@ def test_pixel_offset_of():
     assert pixel_offset_of(Affine(0.5, 0, 300000, 0, -0.5, 5e6), has_crs=True) == (0.0, 0.0)
     with pytest.raises(InputError, match="not a pure pixel"):
         pixel_offset_of(Affine(2, 0, 10, 0, 2, 10), has_crs=False)
+
+
+# -- load_model: the model of an image, found as ASP finds it ------------------------------------
+def _blank(path: Path, width: int, height: int) -> Path:
+    """A raw (unreferenced) uint8 image, as a Level 1A scene is."""
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", NotGeoreferencedWarning)
+        with rasterio.open(path, "w", driver="GTiff", width=width, height=height, count=1,
+                           dtype="uint8") as dst:
+            dst.write(np.zeros((height, width), np.uint8), 1)
+    return path
+
+
+@pytest.fixture(scope="module")
+def spot_scene_files(tmp_path_factory):
+    """A small SPOT-like model written as JSON and as METADATA.DIM, and a blank image."""
+    from core.sensors.pushbroom_synthetic import SyntheticSpec, synthetic_pushbroom
+    from core.sensors.spot import spot_scene_from_model
+    from tasks.dimap import write_dimap
+
+    d = tmp_path_factory.mktemp("spot")
+    m = synthetic_pushbroom(SyntheticSpec(5.2, 44.2, n_cols=300, n_rows=200, gsd_m=20.0,
+                                          incidence_deg=12.0, epoch_utc="2001-05-04T10:00:00Z"))
+    (d / "scene").mkdir()
+    _blank(d / "scene" / "IMAGERY.TIF", 300, 200)
+    write_dimap(spot_scene_from_model(m), d / "scene" / "METADATA.DIM")
+    return d, m
+
+
+def test_imagery_tif_finds_metadata_dim_beside_it(spot_scene_files):
+    from tasks.sensor_io import load_model
+
+    d, m = spot_scene_files
+    loaded = load_model(d / "scene" / "IMAGERY.TIF")
+    assert loaded.family == "pushbroom" and loaded.source.name == "METADATA.DIM"
+    assert loaded.size == (300, 200) and loaded.spot is not None and loaded.band == 1
+    lon, lat = m.localize(np.array([0.0, 150.0, 299.0]), np.array([0.0, 100.0, 199.0]), 500.0)
+    c, r = loaded.model.project(lon, lat, 500.0)
+    np.testing.assert_allclose(c, [0.0, 150.0, 299.0], atol=1e-3)
+    np.testing.assert_allclose(r, [0.0, 100.0, 199.0], atol=1e-3)
+    # the .DIM alone, and as --model of another image of the same size
+    assert load_model(d / "scene" / "METADATA.DIM").family == "pushbroom"
+    shutil.copy(d / "scene" / "IMAGERY.TIF", d / "other.tif")
+    assert load_model(d / "other.tif", model=d / "scene" / "METADATA.DIM").image == d / "other.tif"
+
+
+def test_same_name_dim_json_then_rpc_and_errors(spot_scene_files, tmp_path):
+    from tasks.sensor_io import load_model
+
+    d, m = spot_scene_files
+    img = tmp_path / "left.tif"
+    shutil.copy(d / "scene" / "IMAGERY.TIF", img)
+    (tmp_path / "left.json").write_text(m.to_json())
+    assert load_model(img).source.name == "left.json"  # a gcpfree pushbroom model
+    shutil.copy(d / "scene" / "METADATA.DIM", tmp_path / "left.DIM")
+    assert load_model(img).source.name == "left.DIM"  # SPOT metadata win
+    assert load_model(VENTOUX / "left_image.tif").family == "rpc"
+    small = _blank(tmp_path / "small.tif", 10, 10)
+    with pytest.raises(InputError, match="not the same scene"):
+        load_model(small, model=tmp_path / "left.DIM")
+    with pytest.raises(InputError, match="does not exist"):
+        load_model(tmp_path / "none.tif")
+    (tmp_path / "m.txt").write_text("x")
+    with pytest.raises(InputError, match="unknown model format"):
+        load_model(small, model=tmp_path / "m.txt")

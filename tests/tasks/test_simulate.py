@@ -27,6 +27,7 @@ CENTRE = (5.25, 44.2)
 def run_scene(out: Path, dem: Path = DEM, centre=CENTRE, seed: int = 11, lidar=True, **kw):
     errors = ErrorConfig(lens=True, jitter=True)
     scene = S.define_scene.fn(dem, out, "tiny", seed, errors, centre_lonlat=centre, **kw)
+    S.write_spot_metadata.fn(scene, out)
     scene = S.build_truth_surface.fn(scene, out)
     for i in (0, 1):
         S.build_radiance.fn(scene, out, i)
@@ -68,6 +69,23 @@ def test_delivered_metadata_error_at_centre(scene_dir):
         assert dist * (1 + h / 6.371e6) == pytest.approx(err, rel=2e-3)
         assert t.attitude.jitter and not d.attitude.jitter  # errors the metadata lack
         assert t.distortion.k3 != 0 and d.distortion.k3 == 0
+
+
+def test_spot_metadata_beside_each_image_reads_back_as_the_delivered_model(scene_dir):
+    """DIR/left.DIM (SPOT 1-4 style METADATA.DIM) is what the chain finds for DIR/left.tif, and
+    it projects within 1e-3 px of the delivered JSON model over the scene and heights."""
+    from tasks.sensor_io import load_model
+
+    out, scene = scene_dir
+    lo, hi = scene.dsm_range_m
+    for name, d in zip(scene.image_names, models(out, "delivered"), strict=True):
+        loaded = load_model(out / f"{name}.tif")
+        assert loaded.source == out / f"{name}.DIM" and loaded.spot.mission_index == 2
+        c, r = np.meshgrid(np.linspace(0, 599, 11), np.linspace(0, 599, 11))
+        for h in (lo - 100.0, 0.5 * (lo + hi), hi + 100.0):
+            lon, lat = d.localize(c.ravel(), r.ravel(), h)
+            c2, r2 = loaded.model.project(lon, lat, h)
+            assert np.hypot(c2 - c.ravel(), r2 - r.ravel()).max() < 1e-3
 
 
 def test_truth_models_round_trip(scene_dir):

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+from dataclasses import replace
 
 import numpy as np
 import pytest
@@ -12,7 +13,7 @@ from core.errors import ConvergenceError, GeometryError, InputError
 from core.geodesy import ecef_to_geodetic, enu_rotation, geodetic_to_ecef
 from core.sensors.base import SensorModel
 from core.sensors.linear_array import LensDistortion, LookAngleTable
-from core.sensors.orbit import Attitude, Orbit, circular_orbit_ecef
+from core.sensors.orbit import Attitude, Orbit, SampledAttitude, circular_orbit_ecef
 from core.sensors.pushbroom import DEFAULT_ADJUST, PARAM_NAMES, PushbroomModel
 from core.sensors.pushbroom_synthetic import SyntheticSpec, synthetic_pushbroom
 
@@ -34,12 +35,28 @@ CONFIGS: dict[str, dict] = {
 }
 
 
+def with_sampled_attitude(m: PushbroomModel, seed: int = 3) -> PushbroomModel:
+    """The same scene with its attitude given as samples every 0.125 s (as SPOT metadata do):
+    the polynomial plus a random walk of 1e-6 rad steps, interpolated linearly. The samples
+    are not aligned with the lines (at a sample the attitude rate jumps: no derivative)."""
+    rng = np.random.default_rng(seed)
+    t = np.arange(m.t0_s - 2.0371, m.line_time_s(m.n_rows - 1) + 2.0, 0.125)
+    walk = np.cumsum(rng.normal(0.0, 1e-6, (3, t.size)), axis=1)
+    roll, pitch, yaw = m.attitude.angles(t) + walk
+    return replace(m, attitude=SampledAttitude(t, roll, pitch, yaw, t_ref_s=m.attitude.t_ref_s))
+
+
 @pytest.fixture(scope="module")
 def models() -> dict[str, PushbroomModel]:
-    return {
+    out = {
         name: synthetic_pushbroom(SyntheticSpec(LON0, LAT0, n_cols=N, n_rows=N, gsd_m=10.0, **kw))
         for name, kw in CONFIGS.items()
     }
+    out["sampled_attitude"] = with_sampled_attitude(out["spot_25deg"])
+    return out
+
+
+NAMES = [*CONFIGS, "sampled_attitude"]
 
 
 @pytest.fixture(scope="module")
@@ -125,7 +142,7 @@ def _exact_orbit_like(m: PushbroomModel, t: np.ndarray) -> tuple[np.ndarray, np.
 
 
 # -- round trips ----------------------------------------------------------------------------------
-@pytest.mark.parametrize("name", list(CONFIGS))
+@pytest.mark.parametrize("name", NAMES)
 @pytest.mark.parametrize("h", HEIGHTS)
 def test_localize_then_project_round_trip(models: dict[str, PushbroomModel], name: str, h: float):
     m = models[name]
@@ -136,7 +153,7 @@ def test_localize_then_project_round_trip(models: dict[str, PushbroomModel], nam
     assert np.max(np.abs(r2 - row)) < 1e-6
 
 
-@pytest.mark.parametrize("name", list(CONFIGS))
+@pytest.mark.parametrize("name", NAMES)
 def test_project_then_localize_round_trip(models: dict[str, PushbroomModel], name: str):
     m = models[name]
     rng = np.random.default_rng(1)
@@ -249,7 +266,8 @@ def test_bias_and_drift_shift_rows_and_columns_consistently(spot: PushbroomModel
     assert abs(c[0] - 2999.5) < 0.05  # the drift is zero at the reference time
 
 
-@pytest.mark.parametrize("name", ["spot_25deg", "hrs_fore_20deg", "lens_and_ccd"])
+@pytest.mark.parametrize("name", ["spot_25deg", "hrs_fore_20deg", "lens_and_ccd",
+                                  "sampled_attitude"])
 def test_analytic_and_numeric_jacobians_agree(models: dict[str, PushbroomModel], name: str):
     m = models[name].with_adjust(PARAM_NAMES)
     m = m.with_params(np.linspace(-1.0, 1.0, len(PARAM_NAMES)) * 1e-6)  # away from zero
@@ -303,7 +321,7 @@ def test_orbit_and_attitude_validate_their_inputs():
 
 
 # -- JSON ---------------------------------------------------------------------------------------
-@pytest.mark.parametrize("name", ["spot_25deg", "lens_and_ccd"])
+@pytest.mark.parametrize("name", ["spot_25deg", "lens_and_ccd", "sampled_attitude"])
 def test_json_round_trip_is_exact(models: dict[str, PushbroomModel], name: str):
     m = models[name].with_adjust(PARAM_NAMES).with_params(
         np.linspace(-1, 1, len(PARAM_NAMES)) * 1.234567e-6)
