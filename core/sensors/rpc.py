@@ -37,14 +37,17 @@ Pixel conventions of each source (all converted to ours by the named constructor
   ``from_dimap_xml`` subtracts 1 from ``SAMP_OFF`` and ``LINE_OFF``.
 
 Image-space bias (Fraser & Hanley 2003), applied after the rational function, with ``col, row``
-the unbiased RPC image coordinates (0-based, pixels)::
+the unbiased RPC image coordinates (0-based, pixels) and ``C, R`` the same normalised by the
+RPC's own image offsets and scales (``C = (col - col_off) / col_scale``, in [-1, 1] over the
+image)::
 
     "none":   no parameters
     "shift":  p = [a0, b0];              col += a0;                    row += b0
     "affine": p = [a0, a1, a2, b0, b1, b2]
-              col += a0 + a1 * col + a2 * row;   row += b0 + b1 * col + b2 * row
+              col += a0 + a1 * C + a2 * R;       row += b0 + b1 * C + b2 * R
 
-``a0, b0`` are pixels; ``a1, a2, b1, b2`` are dimensionless (pixels per pixel).
+All six are pixels (``a1`` is the shift the affine adds at the right edge of the image relative
+to its centre, and so on): well conditioned in an adjustment, and unchanged by a crop.
 """
 
 from __future__ import annotations
@@ -315,8 +318,10 @@ class RPCModel:
         if self.bias_mode == "shift":
             return np.eye(2), np.array([p[0], p[1]])
         if self.bias_mode == "affine":
-            a = np.array([[1.0 + p[1], p[2]], [p[4], 1.0 + p[5]]])
-            return a, np.array([p[0], p[3]])
+            cs, rs, co, ro = self.col_scale, self.row_scale, self.col_off, self.row_off
+            a = np.array([[1.0 + p[1] / cs, p[2] / rs], [p[4] / cs, 1.0 + p[5] / rs]])
+            return a, np.array([p[0] - p[1] * co / cs - p[2] * ro / rs,
+                                p[3] - p[4] * co / cs - p[5] * ro / rs])
         return np.eye(2), np.zeros(2)
 
     def _apply_bias(self, col: FloatArray, row: FloatArray) -> tuple[FloatArray, FloatArray]:
@@ -539,7 +544,7 @@ class RPCModel:
 
     def jacobian(self, lon_deg: ArrayLike, lat_deg: ArrayLike, h_m: ArrayLike) -> FloatArray:
         """d(col, row)/d(bias params) at ground points, shape (n, 2, p): analytic (the bias is
-        linear in its parameters; the affine terms multiply the unbiased col and row)."""
+        linear in its parameters; the affine terms multiply the normalised unbiased col, row)."""
         lon, lat, h = (np.ravel(a) for a in np.broadcast_arrays(
             np.asarray(lon_deg, dtype=np.float64), np.asarray(lat_deg, dtype=np.float64),
             np.asarray(h_m, dtype=np.float64)))
@@ -550,8 +555,10 @@ class RPCModel:
             jac[:, 1, 1] = 1.0
         elif self.bias_mode == "affine":
             col, row = replace(self, bias_mode="none", bias=np.zeros(0)).project(lon, lat, h)
-            jac[:, 0, 0], jac[:, 0, 1], jac[:, 0, 2] = 1.0, col, row
-            jac[:, 1, 3], jac[:, 1, 4], jac[:, 1, 5] = 1.0, col, row
+            c = (col - self.col_off) / self.col_scale
+            r = (row - self.row_off) / self.row_scale
+            jac[:, 0, 0], jac[:, 0, 1], jac[:, 0, 2] = 1.0, c, r
+            jac[:, 1, 3], jac[:, 1, 4], jac[:, 1, 5] = 1.0, c, r
         return jac
 
     def with_params(self, p: ArrayLike) -> RPCModel:
@@ -572,8 +579,11 @@ class RPCModel:
             raise InputError(f"bias_mode {mode!r} unknown; use one of {list(BIAS_MODES)}")
         a, t = self._bias_matrix()
         lin = a - np.eye(2)
-        if mode == "affine":
-            p = np.array([t[0], lin[0, 0], lin[0, 1], t[1], lin[1, 0], lin[1, 1]])
+        if mode == "affine":  # biased - unbiased = lin @ (col, row) + t, in normalised terms
+            cs, rs, co, ro = self.col_scale, self.row_scale, self.col_off, self.row_off
+            a1, a2, b1, b2 = lin[0, 0] * cs, lin[0, 1] * rs, lin[1, 0] * cs, lin[1, 1] * rs
+            p = np.array([t[0] + lin[0, 0] * co + lin[0, 1] * ro, a1, a2,
+                          t[1] + lin[1, 0] * co + lin[1, 1] * ro, b1, b2])
         else:
             if np.any(lin != 0) or (mode == "none" and np.any(t != 0)):
                 raise InputError(
@@ -588,13 +598,8 @@ class RPCModel:
         (col0, row0) of this model's image: ``col_crop = col - col0``, ``row_crop = row - row0``.
         """
         col0, row0 = float(col0), float(row0)
-        new = replace(self, col_off=self.col_off - col0, row_off=self.row_off - row0)
-        if self.bias_mode == "affine":
-            p = self.bias.copy()
-            p[0] += p[1] * col0 + p[2] * row0
-            p[3] += p[4] * col0 + p[5] * row0
-            new = replace(new, bias=p)
-        return new
+        # the bias acts on coordinates normalised by the offsets, which move with the crop
+        return replace(self, col_off=self.col_off - col0, row_off=self.row_off - row0)
 
     # ------------------------------------------------------------------ constructors
 

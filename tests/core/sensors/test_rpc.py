@@ -219,13 +219,17 @@ def test_shift_bias_moves_projection(ventoux):
 
 
 def test_affine_bias_follows_its_definition(ventoux):
-    p = np.array([3.0, 1e-4, -2e-4, -4.0, 3e-5, 5e-5])
+    """Affine terms in pixels, on the image coordinates normalised by the RPC's own offsets and
+    scales (module docstring)."""
+    p = np.array([3.0, 2.5, -1.5, -4.0, 0.75, 1.25])
     m = ventoux.with_bias_mode("affine").with_params(p)
     lon, lat, h = domain_points(ventoux, 500)
     c0, r0 = ventoux.project(lon, lat, h)
     c1, r1 = m.project(lon, lat, h)
-    np.testing.assert_allclose(c1, c0 + p[0] + p[1] * c0 + p[2] * r0, atol=1e-8)
-    np.testing.assert_allclose(r1, r0 + p[3] + p[4] * c0 + p[5] * r0, atol=1e-8)
+    cn = (c0 - ventoux.col_off) / ventoux.col_scale
+    rn = (r0 - ventoux.row_off) / ventoux.row_scale
+    np.testing.assert_allclose(c1, c0 + p[0] + p[1] * cn + p[2] * rn, atol=1e-8)
+    np.testing.assert_allclose(r1, r0 + p[3] + p[4] * cn + p[5] * rn, atol=1e-8)
     lon2, lat2 = m.localize(c1, r1, h)
     np.testing.assert_allclose(lon2, lon, atol=1e-10)
     np.testing.assert_allclose(lat2, lat, atol=1e-10)
@@ -242,7 +246,7 @@ def test_bias_modes_and_params_checks(ventoux):
     aff = ventoux.with_bias_mode("shift").with_params([1.0, 2.0]).with_bias_mode("affine")
     np.testing.assert_array_equal(aff.params, [1.0, 0, 0, 2.0, 0, 0])
     with pytest.raises(InputError, match="cannot be expressed"):
-        aff.with_params([1.0, 1e-4, 0, 2.0, 0, 0]).with_bias_mode("shift")
+        aff.with_params([1.0, 0.5, 0, 2.0, 0, 0]).with_bias_mode("shift")
     # models are immutable values
     assert ventoux.params.size == 0
     with pytest.raises(ValueError):
@@ -253,7 +257,7 @@ def test_bias_modes_and_params_checks(ventoux):
 
 
 @pytest.mark.parametrize("mode,p", [("none", []), ("shift", [1.5, -0.5]),
-                                    ("affine", [1.0, 2e-4, -1e-4, -2.0, 1e-4, 3e-4])])
+                                    ("affine", [1.0, 2.0, -1.0, -2.0, 1.0, 3.0])])
 def test_with_image_offset(ventoux, mode, p):
     full = ventoux.with_bias_mode(mode).with_params(p)
     crop = full.with_image_offset(5000, 4000)
@@ -287,10 +291,10 @@ def test_gdal_tags_round_trip_with_units_and_folded_shift(ventoux):
 
 def test_gdal_tags_affine_bias(ventoux):
     lon, lat, h = domain_points(ventoux, 500)
-    diag = ventoux.with_bias_mode("affine").with_params([1.0, 1e-4, 0.0, 2.0, 0.0, -1e-4])
+    diag = ventoux.with_bias_mode("affine").with_params([1.0, 2.0, 0.0, 2.0, 0.0, -1.5])
     folded = RPCModel.from_gdal_tags(diag.to_gdal_tags())
     np.testing.assert_allclose(folded.project(lon, lat, h), diag.project(lon, lat, h), atol=1e-7)
-    cross = diag.with_params([1.0, 1e-4, 1e-5, 2.0, 0.0, -1e-4])
+    cross = diag.with_params([1.0, 2.0, 0.1, 2.0, 0.0, -1.5])
     with pytest.raises(InputError, match="cross terms"):
         cross.to_gdal_tags()
 
@@ -396,7 +400,7 @@ def test_jacobian_agrees_with_finite_differences(ventoux, mode):
     with the bias away from zero (the affine terms multiply the unbiased coordinates)."""
     from core.sensors.base import numeric_jacobian
 
-    p = {"none": [], "shift": [2.0, -1.5], "affine": [2.0, 1e-4, -3e-4, -1.5, 2e-4, 5e-5]}[mode]
+    p = {"none": [], "shift": [2.0, -1.5], "affine": [2.0, 1.5, -3.0, -1.5, 2.0, 0.5]}[mode]
     m = ventoux.with_bias_mode(mode).with_params(p)
     assert m.param_names == {"none": (), "shift": ("a0", "b0"),
                              "affine": ("a0", "a1", "a2", "b0", "b1", "b2")}[mode]
@@ -405,7 +409,7 @@ def test_jacobian_agrees_with_finite_differences(ventoux, mode):
     assert jac.shape == (200, 2, len(m.param_names))
     if mode == "none":
         return
-    steps = np.array([1.0, 1e-4, 1e-4, 1.0, 1e-4, 1e-4]) if mode == "affine" else np.ones(2)
+    steps = np.ones(6) if mode == "affine" else np.ones(2)
     num = numeric_jacobian(m, lon, lat, h, steps)
     np.testing.assert_allclose(jac, num, atol=1e-6 * np.abs(num).max())
     # and it predicts the effect of a small change
