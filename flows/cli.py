@@ -117,6 +117,62 @@ def _run_simulate(args: argparse.Namespace) -> int:
     return 0
 
 
+INFO_VERTICALS = ("auto", "ellipsoidal", "egm96")  # tasks.info.VERTICALS, without importing it
+
+
+def _add_info(sub: argparse._SubParsersAction) -> None:
+    p = sub.add_parser(
+        "info",
+        help="sensor model, corners, viewing angles, GSD of an image; B/H and overlap of a pair",
+        description=(
+            "Find and read the sensor model of an image (SPOT METADATA.DIM or .DIM beside it, "
+            "gcpfree pushbroom .json of the same name, RPC .geom or RPC tags) or read a model "
+            "file given alone (.DIM, .json, .geom, DIMAP v2 RPC .XML), and print: the model, "
+            "the acquisition time, the corners at h = 0 (WGS84 ellipsoid), the incidence, "
+            "azimuth and GSD at the image centre, the SPOT metadata self-check (stated corners "
+            "against the model), the mean terrain height and the corners at that height "
+            "(--reference). With two images: convergence angle, B/H and overlap."
+        ),
+    )
+    p.add_argument("image", type=Path, metavar="IMAGE_OR_MODEL",
+                   help="an image (GeoTIFF...) or a model file (.DIM, .json, .geom, RPC .XML)")
+    p.add_argument("image2", type=Path, nargs="?", default=None, metavar="IMAGE2",
+                   help="a second image or model file: adds the pair geometry")
+    p.add_argument("--json", type=Path, default=None, metavar="FILE",
+                   help="also write everything as JSON to FILE")
+    p.add_argument("--band", type=int, default=None, metavar="N",
+                   help="SPOT band (BAND_INDEX, 1-based) whose look angles to use, for both "
+                        "images (default: the first band)")
+    p.add_argument("--model", type=Path, default=None, metavar="FILE",
+                   help="the sensor model file of IMAGE_OR_MODEL (default: found beside it)")
+    p.add_argument("--model2", type=Path, default=None, metavar="FILE",
+                   help="the sensor model file of IMAGE2 (default: found beside it)")
+    p.add_argument("--reference", type=Path, default=None, metavar="REF",
+                   help="DEM in EPSG:4326 (GeoTIFF or .hgt): mean terrain height under each "
+                        "footprint, corners and view at that height")
+    p.add_argument("--reference-vertical", choices=INFO_VERTICALS, default="auto",
+                   help="heights of REF: egm96 (orthometric, converted with h = H + N), "
+                        "ellipsoidal, or auto (default): .hgt and SRTM-named tiles are egm96, "
+                        "anything else ellipsoidal (as prepare-reference writes)")
+
+
+def _run_info(args: argparse.Namespace) -> int:
+    # plain functions, no Prefect: info answers in about a second
+    from tasks.info import check_json_target, gather_info, write_info_json
+
+    if args.json is not None:
+        check_json_target(args.json)
+    report = gather_info(
+        args.image, args.image2, model=args.model, model2=args.model2, band=args.band,
+        reference=args.reference, vertical=args.reference_vertical,
+    )
+    print("\n".join(report.lines()))
+    if args.json is not None:
+        write_info_json(report, args.json)
+        print(f"{'json':<14} {args.json}")
+    return 0
+
+
 def build_parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(
         prog="gcpfree",
@@ -125,10 +181,12 @@ def build_parser() -> argparse.ArgumentParser:
     sub = parser.add_subparsers(dest="command", required=True, metavar="COMMAND")
     _add_prepare_reference(sub)
     _add_simulate(sub)
+    _add_info(sub)
     return parser
 
 
-COMMANDS = {"prepare-reference": _run_prepare_reference, "simulate": _run_simulate}
+COMMANDS = {"prepare-reference": _run_prepare_reference, "simulate": _run_simulate,
+            "info": _run_info}
 
 
 def main(argv: Sequence[str] | None = None) -> int:
