@@ -11,7 +11,7 @@ sensor family they hold.
 
 from __future__ import annotations
 
-from typing import Protocol, runtime_checkable
+from typing import Literal, Protocol, runtime_checkable
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
@@ -21,6 +21,8 @@ from core.errors import GeometryError, InputError
 from core.geodesy import metres_per_degree
 
 FloatArray = NDArray[np.float64]
+CorrectionKind = Literal["offset", "linear"]
+CORRECTION_KINDS = ("offset", "linear")
 
 
 @runtime_checkable
@@ -55,6 +57,17 @@ class SensorModel(Protocol):
 
     def jacobian(self, lon_deg: ArrayLike, lat_deg: ArrayLike, h_m: ArrayLike) -> FloatArray:
         """d(col, row)/d(params) at ground points: shape (n, 2, len(params)), pixels per unit."""
+        ...
+
+    @property
+    def param_units(self) -> tuple[str, ...]:
+        """The unit of each parameter (``"rad"``, ``"rad/s"``, ``"m"``, ``"px"``...)."""
+        ...
+
+    def with_corrections(self, kind: CorrectionKind) -> SensorModel:
+        """The model with the adjustable corrections of ``kind``: ``"offset"`` (pushbroom:
+        attitude biases; RPC: an image shift) or ``"linear"`` (pushbroom: biases and rates;
+        RPC: an affine), keeping the current values where they carry over."""
         ...
 
 

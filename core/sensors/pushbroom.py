@@ -67,6 +67,7 @@ from core.geodesy import (
 )
 from core.jsonio import parse_json
 from core.sensors import base
+from core.sensors.base import CORRECTION_KINDS
 from core.sensors._dictio import get_float, get_int, get_str, get_str_tuple
 from core.sensors.linear_array import (
     Camera,
@@ -145,6 +146,10 @@ class Corrections:
 
 
 PARAM_NAMES: tuple[str, ...] = tuple(f.name for f in fields(Corrections))
+PARAM_UNITS: dict[str, str] = {
+    **{n: ("rad", "rad/s", "rad/s^2")[power] for n, (_, power) in ATTITUDE_TERMS.items()},
+    **{n: "m" for n in ORBIT_TERMS}, **{n: "1" for n in LENS},
+}
 
 
 def _check_adjust(names: tuple[str, ...]) -> tuple[str, ...]:
@@ -260,6 +265,17 @@ class PushbroomModel:
             )
         new = replace(self.corrections, **dict(zip(self.adjust, map(float, p), strict=True)))
         return replace(self, corrections=new)
+
+    @property
+    def param_units(self) -> tuple[str, ...]:
+        """Unit of each adjusted parameter (module docstring)."""
+        return tuple(PARAM_UNITS[n] for n in self.adjust)
+
+    def with_corrections(self, kind: str) -> PushbroomModel:
+        """``"offset"``: the attitude biases; ``"linear"``: biases and rates (corrections kept)."""
+        if kind not in CORRECTION_KINDS:
+            raise InputError(f"correction kind {kind!r} unknown; use one of {CORRECTION_KINDS}")
+        return self.with_adjust(ATTITUDE_BIASES if kind == "offset" else DEFAULT_ADJUST)
 
     def with_adjust(self, names: tuple[str, ...]) -> PushbroomModel:
         """The same model with another selection of adjustable parameters (corrections kept)."""

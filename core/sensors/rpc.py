@@ -65,6 +65,7 @@ from numpy.typing import ArrayLike, NDArray
 from core.dem import GeoDEM
 from core.errors import ConvergenceError, InputError
 from core.sensors import base
+from core.sensors.base import CORRECTION_KINDS
 
 FloatArray = NDArray[np.float64]
 
@@ -560,6 +561,17 @@ class RPCModel:
             jac[:, 0, 0], jac[:, 0, 1], jac[:, 0, 2] = 1.0, c, r
             jac[:, 1, 3], jac[:, 1, 4], jac[:, 1, 5] = 1.0, c, r
         return jac
+
+    @property
+    def param_units(self) -> tuple[str, ...]:
+        """Every bias parameter is in pixels (module docstring)."""
+        return ("px",) * BIAS_MODES[self.bias_mode]
+
+    def with_corrections(self, kind: str) -> RPCModel:
+        """``"offset"``: an image shift; ``"linear"``: an affine (the current bias carried over)."""
+        if kind not in CORRECTION_KINDS:
+            raise InputError(f"correction kind {kind!r} unknown; use one of {CORRECTION_KINDS}")
+        return self.with_bias_mode("shift" if kind == "offset" else "affine")
 
     def with_params(self, p: ArrayLike) -> RPCModel:
         """A new model with the bias parameters set to ``p`` (same bias mode)."""

@@ -1,0 +1,165 @@
+"""Relative orientation on synthetic pairs with known truth: both sensor families, outliers,
+observability, and the along-epipolar part set from a reference DEM."""
+
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pytest
+
+from core.errors import InputError, InsufficientDataError
+from core.orientation.relative import (
+    RelativeConfig,
+    epipolar_fit,
+    fix_along_epipolar,
+    image_correction,
+    relative_orientation,
+)
+from core.sensors.pushbroom_synthetic import SyntheticSpec, synthetic_pushbroom
+from core.sensors.rpcfit import fit_rpc
+
+N_PX, GSD = 600, 40.0
+
+
+def pair(incidences=(25.5, -20.0), pitches=(0.0, 0.0)):
+    left, right = (synthetic_pushbroom(SyntheticSpec(
+        5.25, 44.2, 800.0, n_cols=N_PX, n_rows=N_PX, gsd_m=GSD, incidence_deg=inc, pitch_deg=p,
+        epoch_utc="2023-07-12T10:00:00Z")) for inc, p in zip(incidences, pitches, strict=True))
+    return left, right
+
+
+def tie_points(left, right_truth, n=300, noise_px=0.1, seed=0):
+    """Left pixels over a hilly surface, their true right pixels (+ noise), true heights."""
+    rng = np.random.default_rng(seed)
+    lc, lr = rng.uniform(5, N_PX - 6, n), rng.uniform(5, N_PX - 6, n)
+    h = 800.0 + 600.0 * np.sin(lc / 90.0) * np.cos(lr / 70.0)
+    lon, lat = left.localize(lc, lr, h)
+    rc, rr = right_truth.project(lon, lat, h)
+    return lc, lr, rc + rng.normal(0, noise_px, n), rr + rng.normal(0, noise_px, n), h
+
+
+@pytest.fixture(scope="module")
+def across():
+    left, right = pair()
+    truth = right.with_params(np.array([3e-5, -4e-5, 2e-5, 0.0, 0.0, 0.0]))
+    return left, right, truth, tie_points(left, truth)
+
+
+def test_parallax_is_the_distance_across_the_epipolar_curve(across):
+    """Independently of the fit: a right point moved along the curve has no parallax, moved
+    across it has exactly that parallax."""
+    left, right, _, _ = across
+    lc, lr, h = np.array([100.0, 400.0]), np.array([250.0, 50.0]), np.array([700.0, 1500.0])
+    lon, lat = left.localize(lc, lr, h)
+    c, r = right.project(lon, lat, h)
+    lon2, lat2 = left.localize(lc, lr, h + 50.0)
+    c2, r2 = right.project(lon2, lat2, h + 50.0)
+    t = np.stack([c2 - c, r2 - r], axis=1)
+    t /= np.linalg.norm(t, axis=1, keepdims=True)
+    nrm = np.stack([-t[:, 1], t[:, 0]], axis=1)
+    fit = epipolar_fit(left, right, lc, lr, c + 0.7 * nrm[:, 0] + 3 * t[:, 0],
+                       r + 0.7 * nrm[:, 1] + 3 * t[:, 1], 1000.0)
+    np.testing.assert_allclose(np.abs(fit.parallax_px), 0.7, atol=2e-3)
+    np.testing.assert_allclose(fit.along_px, 0.0, atol=1e-6)
+
+
+def test_pushbroom_biases_recovered_across_the_epipolar_lines(across):
+    left, right, truth, (lc, lr, rc, rr, h) = across
+    res = relative_orientation(left, right, lc, lr, rc, rr, 900.0)
+    assert res.converged and res.rejected.size <= 3
+    assert res.parallax_rms_before_px > 0.8
+    assert res.parallax_rms_after_px < 0.12  # the matching noise, 0.1 px
+    got = image_correction(left, right, res.right_model, N_PX, N_PX, 900.0)
+    want = image_correction(left, right, truth, N_PX, N_PX, 900.0)
+    assert got.across_epipolar_px == pytest.approx(want.across_epipolar_px, abs=0.02)
+    assert abs(got.along_epipolar_px) < 1e-3  # held: the tie points cannot see it
+    # across track, the roll moves points along the epipolar lines: it is the one unobservable
+    (u,) = res.unobservable
+    assert abs(u.direction["roll_bias"]) > 0.9 and u.observable_share < 1e-6
+    assert res.point_angle.name == "pitch_bias" and res.point_angle.unit == "arcsec"
+    assert res.point_angle.mean == pytest.approx(res.params_after[1] * 206264.806, abs=0.5)
+    json.dumps(res.to_dict())
+
+
+def test_outliers_are_all_rejected_and_change_nothing(across):
+    """10 % of the tie points moved by 5-20 px: all rejected, result unchanged within 0.05 px."""
+    left, right, _, (lc, lr, rc, rr, _) = across
+    clean = relative_orientation(left, right, lc, lr, rc, rr, 900.0)
+    rng = np.random.default_rng(3)
+    bad = rng.choice(lc.size, lc.size // 10, replace=False)
+    ang = rng.uniform(0, 2 * np.pi, bad.size)
+    mag = rng.uniform(5, 20, bad.size)
+    rc2, rr2 = rc.copy(), rr.copy()
+    rc2[bad] += mag * np.cos(ang)
+    rr2[bad] += mag * np.sin(ang)
+    dirty = relative_orientation(left, right, lc, lr, rc2, rr2, 900.0)
+    fit = epipolar_fit(left, right, lc[bad], lr[bad], rc2[bad], rr2[bad], 900.0)
+    visible = np.abs(fit.parallax_px) > 1.0  # a move along the epipolar line is a height
+    assert set(bad[visible]) <= set(dirty.rejected.tolist())
+    a = image_correction(left, right, clean.right_model, N_PX, N_PX, 900.0)
+    b = image_correction(left, right, dirty.right_model, N_PX, N_PX, 900.0)
+    assert abs(a.across_epipolar_px - b.across_epipolar_px) < 0.05
+    assert np.abs(np.array(a.affine) - np.array(b.affine))[:, :2].max() * N_PX < 0.05
+
+
+def test_along_track_pair_cannot_see_pitch():
+    left, right = pair((0.0, 0.0), (20.0, -20.0))
+    truth = right.with_params(np.array([-2e-5, 3e-5, 1e-5, 0.0, 0.0, 0.0]))
+    lc, lr, rc, rr, _ = tie_points(left, truth, seed=5)
+    res = relative_orientation(left, right, lc, lr, rc, rr, 900.0)
+    # pitch moves points along the epipolar lines (rows); fore/aft, roll and yaw both shift the
+    # columns almost uniformly, so one combination of them barely moves the image at all
+    span = np.array([[u.direction[n] for n in res.param_names] for u in res.unobservable])
+    assert len(span) == 2
+    pitch = np.array([0.0, 1.0, 0.0])
+    assert np.linalg.norm(span @ pitch) > 0.99  # the pitch axis lies in the unobservable span
+    assert res.parallax_rms_after_px < 0.12
+
+
+@pytest.mark.parametrize("corrections", ["offset", "linear"])
+def test_rpc_bias_compensation(across, corrections):
+    """RPCs fitted to the synthetic models; the right one's truth carries a shift (offset) or
+    an affine (linear): the across-epipolar part of the centre shift is recovered."""
+    left, right, _, _ = across
+    rpc_l, _ = fit_rpc(left, N_PX, N_PX, (0.0, 2500.0))
+    rpc_r, _ = fit_rpc(right, N_PX, N_PX, (0.0, 2500.0))
+    if corrections == "offset":
+        truth = rpc_r.with_bias_mode("shift").with_params([3.0, -2.5])
+    else:
+        truth = rpc_r.with_bias_mode("affine").with_params([3.0, 0.8, -0.5, -2.5, 0.6, 0.4])
+    lc, lr, rc, rr, _ = tie_points(rpc_l, truth, seed=9)
+    res = relative_orientation(rpc_l, rpc_r, lc, lr, rc, rr, 900.0,
+                               RelativeConfig(corrections=corrections))
+    assert res.parallax_rms_after_px < 0.12 and res.point_angle.unit == "px"
+    got = image_correction(rpc_l, rpc_r, res.right_model, N_PX, N_PX, 900.0)
+    want = image_correction(rpc_l, rpc_r, truth, N_PX, N_PX, 900.0)
+    assert got.across_epipolar_px == pytest.approx(want.across_epipolar_px, abs=0.03)
+    assert len(res.unobservable) == (1 if corrections == "offset" else 3)
+
+
+def test_reference_heights_set_the_along_epipolar_part(across):
+    left, right, truth, (lc, lr, rc, rr, h) = across
+    res = relative_orientation(left, right, lc, lr, rc, rr, 900.0)
+    rng = np.random.default_rng(2)
+    fixed, along = fix_along_epipolar(left, res, lc, lr, rc, rr, h + rng.normal(0, 3, h.size),
+                                      N_PX, N_PX)
+    want = image_correction(left, right, truth, N_PX, N_PX, 900.0)
+    got = image_correction(left, right, fixed, N_PX, N_PX, 900.0)
+    assert along.observable and along.n_points > 250
+    assert along.sigma_px == pytest.approx(5.0 * 0.84 / GSD, rel=0.3)  # 5 m at B/H 0.84
+    assert got.along_epipolar_px == pytest.approx(want.along_epipolar_px, abs=0.05)
+    assert got.across_epipolar_px == pytest.approx(want.across_epipolar_px, abs=0.02)
+    # the tie points' heights now agree with the truth (0.1 px noise ~ 5 m at 40 m, B/H 0.84)
+    fit = epipolar_fit(left, fixed, lc, lr, rc, rr, h)
+    assert abs(np.median(fit.h_m - h)) < 1.0
+
+
+def test_bad_input(across):
+    left, right, _, (lc, lr, rc, rr, _) = across
+    with pytest.raises(InsufficientDataError, match="5 tie points"):
+        relative_orientation(left, right, lc[:5], lr[:5], rc[:5], rr[:5], 900.0)
+    with pytest.raises(InputError, match="differ in length"):
+        relative_orientation(left, right, lc, lr[:-1], rc, rr, 900.0)
+    with pytest.raises(InputError, match="corrections"):
+        RelativeConfig(corrections="quadratic")
