@@ -22,12 +22,9 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
-import rasterio
-from rasterio.errors import NotGeoreferencedWarning, RasterioIOError, WindowError
-from rasterio.windows import Window, from_bounds
+from rasterio.errors import NotGeoreferencedWarning
 
-from core.dem import GeoDEM
-from core.errors import CoverageError, GeometryError, InputError
+from core.errors import GeometryError, InputError
 from core.geodesy import BBox
 from core.sensors.base import footprint_lonlat
 from core.sensors.rpc import RPCModel
@@ -42,86 +39,14 @@ from core.sensors.viewing import (
     pair_geometry,
     scene_geometry,
 )
-from tasks.geoid import load_geoid
+from tasks.dem_io import VERTICALS, check_reference, read_reference, resolve_vertical
 from tasks.raster_io import atomic_write_text
 from tasks.sensor_io import LoadedModel, load_model
-from tasks.srtm import SRTM_VOID, parse_tile_name
 
-VERTICALS = ("auto", "ellipsoidal", "egm96")
 FORMAT = "gcpfree.info"
 REFERENCE_MARGIN_DEG = 0.02  # around the footprint when reading the reference window
 LABEL = 15  # width of the printed labels
 PLAUSIBLE_H_M = (-1000.0, 9000.0)  # terrain heights a pair may be evaluated at
-
-
-# ---------------------------------------------------------------------------- the reference DEM
-
-
-def resolve_vertical(path: Path, vertical: str) -> str:
-    """``egm96`` or ``ellipsoidal``. ``auto``: a ``.hgt`` or a file named like an SRTM tile
-    (``N44E005...``, ``n44_e005_...``) holds EGM96 orthometric heights; anything else is taken
-    as ellipsoidal, like the outputs of ``gcpfree prepare-reference``."""
-    if vertical not in VERTICALS:
-        raise InputError(f"reference vertical {vertical!r} unknown; use one of {VERTICALS}")
-    if vertical != "auto":
-        return vertical
-    srtm = path.suffix.lower() == ".hgt" or parse_tile_name(path.name) is not None
-    return "egm96" if srtm else "ellipsoidal"
-
-
-def check_reference(path: str | Path) -> None:
-    """Fail early, in one line, on a reference DEM that cannot be read as lon/lat heights."""
-    path = Path(path)
-    if not path.is_file():
-        raise InputError(f"reference DEM {path} does not exist; give a GeoTIFF or .hgt file "
-                         "in EPSG:4326")
-    try:
-        with rasterio.open(path) as src:
-            crs = src.crs
-    except RasterioIOError as exc:
-        raise InputError(f"cannot read reference DEM {path}: {exc}; give a GeoTIFF or .hgt "
-                         "file") from exc
-    if crs is None or not crs.is_geographic:
-        raise InputError(f"reference DEM {path} is not in geographic coordinates (CRS {crs}); "
-                         "reproject it to EPSG:4326 (e.g. gdalwarp -t_srs EPSG:4326)")
-
-
-def read_reference(path: str | Path, box: BBox, vertical: str) -> GeoDEM:
-    """The part of a lon/lat DEM covering ``box``, as WGS84 ellipsoidal heights (NaN = void).
-
-    ``vertical`` is ``egm96`` (converted with ``h = H + N``) or ``ellipsoidal``.
-
-    Raises:
-        CoverageError: the DEM does not reach the box.
-    """
-    path = Path(path)
-    check_reference(path)
-    with rasterio.open(path) as src:
-        f = from_bounds(*box.as_tuple(), transform=src.transform)
-        c0, r0 = int(np.floor(f.col_off)) - 1, int(np.floor(f.row_off)) - 1  # one node more:
-        c1 = int(np.ceil(f.col_off + f.width)) + 1  # the nodes (pixel centres) span the box
-        r1 = int(np.ceil(f.row_off + f.height)) + 1
-        try:
-            win = Window(c0, r0, c1 - c0, r1 - r0).intersection(
-                Window(0, 0, src.width, src.height))
-        except WindowError:
-            win = None
-        if win is None or win.width < 2 or win.height < 2:
-            b = src.bounds
-            raise CoverageError(
-                f"reference DEM {path} (lon {b.left:.3f}..{b.right:.3f}, lat {b.bottom:.3f}.."
-                f"{b.top:.3f}) does not cover the image footprint (lon {box.lon_min:.3f}.."
-                f"{box.lon_max:.3f}, lat {box.lat_min:.3f}..{box.lat_max:.3f}); give a DEM "
-                "covering the scene")
-        heights = src.read(1, window=win, masked=True).astype(np.float64).filled(np.nan)
-        tr = src.window_transform(win)
-    heights[heights <= SRTM_VOID + 0.5] = np.nan  # SRTM voids when no nodata is declared
-    if vertical == "egm96":
-        rows, cols = np.mgrid[0:heights.shape[0], 0:heights.shape[1]]
-        lon = tr.c + (cols + 0.5) * tr.a
-        lat = tr.f + (rows + 0.5) * tr.e
-        heights = load_geoid().orthometric_to_ellipsoidal(lon, lat, heights)
-    return GeoDEM.from_transform(heights, tuple(tr)[:6])
 
 
 # ---------------------------------------------------------------------------- results

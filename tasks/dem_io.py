@@ -1,0 +1,90 @@
+"""Reference DEMs read as WGS84 ellipsoidal heights on a lon/lat grid (:class:`core.dem.GeoDEM`).
+
+A window of any lon/lat GeoTIFF or SRTM ``.hgt`` around an area, with the vertical datum
+resolved (EGM96 orthometric heights converted with ``h = H + N``) and voids as NaN. Plain
+functions (no Prefect): the CLI checks inputs with them before any flow starts.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import rasterio
+from rasterio.errors import RasterioIOError, WindowError
+from rasterio.windows import Window, from_bounds
+
+from core.dem import GeoDEM
+from core.errors import CoverageError, InputError
+from core.geodesy import BBox
+from tasks.geoid import load_geoid
+from tasks.srtm import SRTM_VOID, parse_tile_name
+
+VERTICALS = ("auto", "ellipsoidal", "egm96")
+
+
+def resolve_vertical(path: Path, vertical: str) -> str:
+    """``egm96`` or ``ellipsoidal``. ``auto``: a ``.hgt`` or a file named like an SRTM tile
+    (``N44E005...``, ``n44_e005_...``) holds EGM96 orthometric heights; anything else is taken
+    as ellipsoidal, like the outputs of ``gcpfree prepare-reference``."""
+    if vertical not in VERTICALS:
+        raise InputError(f"reference vertical {vertical!r} unknown; use one of {VERTICALS}")
+    if vertical != "auto":
+        return vertical
+    srtm = path.suffix.lower() == ".hgt" or parse_tile_name(path.name) is not None
+    return "egm96" if srtm else "ellipsoidal"
+
+
+def check_reference(path: str | Path) -> None:
+    """Fail early, in one line, on a reference DEM that cannot be read as lon/lat heights."""
+    path = Path(path)
+    if not path.is_file():
+        raise InputError(f"reference DEM {path} does not exist; give a GeoTIFF or .hgt file "
+                         "in EPSG:4326")
+    try:
+        with rasterio.open(path) as src:
+            crs = src.crs
+    except RasterioIOError as exc:
+        raise InputError(f"cannot read reference DEM {path}: {exc}; give a GeoTIFF or .hgt "
+                         "file") from exc
+    if crs is None or not crs.is_geographic:
+        raise InputError(f"reference DEM {path} is not in geographic coordinates (CRS {crs}); "
+                         "reproject it to EPSG:4326 (e.g. gdalwarp -t_srs EPSG:4326)")
+
+
+def read_reference(path: str | Path, box: BBox, vertical: str) -> GeoDEM:
+    """The part of a lon/lat DEM covering ``box``, as WGS84 ellipsoidal heights (NaN = void).
+
+    ``vertical`` is ``egm96`` (converted with ``h = H + N``) or ``ellipsoidal``.
+
+    Raises:
+        CoverageError: the DEM does not reach the box.
+    """
+    path = Path(path)
+    check_reference(path)
+    with rasterio.open(path) as src:
+        f = from_bounds(*box.as_tuple(), transform=src.transform)
+        c0, r0 = int(np.floor(f.col_off)) - 1, int(np.floor(f.row_off)) - 1  # one node more:
+        c1 = int(np.ceil(f.col_off + f.width)) + 1  # the nodes (pixel centres) span the box
+        r1 = int(np.ceil(f.row_off + f.height)) + 1
+        try:
+            win = Window(c0, r0, c1 - c0, r1 - r0).intersection(
+                Window(0, 0, src.width, src.height))
+        except WindowError:
+            win = None
+        if win is None or win.width < 2 or win.height < 2:
+            b = src.bounds
+            raise CoverageError(
+                f"reference DEM {path} (lon {b.left:.3f}..{b.right:.3f}, lat {b.bottom:.3f}.."
+                f"{b.top:.3f}) does not cover the image footprint (lon {box.lon_min:.3f}.."
+                f"{box.lon_max:.3f}, lat {box.lat_min:.3f}..{box.lat_max:.3f}); give a DEM "
+                "covering the scene")
+        heights = src.read(1, window=win, masked=True).astype(np.float64).filled(np.nan)
+        tr = src.window_transform(win)
+    heights[heights <= SRTM_VOID + 0.5] = np.nan  # SRTM voids when no nodata is declared
+    if vertical == "egm96":
+        rows, cols = np.mgrid[0:heights.shape[0], 0:heights.shape[1]]
+        lon = tr.c + (cols + 0.5) * tr.a
+        lat = tr.f + (rows + 0.5) * tr.e
+        heights = load_geoid().orthometric_to_ellipsoidal(lon, lat, heights)
+    return GeoDEM.from_transform(heights, tuple(tr)[:6])
