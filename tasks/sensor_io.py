@@ -79,6 +79,24 @@ def pixel_offset_of(transform: tuple[float, ...] | object, has_crs: bool) -> tup
     )
 
 
+def read_rpc_tags(image_path: str | Path) -> RPCModel:
+    """The RPC in a raster's own GDAL RPC metadata domain (ignoring any .geom beside it)."""
+    image_path = Path(image_path)
+    try:
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore", NotGeoreferencedWarning)
+            with rasterio.open(image_path) as src:
+                tags = src.tags(ns="RPC")
+    except RasterioIOError as exc:
+        raise InputError(f"cannot open raster {image_path}: {exc}; check the path") from exc
+    if not tags:
+        raise InputError(f"{image_path} holds no RPC tags; give its model file instead")
+    try:
+        return RPCModel.from_gdal_tags(tags)
+    except InputError as exc:
+        raise InputError(f"{image_path} RPC tags: {exc}") from exc
+
+
 def read_rpc(image_path: str | Path, dimap_xml: str | Path | None = None) -> RPCModel:
     """The RPC model of a raster, in that raster's pixels (0-based, centres at integers).
 
@@ -192,7 +210,8 @@ def load_model(path: str | Path, *, model: str | Path | None = None,
     """The sensor model of an image, or of a model file given alone.
 
     ``path`` may be an image or a model file (``.DIM``, gcpfree ``.json``, ``.geom``, DIMAP v2
-    ``RPC_*.XML``); ``model`` names the model file of an image explicitly. For an image the
+    ``RPC_*.XML``); ``model`` names the model file of an image explicitly (a GeoTIFF there
+    means its own RPC tags, e.g. to use a simulated image's RPC rather than its .DIM). For an image the
     model is looked for beside it, first found wins: ``METADATA.DIM`` in the folder of an
     ``IMAGERY.*`` file or a ``.DIM`` of the same name (SPOT Level 1A, rigorous), a gcpfree
     pushbroom ``.json`` of the same name, then its RPC (:func:`read_rpc`). ``band`` chooses the
@@ -221,8 +240,12 @@ def load_model(path: str | Path, *, model: str | Path | None = None,
                 rpc = read_rpc(image, dimap_xml=model) if suffix == ".xml" else rpc
                 return LoadedModel(rpc, "rpc", model, image, _raster_size(image))
             return LoadedModel(rpc, "rpc", model, None, _rpc_size(rpc))
+        if suffix in (".tif", ".tiff"):  # a GeoTIFF's own RPC tags
+            rpc = read_rpc_tags(model)
+            return LoadedModel(rpc, "rpc", model, image,
+                               _raster_size(image) if image is not None else _raster_size(model))
         raise InputError(f"{model}: unknown model format; give a .DIM (SPOT), a gcpfree .json, "
-                         "an OSSIM .geom or a DIMAP v2 RPC .XML")
+                         "an OSSIM .geom, a DIMAP v2 RPC .XML or a GeoTIFF with RPC tags")
     dim = dimap_beside(image)
     if dim is not None:
         return _from_dimap(dim, image, band)

@@ -27,3 +27,23 @@ def prefect_harness():
 @pytest.fixture(scope="session")
 def data_dir() -> Path:
     return DATA
+
+
+@pytest.fixture(scope="session")
+def tiny_scene(tmp_path_factory):
+    """The tiny preset with everything the metadata do not know: lens distortion, attitude
+    jitter, 10 % changed between the dates (seed 11). (out_dir, SceneDef)."""
+    from tests.scenes import run_scene
+
+    out = tmp_path_factory.mktemp("tiny")
+    return out, run_scene(out, date_change=0.1)
+
+
+@pytest.fixture(scope="session")
+def tiny_clean_scene(tmp_path_factory):
+    """The tiny preset whose truth differs from its metadata only by what the orientation
+    adjusts and the lens (no jitter, no date change; seed 12, no lidar). (out_dir, SceneDef)."""
+    from tests.scenes import run_scene
+
+    out = tmp_path_factory.mktemp("tiny_clean")
+    return out, run_scene(out, seed=12, jitter=False, lidar=False)

@@ -5,18 +5,17 @@ import sys
 from pathlib import Path
 
 from flows.simulate_scene import SimulationParams, simulate_scene
-from tests.tasks.test_simulate import CENTRE, run_scene
+from tests.scenes import CENTRE
 
 
-def test_flow_is_deterministic(prefect_harness, tmp_path):
+def test_flow_is_deterministic(prefect_harness, tmp_path, tiny_scene):
     a = tmp_path / "a"
     params = SimulationParams(out=a, seed=11, lens=True, jitter=True, date_change=0.1,
                               center=CENTRE)
     summary = simulate_scene(params)
     assert summary.checkpoints >= 50 and summary.lidar_points > 100_000
     assert all(100 <= e <= 300 for e in summary.centre_error_m.values())
-    b = tmp_path / "b"
-    run_scene(b, seed=11, date_change=0.1)  # the same scene through the tasks directly
+    b, _ = tiny_scene  # the same scene through the tasks directly
     files = ["left.tif", "right.tif", "left.json", "right.json", "left.DIM", "right.DIM",
              "truth/dsm.tif",
              "truth/dtm.tif", "truth/landcover.tif", "truth/checkpoints.json",

@@ -18,31 +18,13 @@ from core.sensors.pushbroom import PushbroomModel
 from core.simulation.landcover import LandCover
 from core.simulation.scene import ErrorConfig
 from tasks import simulate as S
-from tasks.geoid import BUNDLED_SRTM_DIR, EGM96_GTX, load_geoid
-
-DEM = BUNDLED_SRTM_DIR / "N44E005.hgt"
-CENTRE = (5.25, 44.2)
-
-
-def run_scene(out: Path, dem: Path = DEM, centre=CENTRE, seed: int = 11, lidar=True, **kw):
-    errors = ErrorConfig(lens=True, jitter=True)
-    scene = S.define_scene.fn(dem, out, "tiny", seed, errors, centre_lonlat=centre, **kw)
-    S.write_spot_metadata.fn(scene, out)
-    scene = S.build_truth_surface.fn(scene, out)
-    for i in (0, 1):
-        S.build_radiance.fn(scene, out, i)
-        S.render_image.fn(scene, out, i)
-    S.make_checkpoints.fn(scene, out)
-    if lidar:
-        S.make_lidar.fn(scene, out)
-    return scene
+from tasks.geoid import EGM96_GTX, load_geoid
+from tests.scenes import CENTRE, DEM, run_scene
 
 
 @pytest.fixture(scope="module")
-def scene_dir(tmp_path_factory):
-    out = tmp_path_factory.mktemp("tiny")
-    scene = run_scene(out, date_change=0.1)
-    return out, scene
+def scene_dir(tiny_scene):
+    return tiny_scene
 
 
 def models(out: Path, kind: str):
