@@ -8,6 +8,8 @@ from collections.abc import Sequence
 from pathlib import Path
 
 from flows._env import configure_environment
+from flows import evaluate as evaluate_command
+from flows.commands import relative as relative_command
 
 
 def _add_prepare_reference(sub: argparse._SubParsersAction) -> None:
@@ -182,11 +184,14 @@ def build_parser() -> argparse.ArgumentParser:
     _add_prepare_reference(sub)
     _add_simulate(sub)
     _add_info(sub)
+    for module in COMMAND_MODULES.values():
+        module.add_parser(sub)
     return parser
 
 
+COMMAND_MODULES = {"relative": relative_command, "evaluate": evaluate_command}
 COMMANDS = {"prepare-reference": _run_prepare_reference, "simulate": _run_simulate,
-            "info": _run_info}
+            "info": _run_info, **{name: m.run for name, m in COMMAND_MODULES.items()}}
 
 
 def main(argv: Sequence[str] | None = None) -> int:

@@ -1,0 +1,752 @@
+"""Accuracy of a DEM against reference points (lidar): statistics of ``dz = DEM - reference``.
+
+Step 6 of the chain (Toutin's evaluation): per class and overall, the count, the mean (bias),
+the sample standard deviation, the RMSE, the median, the NMAD (``1.4826 median |dz - median|``),
+LE68 / LE90 / LE95 (68th / 90th / 95th percentile of ``|dz|``) and a bootstrap confidence
+interval on LE68. Every figure is in metres. Percentiles follow NumPy's default ("linear")
+definition.
+
+Streaming. Points arrive in chunks (a lidar file of 100 M points never loads whole), and the
+statistics are accumulated chunk by chunk in bounded memory (:class:`DzAccumulator`):
+
+- count, mean, std, RMSE, min and max are exact whatever the size: running mean and sum of
+  squared deviations merged with Chan's formula;
+- the order statistics (median, NMAD, LE68/LE90/LE95 and the LE68 interval) are exact while a
+  class holds at most ``StatsConfig.exact_max_count`` values (default 1 M, 8 MB of float64),
+  which are kept; beyond that the accumulator switches, once and for good, to a histogram of
+  ``bin_m`` (default 1 mm) over ``+-range_m`` (default 500 m; 8 MB of counts), plus one
+  under- and one overflow bin represented by the exact min and max. Percentiles from the
+  histogram are within ``bin_m / 2`` of the exact ones, the NMAD within ``1.5 bin_m``.
+
+  A histogram rather than the float32 values of every point: 100 M points would need 400 MB
+  per pass and an exact sort of them, while 1 mm is far below any DEM's accuracy and the
+  memory stays flat whatever the file size.
+
+The LE68 interval is a seeded percentile bootstrap computed without resampling the data: a
+resample of ``n`` points from the empirical distribution ``F`` has its ``k``-th order
+statistic distributed as ``F^-1(U_(k))`` with ``U_(k) ~ Beta(k, n + 1 - k)``, so each bootstrap
+replicate of a percentile costs two random draws, exact in distribution, for any ``n``.
+
+No I/O here: ``tasks.evaluate`` reads the points and the DEM and calls these functions.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+from collections.abc import Mapping, Sequence
+from dataclasses import asdict, dataclass, fields
+from typing import Any
+
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+
+from core.errors import InputError
+from core.geoid import GeoidGrid
+
+FloatArray = NDArray[np.float64]
+
+NMAD_FACTOR = 1.4826
+DATUMS = ("ellipsoidal", "egm96")
+#: ASPRS classes that are not a surface: 7 low point (noise), 18 high noise
+NOISE_CLASSES = (7, 18)
+REPORT_FORMAT = "gcpfree.evaluation"
+
+
+# ---------------------------------------------------------------------------- configuration
+
+
+@dataclass(frozen=True)
+class StatsConfig:
+    """How the statistics are accumulated (see the module docstring).
+
+    ``bin_m`` and ``range_m``: histogram used beyond ``exact_max_count`` values per class;
+    ``ci_level`` the two-sided level of the LE68 interval, from ``n_bootstrap`` replicates
+    drawn with ``seed`` (``n_bootstrap = 0``: no interval).
+    """
+
+    bin_m: float = 0.001
+    range_m: float = 500.0
+    exact_max_count: int = 1_000_000
+    ci_level: float = 0.95
+    n_bootstrap: int = 1000
+    seed: int = 0
+
+    def __post_init__(self) -> None:
+        if not (self.bin_m > 0 and math.isfinite(self.bin_m)):
+            raise InputError(f"histogram bin must be a positive number of metres, got {self.bin_m}")
+        if not (self.range_m >= self.bin_m and math.isfinite(self.range_m)):
+            raise InputError(f"histogram range {self.range_m} m must be finite and at least one "
+                             f"bin ({self.bin_m} m)")
+        if self.range_m / self.bin_m > 5e7:
+            raise InputError(f"histogram of {self.range_m / self.bin_m:.3g} bins per side is too "
+                             "large; widen bin_m or narrow range_m")
+        if self.exact_max_count < 0:
+            raise InputError(f"exact_max_count must be >= 0, got {self.exact_max_count}")
+        if not 0.0 < self.ci_level < 1.0:
+            raise InputError(f"confidence level must be in (0, 1), got {self.ci_level}; "
+                             "e.g. 0.95")
+        if self.n_bootstrap < 0:
+            raise InputError(f"n_bootstrap must be >= 0, got {self.n_bootstrap}")
+        if self.seed < 0:
+            raise InputError(f"seed must be >= 0, got {self.seed}")
+
+    @property
+    def half_bins(self) -> int:
+        """Regular bins on each side of zero."""
+        return round(self.range_m / self.bin_m)
+
+
+# ---------------------------------------------------------------------------- results
+
+
+def _num(v: float) -> float | None:
+    return None if not math.isfinite(v) else float(v)
+
+
+def _unnum(v: Any) -> float:
+    return math.nan if v is None else float(v)
+
+
+@dataclass(frozen=True)
+class DzStats:
+    """Statistics of ``dz = DEM - reference`` for one class (metres; NaN when undefined).
+
+    ``std_m`` is the sample standard deviation (n - 1); ``le68_ci_m`` the bootstrap interval
+    of ``le68_m`` at ``ci_level``. ``method`` is ``"exact"`` or ``"histogram"``, the order
+    statistics of the latter being within ``resolution_m`` (half a bin) of the exact ones.
+    """
+
+    count: int
+    mean_m: float
+    std_m: float
+    rmse_m: float
+    median_m: float
+    nmad_m: float
+    le68_m: float
+    le90_m: float
+    le95_m: float
+    min_m: float
+    max_m: float
+    le68_ci_m: tuple[float, float]
+    ci_level: float
+    method: str
+    resolution_m: float
+
+    KEYS = ("mean", "std", "rmse", "median", "nmad", "le68", "le90", "le95", "min", "max")
+
+    def to_dict(self) -> dict[str, Any]:
+        """JSON-ready, with the keys of eval.json (``count``, ``mean``, ``std``, ``rmse``,
+        ``nmad``, ``le68``, ``le90``...); NaN becomes null."""
+        d: dict[str, Any] = {"count": self.count}
+        d.update({k: _num(getattr(self, f"{k}_m")) for k in self.KEYS})
+        d["le68_ci"] = [_num(v) for v in self.le68_ci_m]
+        d.update(ci_level=self.ci_level, method=self.method, resolution_m=self.resolution_m,
+                 unit="m")
+        return d
+
+    @classmethod
+    def from_dict(cls, d: Mapping[str, Any]) -> DzStats:
+        try:
+            lo, hi = d["le68_ci"]
+            return cls(count=int(d["count"]), **{f"{k}_m": _unnum(d[k]) for k in cls.KEYS},
+                       le68_ci_m=(_unnum(lo), _unnum(hi)), ci_level=float(d["ci_level"]),
+                       method=str(d["method"]), resolution_m=float(d["resolution_m"]))
+        except (KeyError, TypeError, ValueError) as exc:
+            raise InputError(f"statistics record lacks or mistypes {exc}; give a dict written "
+                             "by DzStats.to_dict") from exc
+
+
+# ---------------------------------------------------------------------------- order statistics
+
+
+@dataclass(frozen=True, eq=False)
+class _Sample:
+    """A sorted sample, each value once (``cum`` None) or with counts (``cum`` cumulative)."""
+
+    values: FloatArray
+    cum: NDArray[np.int64] | None = None
+
+    @property
+    def n(self) -> int:
+        return int(self.values.size if self.cum is None else (self.cum[-1] if self.cum.size
+                                                               else 0))
+
+    def order_stat(self, k: ArrayLike) -> FloatArray:
+        """The ``k``-th smallest value (0-based; an array of ranks works)."""
+        k = np.asarray(k, dtype=np.int64)
+        if self.cum is None:
+            return self.values[k]
+        return self.values[np.searchsorted(self.cum, k, side="right")]
+
+    def quantile(self, p: float) -> float:
+        """NumPy's default ("linear") percentile ``p`` in [0, 1]; NaN when empty."""
+        n = self.n
+        if n == 0:
+            return math.nan
+        h = (n - 1) * p
+        k = math.floor(h)
+        g = h - k
+        lo = float(self.order_stat(k))
+        if g == 0.0 or k + 1 >= n:
+            return lo
+        return lo + g * (float(self.order_stat(k + 1)) - lo)
+
+    def inverse_cdf(self, u: FloatArray) -> FloatArray:
+        """``F^-1(u)`` of the empirical distribution, ``u`` in (0, 1]."""
+        k = np.clip(np.ceil(self.n * np.asarray(u)) - 1, 0, self.n - 1)
+        return self.order_stat(k)
+
+    def deviations(self, centre: float) -> _Sample:
+        """The sorted sample of ``|value - centre|`` with the same counts."""
+        d = np.abs(self.values - centre)
+        order = np.argsort(d, kind="stable")
+        if self.cum is None:
+            return _Sample(d[order])
+        counts = np.diff(self.cum, prepend=0)
+        return _Sample(d[order], np.cumsum(counts[order]))
+
+
+def bootstrap_quantile_ci(sample: _Sample, p: float, level: float, n_boot: int,
+                          seed: int) -> tuple[float, float]:
+    """Percentile-bootstrap interval at ``level`` of the ``p`` quantile of ``sample``.
+
+    Each replicate is the quantile of a resample of ``n`` values drawn with replacement;
+    it is drawn from the order-statistic representation (module docstring), exact in
+    distribution. ``(nan, nan)`` for fewer than 2 values or no replicates.
+    """
+    n = sample.n
+    if n < 2 or n_boot == 0:
+        return (math.nan, math.nan)
+    rng = np.random.default_rng(seed)
+    h = (n - 1) * p
+    k = math.floor(h)  # 0-based rank: the (k+1)-th smallest of n
+    g = h - k
+    u_k = rng.beta(k + 1, n - k, size=n_boot)
+    reps = sample.inverse_cdf(u_k)
+    if g > 0.0 and k + 1 < n:
+        # the next order statistic: the smallest of the n-k-1 uniforms above u_k
+        v = rng.random(n_boot)
+        u_next = u_k + (1.0 - u_k) * -np.expm1(np.log(v) / (n - k - 1))
+        reps = reps + g * (sample.inverse_cdf(u_next) - reps)
+    a = 0.5 * (1.0 - level)
+    lo, hi = np.quantile(reps, [a, 1.0 - a])
+    return (float(lo), float(hi))
+
+
+# ---------------------------------------------------------------------------- accumulation
+
+
+class DzAccumulator:
+    """Streaming statistics of height differences of one class, in bounded memory.
+
+    ``add`` chunks of finite dz (metres) in any order and size; ``merge`` another accumulator
+    (chunks processed apart); ``stats`` the result. Chunking does not change the result
+    beyond floating-point rounding of the mean and std (module docstring).
+    """
+
+    def __init__(self, config: StatsConfig | None = None) -> None:
+        self.config = config or StatsConfig()
+        self.count = 0
+        self._mean = 0.0
+        self._m2 = 0.0  # sum of squared deviations from the mean
+        self._min = math.inf
+        self._max = -math.inf
+        self._values: list[FloatArray] | None = []  # exact values while few enough
+        self._hist: NDArray[np.int64] | None = None
+
+    @property
+    def is_exact(self) -> bool:
+        return self._values is not None
+
+    def add(self, dz_m: ArrayLike) -> None:
+        """Accumulate a chunk of height differences (metres, all finite)."""
+        dz = np.asarray(dz_m, dtype=np.float64).ravel()
+        if dz.size == 0:
+            return
+        if not np.isfinite(dz).all():
+            raise InputError("height differences must be finite; drop the points without a DEM "
+                             "value (NaN) before accumulating them")
+        m = float(dz.mean())
+        self._combine(dz.size, m, float(np.square(dz - m).sum()), float(dz.min()),
+                      float(dz.max()))
+        if self._values is not None:
+            self._values.append(dz.copy())
+            self._maybe_switch()
+        else:
+            self._bin(dz)
+
+    def merge(self, other: DzAccumulator) -> None:
+        """Add everything ``other`` accumulated (same configuration) to this accumulator."""
+        if other.config != self.config:
+            raise InputError("cannot merge accumulators of different StatsConfig")
+        if other.count == 0:
+            return
+        self._combine(other.count, other._mean, other._m2, other._min, other._max)
+        if self._values is not None and other._values is not None:
+            self._values.extend(other._values)
+            self._maybe_switch()
+            return
+        self._to_histogram()
+        assert self._hist is not None
+        if other._values is not None:
+            for v in other._values:
+                self._bin(v)
+        else:
+            self._hist += other._hist
+
+    def _combine(self, n_b: int, mean_b: float, m2_b: float, min_b: float, max_b: float) -> None:
+        n_a = self.count
+        n = n_a + n_b
+        delta = mean_b - self._mean
+        self._mean += delta * n_b / n
+        self._m2 += m2_b + delta * delta * n_a * n_b / n
+        self.count = n
+        self._min = min(self._min, min_b)
+        self._max = max(self._max, max_b)
+
+    def _maybe_switch(self) -> None:
+        if self.count > self.config.exact_max_count:
+            self._to_histogram()
+
+    def _to_histogram(self) -> None:
+        if self._hist is not None:
+            return
+        self._hist = np.zeros(2 * self.config.half_bins + 2, dtype=np.int64)
+        values, self._values = self._values or [], None
+        for v in values:
+            self._bin(v)
+
+    def _bin(self, dz: FloatArray) -> None:
+        """Histogram counts: index 0 underflow, 1..2K bins [j w, (j+1) w) for j = -K..K-1,
+        2K+1 overflow."""
+        K = self.config.half_bins
+        j = np.clip(np.floor(dz / self.config.bin_m), -K - 1, K).astype(np.int64) + K + 1
+        assert self._hist is not None
+        self._hist += np.bincount(j, minlength=self._hist.size)
+
+    def _sample(self) -> _Sample:
+        if self._values is not None:
+            return _Sample(np.sort(np.concatenate(self._values)) if self._values
+                           else np.zeros(0))
+        assert self._hist is not None
+        K, w = self.config.half_bins, self.config.bin_m
+        nz = np.flatnonzero(self._hist)
+        centres = (nz - K - 0.5) * w
+        centres[nz == 0] = self._min
+        centres[nz == 2 * K + 1] = self._max
+        return _Sample(centres, np.cumsum(self._hist[nz]))
+
+    def stats(self) -> DzStats:
+        """The statistics of everything accumulated so far."""
+        cfg = self.config
+        n = self.count
+        exact = self.is_exact
+        method, res = ("exact", 0.0) if exact else ("histogram", 0.5 * cfg.bin_m)
+        if n == 0:
+            nan = math.nan
+            return DzStats(0, nan, nan, nan, nan, nan, nan, nan, nan, nan, nan, (nan, nan),
+                           cfg.ci_level, method, res)
+        sample = self._sample()
+        median = sample.quantile(0.5)
+        abs_dz = sample.deviations(0.0)
+        return DzStats(
+            count=n, mean_m=self._mean,
+            std_m=math.sqrt(self._m2 / (n - 1)) if n > 1 else math.nan,
+            rmse_m=math.sqrt(self._mean ** 2 + self._m2 / n),
+            median_m=median, nmad_m=NMAD_FACTOR * sample.deviations(median).quantile(0.5),
+            le68_m=abs_dz.quantile(0.68), le90_m=abs_dz.quantile(0.90),
+            le95_m=abs_dz.quantile(0.95), min_m=self._min, max_m=self._max,
+            le68_ci_m=bootstrap_quantile_ci(abs_dz, 0.68, cfg.ci_level, cfg.n_bootstrap,
+                                            cfg.seed),
+            ci_level=cfg.ci_level, method=method, resolution_m=res,
+        )
+
+
+class ClassedDz:
+    """One :class:`DzAccumulator` per class code, and the overall statistics."""
+
+    def __init__(self, config: StatsConfig | None = None) -> None:
+        self.config = config or StatsConfig()
+        self._by_code: dict[int, DzAccumulator] = {}
+
+    @property
+    def codes(self) -> list[int]:
+        return sorted(self._by_code)
+
+    @property
+    def count(self) -> int:
+        return sum(a.count for a in self._by_code.values())
+
+    def add(self, dz_m: ArrayLike, codes: ArrayLike) -> None:
+        """Accumulate ``dz_m`` (metres, finite) split by the integer class ``codes``."""
+        dz = np.asarray(dz_m, dtype=np.float64).ravel()
+        codes = np.asarray(codes).ravel()
+        if codes.shape != dz.shape:
+            raise InputError(f"{dz.size} height differences but {codes.size} class codes")
+        if dz.size == 0:
+            return
+        order = np.argsort(codes, kind="stable")
+        uniq, start = np.unique(codes[order], return_index=True)
+        for code, part in zip(uniq.tolist(), np.split(order, start[1:]), strict=True):
+            self._by_code.setdefault(int(code), DzAccumulator(self.config)).add(dz[part])
+
+    def merge(self, other: ClassedDz) -> None:
+        for code, acc in other._by_code.items():
+            self._by_code.setdefault(code, DzAccumulator(self.config)).merge(acc)
+
+    def class_stats(self) -> dict[int, DzStats]:
+        return {code: self._by_code[code].stats() for code in self.codes}
+
+    def overall(self) -> DzStats:
+        total = DzAccumulator(self.config)
+        for code in self.codes:
+            total.merge(self._by_code[code])
+        return total.stats()
+
+
+# ---------------------------------------------------------------------------- the report
+
+
+def _from_flat(cls: type, d: Mapping[str, Any]) -> Any:
+    """A flat dataclass from its ``asdict``; lists become tuples."""
+    try:
+        return cls(**{f.name: tuple(d[f.name]) if isinstance(d[f.name], list) else d[f.name]
+                      for f in fields(cls)})
+    except (KeyError, TypeError) as exc:
+        raise InputError(f"{cls.__name__} record lacks or mistypes {exc}; give an eval.json "
+                         "written by gcpfree evaluate") from exc
+
+
+@dataclass(frozen=True)
+class CrsInfo:
+    """A CRS as the report states it: name, authority code when known, WKT."""
+
+    name: str
+    authority: str | None
+    wkt: str
+
+
+@dataclass(frozen=True)
+class LidarInfo:
+    """The lidar file and how it was read: ``xy_factor_m`` None for degrees."""
+
+    path: str
+    crs: CrsInfo
+    crs_source: str
+    xy_unit: str
+    xy_factor_m: float | None
+    z_unit: str
+    z_factor_m: float
+    z_unit_source: str
+    vertical: str
+    vertical_source: str
+    point_count: int
+    las_version: str
+    point_format: int
+    bounds: tuple[float, float, float, float]
+
+    @classmethod
+    def from_dict(cls, d: Mapping[str, Any]) -> LidarInfo:
+        return _from_flat(cls, {**d, "crs": _from_flat(CrsInfo, d["crs"])})
+
+
+@dataclass(frozen=True)
+class DemInfo:
+    """The DEM and how its heights were read; ``transform`` the GDAL affine (a..f)."""
+
+    path: str
+    crs: CrsInfo
+    vertical: str
+    vertical_source: str
+    z_unit: str
+    z_factor_m: float
+    z_unit_source: str
+    width: int
+    height: int
+    transform: tuple[float, ...]
+    bounds: tuple[float, float, float, float]
+
+    @classmethod
+    def from_dict(cls, d: Mapping[str, Any]) -> DemInfo:
+        return _from_flat(cls, {**d, "crs": _from_flat(CrsInfo, d["crs"])})
+
+
+@dataclass(frozen=True)
+class LandcoverInfo:
+    """The land-cover raster sampled (nearest) at the points and the names of its codes."""
+
+    path: str
+    crs: CrsInfo
+    names: tuple[tuple[int, str], ...]
+    names_source: str
+    nodata: int | None
+
+    def to_dict(self) -> dict[str, Any]:
+        return {**asdict(self), "names": {str(c): n for c, n in self.names}}
+
+    @classmethod
+    def from_dict(cls, d: Mapping[str, Any]) -> LandcoverInfo:
+        names = tuple((int(c), str(n)) for c, n in d["names"].items())
+        return _from_flat(cls, {**d, "crs": _from_flat(CrsInfo, d["crs"]), "names": names})
+
+
+@dataclass(frozen=True)
+class PointCounts:
+    """What happened to the points: ``read`` = ``withheld + excluded_class + outside_dem +
+    on_void + evaluated``."""
+
+    in_file: int
+    read: int
+    withheld: int
+    excluded_class: int
+    outside_dem: int
+    on_void: int
+    evaluated: int
+
+
+@dataclass(frozen=True)
+class MaskSummary:
+    """Cells of the DSM's mask raster: 0 valid, 1 mismatch, 2 occluded or outside; other
+    values counted apart. Percentages of all cells."""
+
+    path: str
+    valid: int
+    mismatch: int
+    occluded_or_outside: int
+    other: int
+    mismatched_pct: float
+    occluded_pct: float
+
+
+@dataclass(frozen=True)
+class GcpCheck:
+    """The DEM at known ground points (ellipsoidal heights): ``dz = DEM - h``."""
+
+    path: str
+    points: int
+    outside_dem: int
+    stats: DzStats
+
+    def to_dict(self) -> dict[str, Any]:
+        return {"path": self.path, "points": self.points, "outside_dem": self.outside_dem,
+                "rms_m": _num(self.stats.rmse_m), "stats": self.stats.to_dict()}
+
+    @classmethod
+    def from_dict(cls, d: Mapping[str, Any]) -> GcpCheck:
+        return cls(str(d["path"]), int(d["points"]), int(d["outside_dem"]),
+                   DzStats.from_dict(d["stats"]))
+
+
+@dataclass(frozen=True)
+class EvaluationReport:
+    """Everything ``eval.json`` holds (:meth:`to_dict`): the statistics of ``dz = DEM - lidar``
+    per class (``classes``: LAS code as a string, or land-cover name) and overall (``all``),
+    how the inputs were read, where the points went, and the optional mask and GCP checks."""
+
+    dem: DemInfo
+    lidar: LidarInfo
+    landcover: LandcoverInfo | None
+    classes_from: str
+    class_filter: tuple[int, ...] | None
+    heights_compared: str
+    transformation: str
+    points: PointCounts
+    classes: Mapping[str, DzStats]
+    class_labels: Mapping[str, str]
+    all: DzStats
+    stats_config: StatsConfig
+    mask: MaskSummary | None = None
+    gcps: GcpCheck | None = None
+
+    def to_dict(self) -> dict[str, Any]:
+        return {
+            "format": REPORT_FORMAT, "version": 1,
+            "dz": "DEM - lidar, metres; the DEM interpolated bilinearly at each lidar point",
+            "inputs": {"dem": self.dem.path, "lidar": self.lidar.path,
+                       "landcover": self.landcover.path if self.landcover else None,
+                       "mask": self.mask.path if self.mask else None,
+                       "gcps": self.gcps.path if self.gcps else None},
+            "heights_compared": self.heights_compared,
+            "transformation": self.transformation,
+            "dem": asdict(self.dem), "lidar": asdict(self.lidar),
+            "landcover": self.landcover.to_dict() if self.landcover else None,
+            "classes_from": self.classes_from,
+            "class_filter": list(self.class_filter) if self.class_filter else None,
+            "points": asdict(self.points),
+            "classes": {k: v.to_dict() for k, v in self.classes.items()},
+            "class_labels": dict(self.class_labels),
+            "all": self.all.to_dict(),
+            "statistics": {**asdict(self.stats_config), "std": "sample (n - 1)",
+                           "percentiles": "numpy linear", "nmad": "1.4826 median |dz - median|",
+                           "le68_ci": "percentile bootstrap (order statistics), seeded"},
+            "mask": asdict(self.mask) if self.mask else None,
+            "gcps": self.gcps.to_dict() if self.gcps else None,
+        }
+
+    @classmethod
+    def from_dict(cls, d: Mapping[str, Any]) -> EvaluationReport:
+        if d.get("format") != REPORT_FORMAT:
+            raise InputError(f"not an evaluation report (format {d.get('format')!r}); give the "
+                             "eval.json written by gcpfree evaluate")
+        st = {f.name: d["statistics"][f.name] for f in fields(StatsConfig)}
+        return cls(
+            dem=DemInfo.from_dict(d["dem"]), lidar=LidarInfo.from_dict(d["lidar"]),
+            landcover=LandcoverInfo.from_dict(d["landcover"]) if d["landcover"] else None,
+            classes_from=d["classes_from"],
+            class_filter=tuple(d["class_filter"]) if d["class_filter"] else None,
+            heights_compared=d["heights_compared"], transformation=d["transformation"],
+            points=_from_flat(PointCounts, d["points"]),
+            classes={k: DzStats.from_dict(v) for k, v in d["classes"].items()},
+            class_labels=dict(d["class_labels"]), all=DzStats.from_dict(d["all"]),
+            stats_config=StatsConfig(**st),
+            mask=_from_flat(MaskSummary, d["mask"]) if d["mask"] else None,
+            gcps=GcpCheck.from_dict(d["gcps"]) if d["gcps"] else None,
+        )
+
+    def to_json(self) -> str:
+        return json.dumps(self.to_dict(), indent=1)
+
+
+# ---------------------------------------------------------------------------- heights
+
+
+@dataclass(frozen=True)
+class HeightFrame:
+    """How a height value is stored: its vertical ``datum`` (``"ellipsoidal"`` WGS84 or
+    ``"egm96"`` orthometric) and ``z_factor_m``, metres per stored unit (0.3048 for the
+    international foot, 1200/3937 for the US survey foot)."""
+
+    datum: str
+    z_factor_m: float = 1.0
+
+    def __post_init__(self) -> None:
+        if self.datum not in DATUMS:
+            raise InputError(f"vertical datum {self.datum!r} unknown; use one of {DATUMS}")
+        if not (self.z_factor_m > 0 and math.isfinite(self.z_factor_m)):
+            raise InputError(f"height unit factor must be positive, got {self.z_factor_m}")
+
+
+def height_difference_m(dem_z: ArrayLike, dem: HeightFrame, ref_z: ArrayLike, ref: HeightFrame,
+                        lon_deg: ArrayLike | None = None, lat_deg: ArrayLike | None = None,
+                        geoid: GeoidGrid | None = None) -> FloatArray:
+    """``dz = DEM - reference`` in metres, both in the DEM's datum.
+
+    Heights are scaled to metres; when the datums differ, the EGM96 heights are made
+    ellipsoidal with ``h = H + N`` (``N`` from ``geoid`` at ``lon_deg``, ``lat_deg``), which
+    then must be given. Equal datums need no geoid (N cancels).
+    """
+    d = np.asarray(dem_z, dtype=np.float64) * dem.z_factor_m
+    r = np.asarray(ref_z, dtype=np.float64) * ref.z_factor_m
+    if dem.datum == ref.datum:
+        return d - r
+    if geoid is None or lon_deg is None or lat_deg is None:
+        raise InputError(f"DEM heights are {dem.datum} and reference heights {ref.datum}: "
+                         "give the geoid and the points' lon/lat to convert them")
+    n_m = geoid.undulation_m(lon_deg, lat_deg)
+    return d - r + (n_m if dem.datum == "egm96" else -n_m)
+
+
+# ---------------------------------------------------------------------------- grids and points
+
+
+def affine_nodes(transform: Sequence[float], x: ArrayLike,
+                 y: ArrayLike) -> tuple[FloatArray, FloatArray]:
+    """Fractional grid-node indices ``(fi, fj)`` (row, col; pixel centres at integers) of
+    points ``(x, y)`` in a raster with the GDAL/affine transform ``(a, b, c, d, e, f)``
+    (pixel corner origin; rotation terms allowed)."""
+    a, b, c, d, e, f = (float(v) for v in tuple(transform)[:6])
+    det = a * e - b * d
+    if det == 0:
+        raise InputError("raster transform is singular (zero pixel size); fix its "
+                         "georeferencing")
+    dx = np.asarray(x, dtype=np.float64) - c
+    dy = np.asarray(y, dtype=np.float64) - f
+    col = (e * dx - b * dy) / det
+    row = (-d * dx + a * dy) / det
+    return row - 0.5, col - 0.5
+
+
+@dataclass(frozen=True, eq=False)
+class WindowGroup:
+    """Points ``index`` (into the chunk) whose bilinear neighbours lie in rows
+    ``[row0, row1)`` and columns ``[col0, col1)`` of the grid."""
+
+    index: NDArray[np.intp]
+    row0: int
+    row1: int
+    col0: int
+    col1: int
+
+
+def inside_grid(fi: FloatArray, fj: FloatArray, shape: tuple[int, int],
+                nearest: bool = False) -> NDArray[np.bool_]:
+    """Points with a value on the grid: node indices within ``[0, n - 1]`` (bilinear), or
+    within the cells, ``[-0.5, n - 0.5)`` (``nearest``)."""
+    nr, nc = shape
+    if nearest:
+        return (fi >= -0.5) & (fi < nr - 0.5) & (fj >= -0.5) & (fj < nc - 0.5)
+    return (fi >= 0) & (fi <= nr - 1) & (fj >= 0) & (fj <= nc - 1)
+
+
+def window_groups(fi: FloatArray, fj: FloatArray, shape: tuple[int, int],
+                  tile_cells: int = 2048, nearest: bool = False) -> list[WindowGroup]:
+    """Split the points on a grid (:func:`inside_grid`) into groups whose windows span at
+    most about ``tile_cells`` x ``tile_cells`` cells, so that reading a window keeps memory
+    bounded whatever the spread of the points. A window holds every node bilinear
+    interpolation needs, or with ``nearest`` the cell of each point. Points off the grid are
+    left out."""
+    if tile_cells < 2:
+        raise InputError(f"tile_cells must be >= 2, got {tile_cells}")
+    nr, nc = shape
+    idx = np.flatnonzero(inside_grid(fi, fj, shape, nearest))
+    if idx.size == 0:
+        return []
+    shift, extra = (0.5, 1) if nearest else (0.0, 2)
+    r = np.floor(fi[idx] + shift).astype(np.int64)
+    c = np.floor(fj[idx] + shift).astype(np.int64)
+
+    def group(sel: NDArray[np.intp], rr: NDArray[np.int64], cc: NDArray[np.int64]) -> WindowGroup:
+        return WindowGroup(sel, int(rr.min()), int(min(rr.max() + extra, nr)), int(cc.min()),
+                           int(min(cc.max() + extra, nc)))
+
+    if r.max() - r.min() < tile_cells and c.max() - c.min() < tile_cells:
+        return [group(idx, r, c)]
+    ntc = nc // tile_cells + 1
+    tile = (r // tile_cells) * ntc + c // tile_cells
+    order = np.argsort(tile, kind="stable")
+    _, start = np.unique(tile[order], return_index=True)
+    return [group(idx[part], r[part], c[part]) for part in np.split(order, start[1:])]
+
+
+def sample_nearest(grid: NDArray, fi: ArrayLike, fj: ArrayLike, fill: int) -> NDArray:
+    """Value of the cell containing each point (node indices, pixel centres at integers);
+    ``fill`` outside the grid. For class rasters (land cover)."""
+    fi = np.asarray(fi, dtype=np.float64)
+    fj = np.asarray(fj, dtype=np.float64)
+    nr, nc = np.shape(grid)
+    i = np.floor(fi + 0.5)
+    j = np.floor(fj + 0.5)
+    ok = (i >= 0) & (i < nr) & (j >= 0) & (j < nc)
+    out = np.full(fi.shape, fill, dtype=np.asarray(grid).dtype)
+    out[ok] = np.asarray(grid)[i[ok].astype(np.intp), j[ok].astype(np.intp)]
+    return out
+
+
+def select_points(codes: ArrayLike, withheld: ArrayLike | None = None,
+                  keep: Sequence[int] | None = None,
+                  drop: Sequence[int] = NOISE_CLASSES) -> NDArray[np.bool_]:
+    """Points to evaluate: not withheld, and of a class in ``keep`` when given, else of any
+    class but ``drop`` (by default the ASPRS noise classes 7 and 18)."""
+    codes = np.asarray(codes)
+    ok = np.isin(codes, np.asarray(keep)) if keep is not None else ~np.isin(codes, np.asarray(
+        drop, dtype=np.int64))
+    if withheld is not None:
+        ok &= ~np.asarray(withheld, dtype=bool)
+    return ok
+
+
+def code_counts(values: ArrayLike, codes: Sequence[int]) -> dict[int, int]:
+    """How many of ``values`` equal each of ``codes`` (a mask raster block, say)."""
+    v = np.asarray(values).ravel()
+    return {int(c): int(np.count_nonzero(v == c)) for c in codes}
