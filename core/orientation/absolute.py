@@ -1,0 +1,319 @@
+"""Absolute orientation: every image's model adjusted to ground control points (GCPs).
+
+Step 4 of the chain (Goncalves 4.1). Each GCP has ground coordinates (lon, lat, ellipsoidal h)
+and its measured position in some images; the models' corrections (through the SensorModel
+protocol: ``param_names``, ``with_params``, ``jacobian``) are adjusted by iteratively
+reweighted Gauss-Newton so that the GCPs project where they were measured. Each observation is
+weighted by its expected error in pixels: the matching precision and the GCP's ground
+precision carried into the image (horizontal error over the ground sampling, vertical error
+times the tangent of the incidence). Blunders: Huber weights, then the GCPs whose normalised
+residual exceeds ``reject_k`` are removed, one round at a time, with their residual given as
+the reason. Lens self-calibration (:func:`self_calibrate`) adds radial and decentering terms and
+keeps those whose estimate is significant against its sigma.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+
+from core.errors import ConvergenceError, InputError, InsufficientDataError
+from core.geodesy import geodetic_to_ecef
+from core.sensors.base import SensorModel
+
+FloatArray = NDArray[np.float64]
+
+
+@dataclass(frozen=True)
+class AbsoluteConfig:
+    """Settings of :func:`absolute_orientation`: iterations, robust weighting (``huber_k``)
+    and rejection (``reject_k``) in normalised residuals, the matching precision of the image
+    measurements (px) and the fewest GCPs to solve with."""
+
+    max_iterations: int = 30
+    tol_px: float = 1e-4
+    huber_k: float = 2.0
+    reject_k: float = 3.5
+    max_rejection_rounds: int = 20
+    matching_sigma_px: float = 0.3
+    min_gcps: int = 4
+
+    def __post_init__(self) -> None:
+        if not (self.huber_k > 0 and self.reject_k > self.huber_k and self.tol_px > 0):
+            raise InputError("need huber_k > 0, reject_k > huber_k and tol_px > 0")
+        if self.matching_sigma_px <= 0 or self.min_gcps < 1 or self.max_iterations < 1:
+            raise InputError("need matching_sigma_px > 0, min_gcps >= 1, max_iterations >= 1")
+
+
+@dataclass(frozen=True, eq=False)
+class Observations:
+    """GCP measurements in the images: ``col``/``row`` (n_gcp, n_img) with NaN where a GCP is
+    not measured in an image; GCP ground coordinates (n_gcp,); ground precisions (m)."""
+
+    lon_deg: FloatArray
+    lat_deg: FloatArray
+    h_m: FloatArray
+    col: FloatArray
+    row: FloatArray
+    sigma_xy_m: FloatArray
+    sigma_h_m: FloatArray
+
+    def __post_init__(self) -> None:
+        n = np.asarray(self.lon_deg).size
+        for name in ("lat_deg", "h_m", "sigma_xy_m", "sigma_h_m"):
+            if np.asarray(getattr(self, name)).shape != (n,):
+                raise InputError(f"GCP {name} has shape {np.shape(getattr(self, name))}, "
+                                 f"expected ({n},)")
+        if np.shape(self.col) != np.shape(self.row) or np.shape(self.col)[0] != n:
+            raise InputError("GCP image coordinates must be (n_gcp, n_images), cols and rows "
+                             "alike")
+
+
+@dataclass(frozen=True, eq=False)
+class ImageResiduals:
+    """Residuals (measured - projected, px) of one image at the GCPs kept: ``rms_col_px`` is the
+    paper's P, ``rms_row_px`` its L."""
+
+    name: str
+    n: int
+    rms_col_px: float
+    rms_row_px: float
+    mean_col_px: float
+    mean_row_px: float
+    col_px: FloatArray = field(repr=False)
+    row_px: FloatArray = field(repr=False)
+
+    def to_dict(self) -> dict[str, Any]:
+        return {"name": self.name, "n": self.n, "rms_col_px": self.rms_col_px,
+                "rms_row_px": self.rms_row_px, "mean_col_px": self.mean_col_px,
+                "mean_row_px": self.mean_row_px}
+
+
+@dataclass(frozen=True, eq=False)
+class AbsoluteOrientation:
+    """The adjusted models and how well they fit the GCPs.
+
+    ``rejected`` lists the GCP indices removed, with the normalised residual that condemned
+    each (``reasons``); ``covariance`` is over the concatenated parameters of all images (in
+    each model's parameter units), ``sigma0`` the a-posteriori standard deviation of unit
+    weight.
+    """
+
+    models: tuple[SensorModel, ...]
+    names: tuple[str, ...]
+    param_names: tuple[tuple[str, ...], ...]
+    params_before: tuple[FloatArray, ...]
+    params_after: tuple[FloatArray, ...]
+    covariance: FloatArray
+    sigma0: float
+    residuals: tuple[ImageResiduals, ...]
+    inlier: NDArray[np.bool_]
+    reasons: dict[int, str]
+    n_iterations: int
+    converged: bool
+
+    @property
+    def rejected(self) -> NDArray[np.intp]:
+        return np.flatnonzero(~self.inlier)
+
+    def sigmas(self) -> tuple[FloatArray, ...]:
+        """Standard deviation of each image's parameters."""
+        sd = np.sqrt(np.clip(np.diag(self.covariance), 0.0, None))
+        out, k = [], 0
+        for names in self.param_names:
+            out.append(sd[k:k + len(names)])
+            k += len(names)
+        return tuple(out)
+
+    def to_dict(self) -> dict[str, Any]:
+        return {
+            "images": {
+                n: {"param_names": list(pn), "params_before": pb.tolist(),
+                    "params_after": pa.tolist(), "sigmas": s.tolist(), **r.to_dict()}
+                for n, pn, pb, pa, s, r in zip(self.names, self.param_names, self.params_before,
+                                               self.params_after, self.sigmas(), self.residuals,
+                                               strict=True)},
+            "sigma0": self.sigma0, "n_gcps": int(self.inlier.sum()),
+            "rejected": [{"index": int(i), "reason": self.reasons[int(i)]}
+                         for i in self.rejected],
+            "n_iterations": self.n_iterations, "converged": self.converged,
+        }
+
+
+def observation_sigmas_px(models: Sequence[SensorModel], obs: Observations,
+                          matching_sigma_px: float) -> FloatArray:
+    """(n_gcp, n_img) expected error of each measurement: matching plus the GCP's ground error
+    seen from that image (horizontal over the GSD, vertical times tan(incidence) over it)."""
+    out = np.full(np.shape(obs.col), np.nan)
+    lon, lat, h = obs.lon_deg, obs.lat_deg, obs.h_m
+    g = np.stack(geodetic_to_ecef(lon, lat, h), axis=1)
+    for m, model in enumerate(models):
+        c, r = model.project(lon, lat, h)
+        lon1, lat1 = model.localize(c + 1.0, r, h)
+        gsd = np.linalg.norm(np.stack(geodetic_to_ecef(lon1, lat1, h), axis=1) - g, axis=1)
+        lon_up, lat_up = model.localize(c, r, h + 100.0)
+        shift = np.linalg.norm(np.stack(geodetic_to_ecef(lon_up, lat_up, h), axis=1) - g,
+                               axis=1) / 100.0  # tan(incidence)
+        out[:, m] = np.sqrt(matching_sigma_px**2 + (obs.sigma_xy_m**2
+                                                    + (obs.sigma_h_m * shift) ** 2) / gsd**2)
+    return out
+
+
+def absolute_orientation(models: Sequence[SensorModel], obs: Observations,
+                         names: Sequence[str] | None = None,
+                         config: AbsoluteConfig = AbsoluteConfig()) -> AbsoluteOrientation:
+    """Adjust every model's current parameters to the GCPs (robust, with blunder rejection).
+
+    Raises InsufficientDataError with fewer than ``config.min_gcps`` GCPs kept and
+    ConvergenceError when Gauss-Newton does not settle.
+    """
+    models = list(models)
+    names = tuple(names) if names is not None else tuple(f"image{i}" for i in range(len(models)))
+    col, row = np.asarray(obs.col, dtype=np.float64), np.asarray(obs.row, dtype=np.float64)
+    n_gcp, n_img = col.shape
+    if n_img != len(models) or len(names) != n_img:
+        raise InputError(f"{n_img} image columns of GCP measurements for {len(models)} models")
+    if n_gcp < config.min_gcps:
+        raise InsufficientDataError(f"{n_gcp} GCPs, {config.min_gcps} needed at least")
+    sizes = [len(m.params) for m in models]
+    offsets = np.concatenate([[0], np.cumsum(sizes)])
+    before = tuple(m.params.copy() for m in models)
+    sigma = observation_sigmas_px(models, obs, config.matching_sigma_px)
+    seen = np.isfinite(col) & np.isfinite(row)
+    inlier = seen.any(axis=1)
+    reasons: dict[int, str] = {}
+    iterations, converged = 0, False
+    for _ in range(config.max_rejection_rounds + 1):
+        if inlier.sum() < config.min_gcps:
+            raise InsufficientDataError(
+                f"only {int(inlier.sum())} of {n_gcp} GCPs agree with one another "
+                f"({config.min_gcps} needed); the GCPs are unreliable")
+        converged = False
+        for _ in range(config.max_iterations):
+            iterations += 1
+            a_blocks, res, wts = [], [], []
+            for m, model in enumerate(models):
+                use = inlier & seen[:, m]
+                pc, pr = model.project(obs.lon_deg[use], obs.lat_deg[use], obs.h_m[use])
+                jac = model.jacobian(obs.lon_deg[use], obs.lat_deg[use], obs.h_m[use])
+                full = np.zeros((use.sum(), 2, offsets[-1]))
+                full[:, :, offsets[m]:offsets[m + 1]] = jac
+                a_blocks.append(full.reshape(-1, offsets[-1]))
+                r = np.stack([col[use, m] - pc, row[use, m] - pr], axis=1).ravel()
+                res.append(r)
+                wts.append(np.repeat(1.0 / sigma[use, m] ** 2, 2))
+            a = np.vstack(a_blocks)
+            r = np.concatenate(res)
+            w0 = np.concatenate(wts)
+            z = np.abs(r) * np.sqrt(w0)
+            w = w0 / np.maximum(z / config.huber_k, 1.0)
+            scale = np.sqrt(np.sum(a**2 * w[:, None], axis=0))
+            scale = np.where(scale > 0, scale, 1.0)
+            normal = (a / scale).T @ ((a / scale) * w[:, None])
+            dp = np.linalg.lstsq(normal, (a / scale).T @ (w * r), rcond=1e-12)[0] / scale
+            for m, model in enumerate(models):
+                models[m] = model.with_params(model.params + dp[offsets[m]:offsets[m + 1]])
+            if np.max(np.abs(a @ dp)) < config.tol_px:
+                converged = True
+                break
+        if not converged:
+            raise ConvergenceError(
+                f"absolute orientation did not converge in {config.max_iterations} iterations; "
+                "the GCPs may be wrong or too few for the parameters")
+        worst = np.zeros(n_gcp)
+        for m, model in enumerate(models):
+            use = seen[:, m]
+            pc, pr = model.project(obs.lon_deg[use], obs.lat_deg[use], obs.h_m[use])
+            zc = np.abs(col[use, m] - pc) / sigma[use, m]
+            zr = np.abs(row[use, m] - pr) / sigma[use, m]
+            worst[use] = np.maximum(worst[use], np.maximum(zc, zr))
+        s0 = _sigma0(models, obs, col, row, sigma, seen, inlier, offsets[-1])
+        limit = config.reject_k * max(s0, 1.0)
+        candidates = np.flatnonzero(inlier & (worst > limit))
+        if candidates.size == 0:
+            break
+        k = int(candidates[np.argmax(worst[candidates])])  # one blunder at a time
+        inlier[k] = False
+        reasons[k] = (f"normalised residual {worst[k]:.1f} over {limit:.1f} "
+                      f"({config.reject_k} x sigma0 {max(s0, 1.0):.2f})")
+    s0 = _sigma0(models, obs, col, row, sigma, seen, inlier, offsets[-1])
+    cov = s0**2 * np.linalg.pinv((a / scale).T @ ((a / scale) * w0[:, None])) / np.outer(scale,
+                                                                                         scale)
+    residuals = []
+    for m, model in enumerate(models):
+        use = inlier & seen[:, m]
+        pc, pr = model.project(obs.lon_deg[use], obs.lat_deg[use], obs.h_m[use])
+        dc, dr = col[use, m] - pc, row[use, m] - pr
+        residuals.append(ImageResiduals(
+            names[m], int(use.sum()), _rms(dc), _rms(dr), float(np.mean(dc)) if dc.size else 0.0,
+            float(np.mean(dr)) if dr.size else 0.0, dc, dr))
+    return AbsoluteOrientation(
+        models=tuple(models), names=names, param_names=tuple(m.param_names for m in models),
+        params_before=before, params_after=tuple(m.params.copy() for m in models),
+        covariance=cov, sigma0=s0, residuals=tuple(residuals), inlier=inlier, reasons=reasons,
+        n_iterations=iterations, converged=converged)
+
+
+def _rms(v: FloatArray) -> float:
+    return float(np.sqrt(np.mean(v**2))) if v.size else float("nan")
+
+
+def _sigma0(models: Sequence[SensorModel], obs: Observations, col: FloatArray, row: FloatArray,
+            sigma: FloatArray, seen: NDArray[np.bool_], inlier: NDArray[np.bool_],
+            n_params: int) -> float:
+    """Robust a-posteriori sigma of unit weight over the kept GCPs."""
+    z = []
+    for m, model in enumerate(models):
+        use = inlier & seen[:, m]
+        pc, pr = model.project(obs.lon_deg[use], obs.lat_deg[use], obs.h_m[use])
+        z.append((col[use, m] - pc) / sigma[use, m])
+        z.append((row[use, m] - pr) / sigma[use, m])
+    zz = np.concatenate(z)
+    if zz.size <= n_params:
+        return 1.0
+    return float(1.4826 * np.median(np.abs(zz)) * np.sqrt(zz.size / (zz.size - n_params)))
+
+
+# ------------------------------------------------------------------------- check points
+
+
+@dataclass(frozen=True)
+class CheckPointStats:
+    """The paper's Table 2 for one image: residuals (measured - projected, px) of independent
+    check points in P (col) and L (row)."""
+
+    name: str
+    n: int
+    min_col_px: float
+    max_col_px: float
+    mean_col_px: float
+    std_col_px: float
+    rms_col_px: float
+    min_row_px: float
+    max_row_px: float
+    mean_row_px: float
+    std_row_px: float
+    rms_row_px: float
+
+    def to_dict(self) -> dict[str, Any]:
+        return dict(vars(self))
+
+
+def check_point_stats(model: SensorModel, lon_deg: ArrayLike, lat_deg: ArrayLike,
+                      h_m: ArrayLike, col: ArrayLike, row: ArrayLike,
+                      name: str = "image") -> CheckPointStats:
+    """Min, max, mean, std and RMS of the check points' residuals in one image."""
+    pc, pr = model.project(lon_deg, lat_deg, h_m)
+    dc = np.asarray(col, dtype=np.float64) - pc
+    dr = np.asarray(row, dtype=np.float64) - pr
+    if dc.size == 0:
+        raise InsufficientDataError(f"no check point in image {name}")
+
+    def five(v: FloatArray) -> tuple[float, ...]:
+        return (float(v.min()), float(v.max()), float(v.mean()), float(v.std()), _rms(v))
+
+    return CheckPointStats(name, int(dc.size), *five(dc), *five(dr))

@@ -1,0 +1,351 @@
+"""Local surface matching of the relative DEM to the reference: simulated GCPs from SRTM alone.
+
+Step 3 of the chain (Goncalves 3.3). Around each tie point, the relative DEM's cells within a
+radius (heights ``h'``, ellipsoidal, in the frame the relative orientation left them) are
+compared with the reference DEM (SRTM + EGM96, ellipsoidal) shifted by ``(dlon, dlat)`` over a
+grid of shifts (default -20" .. +20" every 1"): the correlation coefficient of the two height
+sets is computed for every shift at once, its peak refined to a fraction of an arcsecond by a
+quadratic fit (then, optionally, a finer grid around it), and the vertical shift is the robust
+mean of the height differences at the refined position. The window's local 3-D shift moves the
+tie point's relative ground coordinates onto the reference: a simulated GCP.
+
+Cells are first averaged onto a lattice of about the reference's cell size (finer detail is
+absent from SRTM and would only cost time). Quality of a window: peak correlation, the peak's
+sharpness turned into a horizontal precision in metres, the relief (std of ``h'``), the number
+of cells, the share of the window masked (mismatched cells or reference voids), and a
+precision predicted from the relief before matching (relief sufficiency): with RMS slope ``g``
+and height noise ``s`` over ``N`` independent patches (the window's area over the squared
+correlation length of the reference's errors) the shift is known to about ``s / (g sqrt(N))``.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from enum import IntEnum
+from typing import Any
+
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+
+from core.dem import GeoDEM
+from core.errors import InputError
+from core.geodesy import metres_per_degree
+
+FloatArray = NDArray[np.float64]
+ARCSEC = 1.0 / 3600.0
+
+
+class WindowStatus(IntEnum):
+    """Outcome of a window: 0 usable, else why it was refused."""
+
+    OK = 0
+    TOO_FEW_CELLS = 1  # the relative DEM has too few valid cells in the window
+    MASKED = 2  # too large a share masked (mismatch or reference voids)
+    LOW_RELIEF = 3  # the relief cannot give the needed precision
+    LOW_CORRELATION = 4  # the best correlation is too low to trust
+    EDGE_PEAK = 5  # the peak is on the border of the searched shifts
+    IMPRECISE = 6  # the peak is too flat: the shift is not known well enough
+
+
+@dataclass(frozen=True)
+class SurfaceMatchConfig:
+    """Settings of :func:`match_window` (lengths in metres, shifts in arcseconds).
+
+    ``cell_m`` None averages the window on the reference's own cell size. ``error_length_m``
+    is the correlation length of the reference's height errors (SRTM: a few hundred metres),
+    ``height_noise_m`` their standard deviation (SRTM: about 4-5 m), both used by the
+    predicted precision. A window is refused when that prediction, or the measured precision,
+    exceeds ``max_precision_m``.
+    """
+
+    radius_m: float = 4000.0
+    shift_max_arcsec: float = 20.0
+    shift_step_arcsec: float = 1.0
+    cell_m: float | None = None
+    refine_step_arcsec: float | None = 0.1
+    min_cells: int = 100
+    max_masked_share: float = 0.5
+    min_correlation: float = 0.6
+    max_precision_m: float = 10.0
+    height_noise_m: float = 5.0
+    error_length_m: float = 300.0
+
+    def __post_init__(self) -> None:
+        if not (self.radius_m > 0 and self.shift_max_arcsec > 0
+                and 0 < self.shift_step_arcsec <= self.shift_max_arcsec):
+            raise InputError("surface matching needs radius_m > 0 and 0 < shift_step_arcsec <= "
+                             "shift_max_arcsec")
+        if self.refine_step_arcsec is not None and not (
+                0 < self.refine_step_arcsec < self.shift_step_arcsec):
+            raise InputError("refine_step_arcsec must be in (0, shift_step_arcsec) or None")
+        if not (0 <= self.max_masked_share <= 1 and -1 < self.min_correlation < 1):
+            raise InputError("max_masked_share must be in [0, 1] and min_correlation in (-1, 1)")
+        if not (self.max_precision_m > 0 and self.height_noise_m > 0
+                and self.error_length_m > 0 and self.min_cells >= 10):
+            raise InputError("max_precision_m, height_noise_m and error_length_m must be > 0 "
+                             "and min_cells >= 10")
+
+
+@dataclass(frozen=True)
+class WindowMatch:
+    """The local 3-D shift of one window and its quality.
+
+    The shift maps the relative DEM onto the reference: a relative point (lon, lat, h) lies at
+    ``(lon + shift_lon_arcsec", lat + shift_lat_arcsec", h + shift_h_m)`` in the reference.
+    ``shift_east_m``/``shift_north_m`` are the same horizontal shift in metres;
+    ``precision_m`` the horizontal precision from the peak's sharpness, ``precision_h_m`` the
+    vertical one (the differences' robust spread over the root of the independent patches);
+    ``predicted_precision_m`` the precision the relief promised before matching.
+    """
+
+    status: WindowStatus
+    shift_lon_arcsec: float = float("nan")
+    shift_lat_arcsec: float = float("nan")
+    shift_h_m: float = float("nan")
+    shift_east_m: float = float("nan")
+    shift_north_m: float = float("nan")
+    correlation: float = float("nan")
+    precision_m: float = float("nan")
+    precision_h_m: float = float("nan")
+    predicted_precision_m: float = float("nan")
+    relief_m: float = float("nan")
+    rms_slope: float = float("nan")
+    n_cells: int = 0
+    masked_share: float = 1.0
+
+    @property
+    def ok(self) -> bool:
+        return self.status == WindowStatus.OK
+
+    def to_dict(self) -> dict[str, Any]:
+        d = dict(vars(self))
+        d["status"] = self.status.name
+        return {k: (None if isinstance(v, float) and not np.isfinite(v) else v)
+                for k, v in d.items()}
+
+    @classmethod
+    def from_dict(cls, d: dict[str, Any]) -> WindowMatch:
+        kw = {k: (float("nan") if v is None else v) for k, v in d.items()}
+        kw["status"] = WindowStatus[d["status"]]
+        return cls(**kw)
+
+
+# ------------------------------------------------------------------------- window lattice
+
+
+@dataclass(frozen=True, eq=False)
+class WindowCells:
+    """The relative DEM in a window, averaged on a lattice: lon/lat (degrees) and height ``h_m``
+    of each lattice cell (NaN when no valid relative cell fell in it), ``cell_m`` its size."""
+
+    lon_deg: FloatArray
+    lat_deg: FloatArray
+    h_m: FloatArray
+    cell_m: float
+    shape: tuple[int, int]
+    n_input: int
+    n_masked: int
+    n_disk: int
+
+
+def window_cells(lon_deg: ArrayLike, lat_deg: ArrayLike, h_m: ArrayLike,
+                 centre: tuple[float, float], radius_m: float, cell_m: float) -> WindowCells:
+    """Average the relative DEM's cells (NaN heights = mismatched) within ``radius_m`` of
+    ``centre`` onto a square lattice of ``cell_m`` around it."""
+    lon = np.ravel(np.asarray(lon_deg, dtype=np.float64))
+    lat = np.ravel(np.asarray(lat_deg, dtype=np.float64))
+    h = np.ravel(np.asarray(h_m, dtype=np.float64))
+    m_lon, m_lat = metres_per_degree(centre[1])
+    x = (lon - centre[0]) * float(m_lon)
+    y = (lat - centre[1]) * float(m_lat)
+    inside = np.hypot(x, y) <= radius_m
+    n_side = 2 * int(np.ceil(radius_m / cell_m))
+    ix = np.floor((x[inside] + n_side * cell_m / 2) / cell_m).astype(np.int64)
+    iy = np.floor((y[inside] + n_side * cell_m / 2) / cell_m).astype(np.int64)
+    keep = (ix >= 0) & (ix < n_side) & (iy >= 0) & (iy < n_side)
+    idx = iy[keep] * n_side + ix[keep]
+    hv = h[inside][keep]
+    good = np.isfinite(hv)
+    total = np.bincount(idx[good], weights=hv[good], minlength=n_side * n_side)
+    count = np.bincount(idx[good], minlength=n_side * n_side)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        mean = np.where(count > 0, total / count, np.nan)
+    gx = (np.arange(n_side) + 0.5) * cell_m - n_side * cell_m / 2
+    xx, yy = np.meshgrid(gx, gx)
+    in_disk = (np.hypot(xx, yy) <= radius_m).ravel()
+    mean = np.where(in_disk, mean, np.nan)
+    return WindowCells(centre[0] + xx.ravel() / float(m_lon), centre[1] + yy.ravel() / float(m_lat),
+                       mean, float(cell_m), (n_side, n_side), int(inside.sum()),
+                       int((~np.isfinite(h[inside])).sum()), int(in_disk.sum()))
+
+
+# ------------------------------------------------------------------------- matching
+
+
+def _correlations(cells: WindowCells, reference: GeoDEM, shifts_deg: FloatArray,
+                  chunk: int = 128) -> tuple[FloatArray, FloatArray]:
+    """Correlation coefficient and valid-pair count for each (dlon, dlat) shift (n, 2)."""
+    ok = np.isfinite(cells.h_m)
+    lon, lat, h = cells.lon_deg[ok], cells.lat_deg[ok], cells.h_m[ok]
+    rho = np.full(len(shifts_deg), np.nan)
+    count = np.zeros(len(shifts_deg))
+    for s in range(0, len(shifts_deg), chunk):
+        sh = shifts_deg[s:s + chunk]
+        ref = reference.height_m(lon[None, :] + sh[:, :1], lat[None, :] + sh[:, 1:])
+        valid = np.isfinite(ref)
+        n = valid.sum(axis=1).astype(np.float64)
+        hv = np.where(valid, h[None, :], 0.0)
+        rv = np.where(valid, ref, 0.0)
+        with np.errstate(invalid="ignore", divide="ignore"):
+            mh, mr = hv.sum(1) / n, rv.sum(1) / n
+            dh = np.where(valid, hv - mh[:, None], 0.0)
+            dr = np.where(valid, rv - mr[:, None], 0.0)
+            cov = (dh * dr).sum(1)
+            rho[s:s + chunk] = cov / np.sqrt((dh * dh).sum(1) * (dr * dr).sum(1))
+        count[s:s + chunk] = n
+    return rho, count
+
+
+def _valid_rho(cells: WindowCells, reference: GeoDEM, sx_arcsec: FloatArray,
+               sy_arcsec: FloatArray, min_cells: int) -> FloatArray:
+    """Correlations at shifts (arcsec), NaN where fewer than ``min_cells`` pairs are valid."""
+    rho, count = _correlations(cells, reference, np.stack([sx_arcsec, sy_arcsec], 1) * ARCSEC)
+    return np.where(count >= min_cells, rho, np.nan)
+
+
+def quadratic_peak(z: FloatArray) -> tuple[float, float, FloatArray]:
+    """Offset (dx, dy) in grid steps of the maximum of the quadratic fitted to a 3x3 patch (rows
+    y, columns x; centre at 0), and the fit's Hessian (2, 2) per step squared."""
+    y, x = np.mgrid[-1:2, -1:2]
+    design = np.stack([np.ones(9), x.ravel(), y.ravel(), x.ravel() ** 2, x.ravel() * y.ravel(),
+                       y.ravel() ** 2], axis=1)
+    c, *_ = np.linalg.lstsq(design, z.ravel(), rcond=None)
+    hess = np.array([[2 * c[3], c[4]], [c[4], 2 * c[5]]])
+    grad = np.array([c[1], c[2]])
+    try:
+        off = -np.linalg.solve(hess, grad)
+    except np.linalg.LinAlgError:
+        off = np.zeros(2)
+    if not np.all(np.isfinite(off)) or np.max(np.abs(off)) > 1.0:
+        off = np.clip(np.nan_to_num(off), -1.0, 1.0)
+    return float(off[0]), float(off[1]), hess
+
+
+def _grid(half: float, step: float) -> FloatArray:
+    n = int(round(half / step))
+    return np.arange(-n, n + 1) * step
+
+
+def predicted_precision_m(cells: WindowCells, cfg: SurfaceMatchConfig) -> tuple[float, float,
+                                                                                 float, int]:
+    """(precision m, relief m, RMS slope, independent patches) the window's relief promises."""
+    h = cells.h_m.reshape(cells.shape)
+    gy, gx = np.gradient(h, cells.cell_m)
+    g2 = gx**2 + gy**2
+    ok = np.isfinite(g2)
+    relief = float(np.nanstd(h)) if np.isfinite(h).any() else 0.0
+    if ok.sum() < 3:
+        return float("inf"), relief, 0.0, 0
+    slope = float(np.sqrt(np.mean(g2[ok])))
+    area = ok.sum() * cells.cell_m**2
+    n_eff = max(int(area / max(cfg.error_length_m, cells.cell_m) ** 2), 1)
+    if slope <= 0:
+        return float("inf"), relief, slope, n_eff
+    return cfg.height_noise_m / (slope * np.sqrt(n_eff)), relief, slope, n_eff
+
+
+def match_window(lon_deg: ArrayLike, lat_deg: ArrayLike, h_m: ArrayLike,
+                 centre: tuple[float, float], reference: GeoDEM,
+                 cfg: SurfaceMatchConfig = SurfaceMatchConfig()) -> WindowMatch:
+    """The local 3-D shift of the relative DEM around ``centre`` (lon, lat degrees) onto the
+    reference. ``lon_deg``, ``lat_deg``, ``h_m``: the relative DEM's cells (NaN heights: cells
+    the matching could not fill), at least those within ``cfg.radius_m``."""
+    m_lon, m_lat = (float(v) for v in metres_per_degree(centre[1]))
+    cell = cfg.cell_m if cfg.cell_m is not None else reference.cell_size_m()
+    cells = window_cells(lon_deg, lat_deg, h_m, centre, cfg.radius_m, cell)
+    valid = np.isfinite(cells.h_m)
+    n_valid = int(valid.sum())
+    ref0 = reference.height_m(cells.lon_deg[valid], cells.lat_deg[valid])
+    n_pairs = int(np.isfinite(ref0).sum())
+    masked = 1.0 - n_pairs / max(cells.n_disk, 1)  # mismatched cells or reference voids
+    pred, relief, slope, n_eff = predicted_precision_m(cells, cfg)
+    base = dict(relief_m=relief, rms_slope=slope, n_cells=n_pairs, masked_share=masked,
+                predicted_precision_m=pred)
+    if n_pairs < cfg.min_cells:
+        return WindowMatch(WindowStatus.TOO_FEW_CELLS, **base)
+    if masked > cfg.max_masked_share:
+        return WindowMatch(WindowStatus.MASKED, **base)
+    if not pred <= cfg.max_precision_m:
+        return WindowMatch(WindowStatus.LOW_RELIEF, **base)
+    # coarse to fine: every other step over the whole range, then every step around the best
+    grid = _grid(cfg.shift_max_arcsec, cfg.shift_step_arcsec)
+    gx, gy = np.meshgrid(grid, grid)
+    rho = np.full(gx.shape, np.nan)
+    coarse = np.zeros(gx.shape, dtype=bool)
+    coarse[::2, ::2] = True
+    rho[coarse] = _valid_rho(cells, reference, gx[coarse], gy[coarse], cfg.min_cells)
+    if not np.isfinite(rho).any():
+        return WindowMatch(WindowStatus.MASKED, **base)
+    cy, cx = np.unravel_index(int(np.nanargmax(rho)), rho.shape)
+    near = np.zeros(gx.shape, dtype=bool)
+    near[max(cy - 3, 0):cy + 4, max(cx - 3, 0):cx + 4] = True
+    near &= ~coarse
+    rho[near] = _valid_rho(cells, reference, gx[near], gy[near], cfg.min_cells)
+    iy, ix = np.unravel_index(int(np.nanargmax(rho)), rho.shape)
+    if iy in (0, rho.shape[0] - 1) or ix in (0, rho.shape[1] - 1):
+        return WindowMatch(WindowStatus.EDGE_PEAK, correlation=float(rho[iy, ix]), **base)
+    patch = rho[iy - 1:iy + 2, ix - 1:ix + 2]
+    if not np.all(np.isfinite(patch)):
+        return WindowMatch(WindowStatus.MASKED, **base)
+    dx, dy, hess = quadratic_peak(patch)
+    step = cfg.shift_step_arcsec
+    sx, sy = grid[ix] + dx * step, grid[iy] + dy * step
+    hess = hess / step**2  # per arcsec squared
+    if cfg.refine_step_arcsec is not None:
+        fine = _grid(1.5 * step, cfg.refine_step_arcsec)
+        fx, fy = np.meshgrid(sx + fine, sy + fine)
+        rf, _ = _correlations(cells, reference,
+                              np.stack([fx.ravel(), fy.ravel()], 1) * ARCSEC)
+        rf = rf.reshape(fx.shape)
+        if np.isfinite(rf).all():
+            jy, jx = np.unravel_index(int(np.argmax(rf)), rf.shape)
+            jy = int(np.clip(jy, 1, rf.shape[0] - 2))
+            jx = int(np.clip(jx, 1, rf.shape[1] - 2))
+            ddx, ddy, _ = quadratic_peak(rf[jy - 1:jy + 2, jx - 1:jx + 2])
+            sx = float(fx[jy, jx] + ddx * cfg.refine_step_arcsec)
+            sy = float(fy[jy, jx] + ddy * cfg.refine_step_arcsec)
+    peak = float(np.nanmax(rho))
+    ref = reference.height_m(cells.lon_deg[valid] + sx * ARCSEC,
+                             cells.lat_deg[valid] + sy * ARCSEC)
+    diff = ref - cells.h_m[valid]
+    diff = diff[np.isfinite(diff)]
+    dz, spread = _robust_mean(diff)
+    # precision: near its peak rho(s) ~ 1 - k s^2 / 2 with k = slope^2 / relief^2 along the
+    # flattest direction (the peak's curvature, per m^2); least squares then knows the shift to
+    # spread / (slope sqrt(N)) = spread / (relief sqrt(k N)) over N independent patches
+    scale = np.diag([1.0 / (ARCSEC * m_lon), 1.0 / (ARCSEC * m_lat)])  # arcsec per metre
+    curv = float(np.min(np.abs(np.linalg.eigvalsh(scale @ hess @ scale))))
+    precision = (float(spread / (relief * np.sqrt(curv * n_eff))) if curv > 0 and relief > 0
+                 else float("inf"))
+    result = WindowMatch(
+        WindowStatus.OK, shift_lon_arcsec=float(sx), shift_lat_arcsec=float(sy),
+        shift_h_m=dz, shift_east_m=float(sx * ARCSEC * m_lon),
+        shift_north_m=float(sy * ARCSEC * m_lat), correlation=peak, precision_m=precision,
+        precision_h_m=float(spread / np.sqrt(max(n_eff, 1))), **base)
+    if peak < cfg.min_correlation:
+        return WindowMatch(**{**vars(result), "status": WindowStatus.LOW_CORRELATION})
+    if not precision <= cfg.max_precision_m:
+        return WindowMatch(**{**vars(result), "status": WindowStatus.IMPRECISE})
+    return result
+
+
+def _robust_mean(d: FloatArray, k: float = 1.5, n_iter: int = 10) -> tuple[float, float]:
+    """Huber mean and robust spread (1.4826 MAD) of ``d``."""
+    if d.size == 0:
+        return float("nan"), float("nan")
+    mu = float(np.median(d))
+    s = max(float(1.4826 * np.median(np.abs(d - mu))), 1e-6)
+    for _ in range(n_iter):
+        w = 1.0 / np.maximum(np.abs(d - mu) / (k * s), 1.0)
+        mu = float(np.sum(w * d) / np.sum(w))
+    return mu, s
