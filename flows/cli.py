@@ -9,6 +9,7 @@ from pathlib import Path
 
 from flows._env import configure_environment
 from flows import evaluate as evaluate_command
+from flows.commands import coregister as coregister_command
 from flows.commands import relative as relative_command
 
 
@@ -189,7 +190,8 @@ def build_parser() -> argparse.ArgumentParser:
     return parser
 
 
-COMMAND_MODULES = {"relative": relative_command, "evaluate": evaluate_command}
+COMMAND_MODULES = {"relative": relative_command, "evaluate": evaluate_command,
+                   "coregister": coregister_command}
 COMMANDS = {"prepare-reference": _run_prepare_reference, "simulate": _run_simulate,
             "info": _run_info, **{name: m.run for name, m in COMMAND_MODULES.items()}}
 

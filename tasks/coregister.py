@@ -1,0 +1,63 @@
+"""``gcpfree coregister``: read two DEM rasters, align one onto the other (Nuth & Kaab), write
+the translation. The maths is :func:`core.coregister.nuth_kaab`."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import numpy as np
+import rasterio
+from rasterio.errors import RasterioIOError
+from rasterio.warp import Resampling, reproject
+
+from core.coregister import CoregConfig, CoregResult, Grid, nuth_kaab
+from core.errors import InputError
+from tasks.raster_io import atomic_write_text
+from tasks.srtm import SRTM_VOID
+
+
+def read_grid(path: str | Path, crs: object | None = None,
+              like: rasterio.io.DatasetReader | None = None) -> tuple[Grid, object]:
+    """A DEM raster as a :class:`Grid` (NaN voids), reprojected onto ``like``'s CRS and grid
+    when given and different."""
+    path = Path(path)
+    try:
+        src = rasterio.open(path)
+    except RasterioIOError as exc:
+        raise InputError(f"cannot read DEM {path}: {exc}; give a GeoTIFF or .hgt") from exc
+    with src:
+        if src.crs is None:
+            raise InputError(f"DEM {path} has no CRS; give a georeferenced DEM")
+        z = src.read(1, masked=True).astype(np.float64).filled(np.nan)
+        z[z <= SRTM_VOID + 0.5] = np.nan
+        transform, src_crs = src.transform, src.crs
+    if like is not None and (src_crs != like.crs):
+        out = np.full((like.height, like.width), np.nan)
+        reproject(z, out, src_transform=transform, src_crs=src_crs, dst_transform=like.transform,
+                  dst_crs=like.crs, resampling=Resampling.cubic, src_nodata=np.nan,
+                  dst_nodata=np.nan)
+        z, transform, src_crs = out, like.transform, like.crs
+    if transform.b != 0 or transform.d != 0:
+        raise InputError(f"DEM {path} is rotated; warp it north-up first")
+    grid = Grid(z, transform.c + 0.5 * transform.a, transform.f + 0.5 * transform.e,
+                transform.a, transform.e, bool(src_crs.is_geographic))
+    return grid, src_crs
+
+
+def coregister(reference: str | Path, dem: str | Path, out: str | Path | None = None,
+               config: CoregConfig = CoregConfig()) -> CoregResult:
+    """The translation that, added to ``dem``'s coordinates, aligns it with ``reference``;
+    written as JSON to ``out`` when given."""
+    with rasterio.open(reference) as like:
+        ref, crs = read_grid(reference)
+        grid, _ = read_grid(dem, like=like)
+    result = nuth_kaab(ref, grid, config)
+    if out is not None:
+        doc = {"format": "gcpfree.coregister", "version": 1, "reference": str(reference),
+               "dem": str(dem), "crs": str(crs),
+               "convention": "adding the shift to the DEM's coordinates aligns it with the "
+                             "reference: ref(x + dx, y + dy) = dem(x, y) + dz",
+               **result.to_dict()}
+        atomic_write_text(out, json.dumps(doc, indent=1))
+    return result

@@ -1,0 +1,97 @@
+"""Nuth & Kaab coregistration on the real SRTM tile against shifted copies of itself."""
+
+from __future__ import annotations
+
+import json
+import subprocess
+import sys
+
+import numpy as np
+import pytest
+import rasterio
+from affine import Affine
+from scipy.ndimage import shift as nd_shift
+
+from core.coregister import Grid, metres_per_unit, nuth_kaab
+from core.errors import InputError, InsufficientDataError
+from tasks.geoid import BUNDLED_SRTM_DIR
+
+D = 1 / 1200
+
+
+@pytest.fixture(scope="module")
+def srtm() -> np.ndarray:
+    z = np.fromfile(BUNDLED_SRTM_DIR / "N44E005.hgt", dtype=">i2").reshape(1201, 1201)
+    z = z.astype(np.float64)
+    z[z < -1000] = np.nan
+    return z[300:800, 300:800]  # Mont Ventoux and its valleys, 500 x 500 cells
+
+
+def shifted(z, col_px, row_px, dz, noise_m=0.0, seed=0):
+    """A DEM whose content is the reference moved by (col, row) pixels (bicubic), dz lower."""
+    filled = np.where(np.isnan(z), np.nanmean(z), z)
+    out = nd_shift(filled, (-row_px, -col_px), order=3, mode="nearest") - dz
+    out += np.random.default_rng(seed).normal(0, noise_m, z.shape)
+    out[np.isnan(z)] = np.nan
+    return out
+
+
+@pytest.mark.parametrize(("col", "row", "dz", "noise"),
+                         [(0.3, -0.45, 0.0, 0.0), (-0.27, 0.61, 12.5, 0.5), (1.3, 0.2, -3.0, 1.0)])
+def test_known_subpixel_shift_recovered(srtm, col, row, dz, noise):
+    ref = Grid(srtm, 5.25, 44.75, D, -D, True)
+    r = nuth_kaab(ref, Grid(shifted(srtm, col, row, dz, noise), 5.25, 44.75, D, -D, True))
+    assert r.shift_col_px == pytest.approx(col, abs=0.01)
+    assert r.shift_row_px == pytest.approx(row, abs=0.01)
+    assert r.shift_up_m == pytest.approx(dz, abs=0.05)
+    me, mn = metres_per_unit(44.5)
+    assert r.shift_east_m == pytest.approx(col * D * float(me), rel=0.01)
+    assert r.shift_north_m == pytest.approx(-row * D * float(mn), rel=0.01)
+    assert r.nmad_after_m < max(noise, 0.01) * 1.6
+
+
+def test_projected_grids(srtm):
+    ref = Grid(srtm, 650_000.0, 4_950_000.0, 30.0, -30.0, False)
+    r = nuth_kaab(ref, Grid(shifted(srtm, -0.4, 0.25, 2.0), 650_000.0, 4_950_000.0, 30.0, -30.0,
+                            False))
+    assert r.shift_east_m == pytest.approx(-0.4 * 30.0, abs=0.3)
+    assert r.shift_north_m == pytest.approx(-0.25 * 30.0, abs=0.3)
+
+
+def test_metres_per_unit_against_proj():
+    import pyproj
+
+    geod = pyproj.Geod(ellps="WGS84")
+    me, mn = metres_per_unit(44.5)
+    assert float(me) * 1e-3 == pytest.approx(geod.inv(5.0, 44.5, 5.001, 44.5)[2], rel=1e-6)
+    assert float(mn) * 1e-3 == pytest.approx(geod.inv(5.0, 44.4995, 5.0, 44.5005)[2], rel=1e-6)
+
+
+def test_bad_inputs(srtm):
+    ref = Grid(srtm, 5.25, 44.75, D, -D, True)
+    with pytest.raises(InputError, match="both be geographic"):
+        nuth_kaab(ref, Grid(srtm, 0.0, 0.0, 30.0, -30.0, False))
+    with pytest.raises(InsufficientDataError, match="overlap"):
+        nuth_kaab(ref, Grid(srtm, 9.25, 44.75, D, -D, True))
+
+
+def test_cli_on_geotiffs(srtm, tmp_path):
+    tr = Affine(D, 0, 5.25 - D / 2, 0, -D, 44.75 + D / 2)
+    for name, z in (("ref.tif", srtm), ("dem.tif", shifted(srtm, 0.35, -0.2, 4.0))):
+        with rasterio.open(tmp_path / name, "w", driver="GTiff", width=z.shape[1],
+                           height=z.shape[0], count=1, dtype="float32", crs="EPSG:4326",
+                           transform=tr, nodata=np.nan) as dst:
+            dst.write(z.astype(np.float32), 1)
+    out = tmp_path / "result.json"
+    r = subprocess.run([sys.executable, "-m", "flows.cli", "coregister", "--ref",
+                        str(tmp_path / "ref.tif"), "--dem", str(tmp_path / "dem.tif"), "--out",
+                        str(out)], capture_output=True, text=True, timeout=120, check=False)
+    assert r.returncode == 0, r.stderr
+    doc = json.loads(out.read_text())
+    assert doc["shift_col_px"] == pytest.approx(0.35, abs=0.01)
+    assert doc["shift_row_px"] == pytest.approx(-0.2, abs=0.01)
+    assert doc["shift_up_m"] == pytest.approx(4.0, abs=0.05)
+    r = subprocess.run([sys.executable, "-m", "flows.cli", "coregister", "--ref",
+                        str(tmp_path / "none.tif"), "--dem", str(tmp_path / "dem.tif"), "--out",
+                        str(out)], capture_output=True, text=True, timeout=60, check=False)
+    assert r.returncode == 2 and "does not exist" in r.stderr and "Traceback" not in r.stderr
