@@ -125,3 +125,66 @@ class CheckPointSet:
         except (KeyError, TypeError) as exc:
             raise InputError(f"check point file lacks {exc}; give the checkpoints.json written "
                              "by gcpfree simulate") from exc
+
+
+@dataclass(frozen=True, eq=False)
+class ControlPoint:
+    """A ground control point: ground coordinates, its measured position in each image, its
+    ground precision (``sigma_xy_m`` horizontal, ``sigma_h_m`` vertical) and where it came
+    from (``source``, e.g. ``"srtm_surface_match"``, with the matching window's figures in
+    ``provenance``)."""
+
+    id: int
+    lon_deg: float
+    lat_deg: float
+    h_m: float
+    image_points: Mapping[str, ImagePoint]
+    sigma_xy_m: float
+    sigma_h_m: float
+    source: str = ""
+    provenance: Mapping[str, Any] = field(default_factory=dict)
+
+    def to_dict(self) -> dict[str, Any]:
+        return {
+            "id": self.id, "lon_deg": self.lon_deg, "lat_deg": self.lat_deg, "h_m": self.h_m,
+            "images": {n: p.to_dict() for n, p in self.image_points.items()},
+            "sigma_xy_m": self.sigma_xy_m, "sigma_h_m": self.sigma_h_m, "source": self.source,
+            "provenance": dict(self.provenance),
+        }
+
+    @classmethod
+    def from_dict(cls, d: Mapping[str, Any]) -> ControlPoint:
+        try:
+            return cls(
+                id=int(d["id"]), lon_deg=float(d["lon_deg"]), lat_deg=float(d["lat_deg"]),
+                h_m=float(d["h_m"]),
+                image_points={str(n): ImagePoint.from_dict(p) for n, p in d["images"].items()},
+                sigma_xy_m=float(d["sigma_xy_m"]), sigma_h_m=float(d["sigma_h_m"]),
+                source=str(d.get("source", "")), provenance=dict(d.get("provenance", {})),
+            )
+        except (KeyError, TypeError, ValueError, AttributeError) as exc:
+            raise InputError(f"control point record {dict(d)!r:.120} lacks or mistypes {exc}; "
+                             "give the gcps.json written by gcpfree orient") from exc
+
+    def __eq__(self, other: object) -> bool:
+        if not isinstance(other, ControlPoint):
+            return NotImplemented
+        return self.to_dict() == other.to_dict()
+
+    __hash__ = None  # type: ignore[assignment]
+
+
+def control_points_to_dict(points: tuple[ControlPoint, ...]) -> dict[str, Any]:
+    """The gcps.json document."""
+    return {"format": "gcpfree.gcps", "version": 1,
+            "heights": "h_m WGS84 ellipsoidal",
+            "image_coordinates": "0-based, pixel centres at integers, (col, row)",
+            "points": [p.to_dict() for p in points]}
+
+
+def control_points_from_dict(d: Mapping[str, Any]) -> tuple[ControlPoint, ...]:
+    try:
+        return tuple(ControlPoint.from_dict(p) for p in d["points"])
+    except (KeyError, TypeError) as exc:
+        raise InputError(f"gcps document lacks {exc}; give the gcps.json written by gcpfree "
+                         "orient") from exc

@@ -264,7 +264,6 @@ def match_window(lon_deg: ArrayLike, lat_deg: ArrayLike, h_m: ArrayLike,
     cell = cfg.cell_m if cfg.cell_m is not None else reference.cell_size_m()
     cells = window_cells(lon_deg, lat_deg, h_m, centre, cfg.radius_m, cell)
     valid = np.isfinite(cells.h_m)
-    n_valid = int(valid.sum())
     ref0 = reference.height_m(cells.lon_deg[valid], cells.lat_deg[valid])
     n_pairs = int(np.isfinite(ref0).sum())
     masked = 1.0 - n_pairs / max(cells.n_disk, 1)  # mismatched cells or reference voids

@@ -43,3 +43,18 @@ def test_bad_records_name_the_problem():
         CheckPointSet.from_dict({"crs": "EPSG:4326", "points": []})
     with pytest.raises(InputError, match="lon_deg, lat_deg, h_m"):
         GeoPoint.from_list([1.0, 2.0])
+
+
+def test_control_points_round_trip():
+    from core.points import ControlPoint, control_points_from_dict, control_points_to_dict
+
+    pts = tuple(ControlPoint(i, 5.2 + i * 1e-3, 44.1, 812.5 + i,
+                             {"left": ImagePoint(10.5, 20.25), "right": ImagePoint(30.0, 41.0)},
+                             2.5, 1.25, "srtm_surface_match",
+                             {"correlation": 0.97, "relief_m": 120.0, "status": "OK"})
+                for i in range(3))
+    text = json.dumps(control_points_to_dict(pts))
+    back = control_points_from_dict(json.loads(text))
+    assert back == pts and json.dumps(control_points_to_dict(back)) == text
+    with pytest.raises(InputError, match="gcps.json"):
+        control_points_from_dict({"points": [{"id": 1}]})

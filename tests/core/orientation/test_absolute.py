@@ -112,3 +112,32 @@ def test_too_few_gcps(pair):
     obs, _ = gcps(truth, n=3)
     with pytest.raises(InsufficientDataError, match="3 GCPs"):
         absolute_orientation(delivered, obs)
+
+
+def test_self_calibration_finds_the_lens_only_when_there_is_one(pair):
+    from dataclasses import replace
+
+    from core.orientation.selfcal import self_calibrate
+    from core.sensors.linear_array import LensDistortion
+
+    delivered, truth = pair
+    # the true cameras distort: 1.5 px radial at the edge, decentering a tenth of it
+    r_edge = float(np.hypot(*delivered[0].camera.detector_xy(np.array([0.0])))[0])
+    px = r_edge / 1499.5
+    lens = (LensDistortion(k3=1.5 * px / r_edge**3, p1=0.1 * px / r_edge**2),
+            LensDistortion(k3=-1.5 * px / r_edge**3, p2=-0.1 * px / r_edge**2))
+    distorted = tuple(replace(t, distortion=d) for t, d in zip(truth, lens, strict=True))
+    obs, _ = gcps(distorted, n=80, sxy=1.0, sh=1.0, seed=7)
+    cal = self_calibrate(delivered, obs, ("left", "right"))
+    assert cal.applied and set(cal.significant) == {"left", "right"}
+    assert all("k3" in terms for terms in cal.significant.values())
+    for name, imp in cal.improvement().items():
+        assert imp["col_drop"] >= 0.4, (name, imp)
+    before = check(cal.without.models, distorted)
+    after = check(cal.result.models, distorted)
+    for b, a in zip(before, after, strict=True):
+        assert a.rms_col_px < 0.6 * b.rms_col_px
+    # without distortion, nothing is significant and nothing is applied
+    clean, _ = gcps(truth, n=80, sxy=1.0, sh=1.0, seed=7)
+    assert not self_calibrate(delivered, clean, ("left", "right")).applied
+    json.dumps(cal.to_dict())

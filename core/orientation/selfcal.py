@@ -1,0 +1,107 @@
+"""Lens self-calibration inside the absolute orientation (Toutin 2006).
+
+The rigorous models' radial symmetric (``k1 r + k3 r^3``) and decentering (``p1, p2``) terms
+(:mod:`core.sensors.linear_array`) are added to the adjusted parameters of every pushbroom
+image; a term is kept only when its estimate is significant against its own sigma
+(``|estimate| > t sigma``), and the adjustment is redone with the significant terms alone.
+RPC models have no lens: an affine image correction cannot absorb a distortion, and their
+images are left as they are (the report says so).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+
+from core.orientation.absolute import (
+    AbsoluteConfig,
+    AbsoluteOrientation,
+    Observations,
+    absolute_orientation,
+)
+from core.sensors.base import SensorModel
+from core.sensors.pushbroom import PushbroomModel
+
+LENS_TERMS = ("k1", "k3", "p1", "p2")
+
+
+@dataclass(frozen=True, eq=False)
+class SelfCalibration:
+    """The adjustment without and with lens terms, and what was kept.
+
+    ``significant`` maps each image name to its kept terms with (estimate, sigma);
+    ``applied`` says whether any term was kept (then ``with_lens`` is the result to use).
+    ``improvement`` gives, per image, the relative drop of the GCP residual RMS in col and row.
+    """
+
+    without: AbsoluteOrientation
+    with_lens: AbsoluteOrientation | None
+    significant: dict[str, dict[str, tuple[float, float]]] = field(default_factory=dict)
+    t_threshold: float = 3.0
+
+    @property
+    def applied(self) -> bool:
+        return self.with_lens is not None
+
+    @property
+    def result(self) -> AbsoluteOrientation:
+        return self.with_lens if self.with_lens is not None else self.without
+
+    def improvement(self) -> dict[str, dict[str, float]]:
+        if self.with_lens is None:
+            return {}
+        out = {}
+        for a, b in zip(self.without.residuals, self.with_lens.residuals, strict=True):
+            out[a.name] = {
+                "rms_col_px_without": a.rms_col_px, "rms_col_px_with": b.rms_col_px,
+                "rms_row_px_without": a.rms_row_px, "rms_row_px_with": b.rms_row_px,
+                "col_drop": 1.0 - b.rms_col_px / a.rms_col_px if a.rms_col_px else 0.0,
+                "row_drop": 1.0 - b.rms_row_px / a.rms_row_px if a.rms_row_px else 0.0,
+            }
+        return out
+
+    def to_dict(self) -> dict[str, Any]:
+        return {"applied": self.applied, "t_threshold": self.t_threshold,
+                "significant": {n: {k: {"estimate": e, "sigma": s} for k, (e, s) in terms.items()}
+                                for n, terms in self.significant.items()},
+                "improvement": self.improvement()}
+
+
+def _with_terms(model: SensorModel, terms: Sequence[str]) -> SensorModel:
+    if not isinstance(model, PushbroomModel) or not terms:
+        return model
+    return model.with_adjust(tuple(model.param_names) + tuple(t for t in terms
+                                                               if t not in model.param_names))
+
+
+def self_calibrate(models: Sequence[SensorModel], obs: Observations, names: Sequence[str],
+                   config: AbsoluteConfig = AbsoluteConfig(), terms: Sequence[str] = LENS_TERMS,
+                   t_threshold: float = 3.0) -> SelfCalibration:
+    """Orient without lens terms, then with ``terms`` on every pushbroom image; keep the
+    significant ones and orient again with those alone. GCPs rejected without lens terms stay
+    rejected (their residuals were blunders, not distortion)."""
+    without = absolute_orientation(models, obs, names, config)
+    trial_models = [_with_terms(m, terms) for m in without.models]
+    if all(tm is m for tm, m in zip(trial_models, without.models, strict=True)):
+        return SelfCalibration(without, None, {}, t_threshold)
+    keep = without.inlier
+    trial_obs = Observations(obs.lon_deg[keep], obs.lat_deg[keep], obs.h_m[keep],
+                             np.asarray(obs.col)[keep], np.asarray(obs.row)[keep],
+                             obs.sigma_xy_m[keep], obs.sigma_h_m[keep])
+    trial = absolute_orientation(trial_models, trial_obs, names, config)
+    significant: dict[str, dict[str, tuple[float, float]]] = {}
+    for name, pn, pa, sd in zip(names, trial.param_names, trial.params_after, trial.sigmas(),
+                                strict=True):
+        kept = {t: (float(pa[pn.index(t)]), float(sd[pn.index(t)])) for t in terms
+                if t in pn and abs(pa[pn.index(t)]) > t_threshold * sd[pn.index(t)] > 0}
+        if kept:
+            significant[name] = kept
+    if not significant:
+        return SelfCalibration(without, None, {}, t_threshold)
+    final_models = [_with_terms(m, list(significant.get(n, {})))
+                    for m, n in zip(without.models, names, strict=True)]
+    with_lens = absolute_orientation(final_models, trial_obs, names, config)
+    return SelfCalibration(without, with_lens, significant, t_threshold)
