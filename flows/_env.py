@@ -7,7 +7,10 @@ given explicitly.
 
 from __future__ import annotations
 
+import contextlib
+import logging
 import os
+from collections.abc import Iterator
 from pathlib import Path
 
 DEFAULTS = {
@@ -31,3 +34,28 @@ def configure_environment(prefect_home: str | Path | None = None) -> None:
         home = Path(prefect_home)
         os.environ["PREFECT_HOME"] = str(home)
         os.environ["DASK_TEMPORARY_DIRECTORY"] = str(home / "dask")
+
+
+class _OurErrorsOnce(logging.Filter):
+    """Drop Prefect's log records (with tracebacks) of our own errors: the command prints each
+    as one line on the way out. Any other exception is left to Prefect's log."""
+
+    def filter(self, record: logging.LogRecord) -> bool:
+        from core.errors import GcpFreeError
+
+        exc = record.exc_info[1] if record.exc_info else None
+        return not isinstance(exc, GcpFreeError)
+
+
+@contextlib.contextmanager
+def one_line_errors() -> Iterator[None]:
+    """While a command runs, Prefect does not print tracebacks for gcpfree's own errors."""
+    loggers = [logging.getLogger(n) for n in ("prefect.task_runs", "prefect.flow_runs")]
+    flt = _OurErrorsOnce()
+    for log in loggers:
+        log.addFilter(flt)
+    try:
+        yield
+    finally:
+        for log in loggers:
+            log.removeFilter(flt)

@@ -7,8 +7,8 @@ import sys
 from collections.abc import Sequence
 from pathlib import Path
 
-from flows._env import configure_environment
 from flows import evaluate as evaluate_command
+from flows._env import configure_environment, one_line_errors
 from flows.commands import coregister as coregister_command
 from flows.commands import relative as relative_command
 
@@ -202,7 +202,8 @@ def main(argv: Sequence[str] | None = None) -> int:
     from core.errors import GcpFreeError
 
     try:
-        return COMMANDS[args.command](args)
+        with one_line_errors():
+            return COMMANDS[args.command](args)
     except GcpFreeError as exc:
         print(f"gcpfree {args.command}: error: {exc}", file=sys.stderr)
         return 2

@@ -12,13 +12,13 @@ then builds and runs the Prefect flow (:func:`evaluate_flow`).
 from __future__ import annotations
 
 import argparse
-import contextlib
 import functools
-import logging
 import sys
-from collections.abc import Callable, Iterator, Sequence
+from collections.abc import Callable, Sequence
 from pathlib import Path
 from typing import TYPE_CHECKING
+
+from flows._env import one_line_errors
 
 if TYPE_CHECKING:
     from core.evaluation import EvaluationReport
@@ -46,30 +46,6 @@ def evaluate_flow() -> Callable[[EvaluationOptions], EvaluationReport]:
     # the types themselves, not the postponed strings: Prefect validates parameters with them
     evaluate.__annotations__ = {"options": EvaluationOptions, "return": EvaluationReport}
     return flow(name="evaluate", log_prints=True)(evaluate)
-
-
-class _OurErrorsOnce(logging.Filter):
-    """Drop Prefect's log records (with tracebacks) of our own errors: the command prints each
-    as one line on the way out. Any other exception is left to Prefect's log."""
-
-    def filter(self, record: logging.LogRecord) -> bool:
-        from core.errors import GcpFreeError
-
-        exc = record.exc_info[1] if record.exc_info else None
-        return not isinstance(exc, GcpFreeError)
-
-
-@contextlib.contextmanager
-def _one_line_errors() -> Iterator[None]:
-    loggers = [logging.getLogger(n) for n in ("prefect.task_runs", "prefect.flow_runs")]
-    flt = _OurErrorsOnce()
-    for log in loggers:
-        log.addFilter(flt)
-    try:
-        yield
-    finally:
-        for log in loggers:
-            log.removeFilter(flt)
 
 
 def report_lines(report: EvaluationReport) -> list[str]:
@@ -187,7 +163,7 @@ def run(args: argparse.Namespace) -> int:
     # every header read and checked before Prefect starts: bad input is one clean line
     plan_evaluation(options)
     check_json_target(args.out)
-    with _one_line_errors():
+    with one_line_errors():
         report = evaluate_flow()(options)
     print("\n".join(report_lines(report)))
     print(f"{'json':<14} {args.out}")

@@ -1,0 +1,147 @@
+"""Time and peak memory of the tie-point search on the simulated `spot` pair (6000x6000, 10 m).
+
+Target (issue 9, with the relative orientation): under 60 s and 1.5 GB on 2 cores. The pair is
+simulated once into a temporary folder (about 8 min) unless GCPFREE_BENCH_SCENE names the
+folder of an existing `gcpfree simulate --preset spot` scene. The reference DEM is the bundled
+SRTM tile made ellipsoidal by prepare-reference's tasks. The search runs in a child process
+(its peak RSS is read from getrusage(RUSAGE_CHILDREN)); then the tie points are scored against
+the scene's truth here. Prints figures, asserts nothing.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import resource
+import subprocess
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+import numpy as np
+
+CHILD = """
+import json, sys, time
+from pathlib import Path
+from core.matching.tiepoints import TiePointConfig
+from tasks.sensor_io import load_model
+from tasks.tiepoints import find_tie_points
+scene, ref, out = (Path(a) for a in sys.argv[1:4])
+left, right = load_model(scene / "left.tif"), load_model(scene / "right.tif")
+t0 = time.perf_counter()
+res = find_tie_points.fn(scene / "left.tif", scene / "right.tif", left.model, right.model, ref,
+                         TiePointConfig(), out=out)
+print(json.dumps({"seconds": time.perf_counter() - t0}))
+"""
+
+
+def simulate(out: Path) -> None:
+    cmd = [sys.executable, "-m", "flows.cli", "simulate", "--preset", "spot", "--out", str(out),
+           "--seed", "1", "--lens", "--jitter", "--date-change", "0.1", "--no-lidar"]
+    env = dict(os.environ, PREFECT_HOME=str(out.parent / "prefect"))
+    r = subprocess.run(cmd, capture_output=True, text=True, env=env, check=False)
+    if r.returncode != 0:
+        print(r.stdout[-3000:], r.stderr[-3000:])
+        raise SystemExit("simulate failed")
+
+
+def score(scene: Path, tie_json: Path) -> str:
+    """Tie points against the truth: the left pixel ray-cast on the truth DSM, projected by the
+    true right model; errors split across / along the epipolar line (right pixels)."""
+    import rasterio
+    from rasterio.warp import Resampling, calculate_default_transform, reproject
+
+    from core.dem import GeoDEM
+    from core.matching.tiepoint_results import TiePointResult
+    from core.sensors.base import localize_on_dem
+    from core.sensors.pushbroom import PushbroomModel
+
+    tp = TiePointResult.from_dict(json.loads(tie_json.read_text())).tie_points
+    with rasterio.open(scene / "truth" / "dsm.tif") as src:
+        t, w, h = calculate_default_transform(src.crs, "EPSG:4326", src.width, src.height,
+                                              *src.bounds)
+        z = np.full((h, w), np.nan)
+        reproject(src.read(1).astype(np.float64), z, src_transform=src.transform,
+                  src_crs=src.crs, dst_transform=t, dst_crs="EPSG:4326",
+                  resampling=Resampling.bilinear, src_nodata=np.nan, dst_nodata=np.nan)
+    dsm = GeoDEM.from_transform(z, tuple(t)[:6])
+    tl, tr = (PushbroomModel.from_json((scene / "truth" / f"{n}_truth.json").read_text())
+              for n in ("left", "right"))
+    lon, lat, hh = localize_on_dem(tl, tp.left_col, tp.left_row, dsm)
+    c, r = tr.project(lon, lat, hh)
+    c2, r2 = tr.project(*tl.localize(tp.left_col, tp.left_row, hh + 50.0), hh + 50.0)
+    e = np.stack([c2 - c, r2 - r])
+    e /= np.linalg.norm(e, axis=0)
+    d = np.stack([tp.right_col - c, tp.right_row - r])
+    ok = np.all(np.isfinite(d), axis=0)
+    along = np.sum(d * e, axis=0)[ok]
+    across = (e[0] * d[1] - e[1] * d[0])[ok]
+    err = np.hypot(*d[:, ok])
+    return (f"against the truth ({ok.sum()} points): across-epipolar RMS "
+            f"{np.sqrt(np.mean(across**2)):.3f} px, along-epipolar RMS "
+            f"{np.sqrt(np.mean(along**2)):.3f} px, 2-D median {np.median(err):.3f} px, "
+            f"{np.sum(err > 1)} over 1 px, {np.sum(err > 3)} over 3 px")
+
+
+def one_tile(scene: Path, ref: Path) -> float:
+    """Seconds for the central 1024x1024 block alone, one thread."""
+    from core.matching.tiepoints import HeightPrior, TiePointConfig
+    from tasks.sensor_io import load_model
+    from tasks.tiepoints import Block, block_matches, raster_info, read_reference
+
+    cfg = TiePointConfig()
+    left, right = load_model(scene / "left.tif"), load_model(scene / "right.tif")
+    size, saturation = raster_info(scene / "left.tif")
+    heights = HeightPrior.from_dem(read_reference(ref, left.model, size), cfg.search_radius_m,
+                                   cfg.height_margin_m)
+    c, r = size[0] // 2 - 512, size[1] // 2 - 512
+    t0 = time.perf_counter()
+    block_matches(Block(c, r, c + 1024, r + 1024), str(scene / "left.tif"),
+                  str(scene / "right.tif"), left.model, right.model, heights, cfg, saturation)
+    return time.perf_counter() - t0
+
+
+def main() -> None:
+    from core.geodesy import BBox
+    from tasks.geoid import BUNDLED_SRTM_DIR
+    from tasks.reference import build_reference, locate_tiles
+
+    with tempfile.TemporaryDirectory() as tmp:
+        tmp_path = Path(tmp)
+        given = os.environ.get("GCPFREE_BENCH_SCENE")
+        scene = Path(given) if given else tmp_path / "spot"
+        if not given:
+            t0 = time.perf_counter()
+            simulate(scene)
+            print(f"simulated the spot pair in {time.perf_counter() - t0:.0f} s")
+        ref = tmp_path / "ref.tif"
+        box = BBox(5.0, 44.0, 6.0, 45.0)  # the bundled tile
+        build_reference.fn(locate_tiles.fn(BUNDLED_SRTM_DIR, box), box, ref)
+        out = tmp_path / "tiepoints.json"
+        env = dict(os.environ, PREFECT_HOME=str(tmp_path / "prefect"))
+        before = resource.getrusage(resource.RUSAGE_CHILDREN)
+        r = subprocess.run([sys.executable, "-c", CHILD, str(scene), str(ref), str(out)],
+                           capture_output=True, text=True, env=env, check=False,
+                           cwd=Path(__file__).resolve().parents[1])
+        if r.returncode != 0:
+            print(r.stdout[-3000:], r.stderr[-3000:])
+            raise SystemExit("tie points failed")
+        seconds = json.loads(r.stdout.strip().splitlines()[-1])["seconds"]
+        after = resource.getrusage(resource.RUSAGE_CHILDREN)
+        cpu_s = (after.ru_utime + after.ru_stime) - (before.ru_utime + before.ru_stime)
+        peak_mb = after.ru_maxrss / 1024
+        from core.matching.tiepoint_results import TiePointResult
+
+        report = TiePointResult.from_dict(json.loads(out.read_text())).report
+        print(f"tie points on the spot pair: {seconds:.1f} s on {os.cpu_count()} cores "
+              f"(Dask threads; the child process used {cpu_s:.0f} s of CPU with its imports), "
+              f"peak RSS {peak_mb:.0f} MB (target with the relative orientation: < 60 s, "
+              "< 1536 MB)")
+        print(f"one 1024x1024 block alone: {one_tile(scene, ref):.2f} s")
+        print("\n".join(report.lines()))
+        print(score(scene, out))
+
+
+if __name__ == "__main__":
+    main()

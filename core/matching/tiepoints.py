@@ -1,0 +1,812 @@
+"""Automatic tie points between the two images of a stereo pair (step 1 of the chain).
+
+The delivered sensor models of both images are wrong by up to a few hundred metres on the
+ground but consistent with each other to first order, so each interest point of the left image
+is searched in the right image only around the position the models predict:
+
+1. :func:`detect_points`: Shi-Tomasi corners (minimum eigenvalue of the structure tensor),
+   spread over the window by keeping the strongest per small image cell, away from nodata.
+2. :func:`predict_search`: the epipolar prior. The left pixel is localised at its height h
+   (from a reference DEM) and projected into the right image; the 2x2 Jacobian of that
+   left -> right mapping resamples the right image into left geometry; the search box covers
+   the epipolar segment between h_lo and h_hi plus the metadata uncertainty on the ground.
+3. :func:`match_points`: normalised cross-correlation of the left template over the resampled
+   search box, integer peak, then sub-pixel by re-centred 2-D quadratic fits of the correlation
+   (the right image is resampled around the current estimate at shrinking steps, so the fit's
+   pixel-locking bias vanishes), then a right -> left back-match over the same box that must
+   return to the left point within a tolerance.
+4. :func:`check_consistency`: the offsets of good matches from their predictions agree with
+   their neighbours' (the models' error is smooth, the reference DEM gives the relief).
+5. :func:`best_per_cell`: the best point per ground grid cell, so points cover the overlap.
+
+Image coordinates are ``(col, row)``, 0-based, pixel centres at integers; arrays are indexed
+``[row, col]``; windows of a larger image carry their ``(col0, row0)`` origin. Nodata is 0
+(or NaN). Ground: WGS84 lon/lat degrees, ellipsoidal heights in metres.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, replace
+
+import cv2
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+from scipy import ndimage
+from scipy.spatial import cKDTree
+
+from core.dem import GeoDEM, sample_bilinear
+from core.errors import GeometryError, InputError
+from core.geodesy import geodetic_to_enu, metres_per_degree
+from core.matching.tiepoint_results import TiePoints, TiePointStatus
+from core.sensors.base import SensorModel, localize_on_dem
+
+FloatArray = NDArray[np.float64]
+IntArray = NDArray[np.intp]
+
+_EPI_STEP_M = 10.0  # height step of the epipolar direction
+# cell ids: (iy + OFFSET) * STRIDE + (ix + OFFSET), valid for |ix|, |iy| < 2**20 cells
+_CELL_OFFSET = 2**20
+_CELL_STRIDE = 2**21
+
+
+@dataclass(frozen=True)
+class TiePointConfig:
+    """Settings of the tie-point search (pixels of the left image, metres on the ground).
+
+    Detection: ``candidates_per_cell`` interest points per ground cell, at most
+    ``points_per_tile`` per ``tile_px``-square block, ``min_spacing_px`` apart, none weaker
+    than ``quality_level`` times the block's strong corners. Search: ``search_radius_m`` is
+    each image's stated geolocation uncertainty; the two errors can add up, so the search
+    covers twice that (``pair_radius_m``) around the prediction, plus the epipolar segment over
+    the reference DEM's range within ``search_radius_m`` widened by ``height_margin_m``.
+    Matching: ``(2 template_half_px + 1)``-square templates, ``refine_iterations`` re-centred
+    sub-pixel fits, back-match within ``back_match_tol_px``. ``min_correlation`` 0.7: two
+    independent 15x15 noise patches correlate with a standard deviation of 1/15, so 0.7 is ten
+    of them; correct matches score 0.85-0.99 (median 0.96 on the simulated pairs), but on
+    scenes changed between dates 12-36 % of the matches at 0.7-0.9 that pass the back-match
+    are still wrong. Those are caught by the neighbourhood check (``consistency_*``, see
+    :func:`check_consistency`) rather than by a higher threshold, which costs coverage (0.8:
+    63 -> 51 % of the cells of a changed tiny scene) and ``best_per_cell`` keeps the best
+    correlation of each ``cell_m`` cell anyway.
+    """
+
+    template_half_px: int = 7
+    candidates_per_cell: int = 8
+    points_per_tile: int = 4000
+    tile_px: int = 1024
+    min_spacing_px: int = 5
+    quality_level: float = 0.01
+    search_radius_m: float = 300.0
+    min_correlation: float = 0.7
+    back_match_tol_px: float = 0.5
+    cell_m: float = 2000.0
+    height_margin_m: float = 50.0
+    refine_iterations: int = 4
+    consistency_radius_m: float = 3000.0
+    consistency_tol_px: float = 1.5
+    consistency_height_m: float = 40.0
+
+    def __post_init__(self) -> None:
+        positive = ("candidates_per_cell", "points_per_tile", "min_spacing_px",
+                    "back_match_tol_px", "cell_m", "consistency_radius_m", "consistency_tol_px")
+        nonneg = ("search_radius_m", "height_margin_m", "refine_iterations",
+                  "consistency_height_m")
+        bad = [f"{k} must be > 0, got {getattr(self, k)}" for k in positive
+               if not getattr(self, k) > 0]
+        bad += [f"{k} must be >= 0, got {getattr(self, k)}" for k in nonneg
+                if not getattr(self, k) >= 0]
+        if not 2 <= self.template_half_px <= 50:
+            bad.append(f"template_half_px must be in 2..50, got {self.template_half_px}")
+        if self.tile_px < 64:
+            bad.append(f"tile_px must be >= 64, got {self.tile_px}")
+        if not (0.0 <= self.quality_level < 1.0 and -1.0 < self.min_correlation < 1.0):
+            bad.append(f"quality_level ({self.quality_level}) must be in [0, 1) and "
+                       f"min_correlation ({self.min_correlation}) in (-1, 1)")
+        if bad:
+            raise InputError(f"tie points: {bad[0]}")
+
+    @property
+    def pair_radius_m(self) -> float:
+        """The relative uncertainty of the two images on the ground: twice each one's."""
+        return 2.0 * self.search_radius_m
+
+    def max_points(self, n_pixels: int, gsd_m: float) -> int:
+        """Interest points wanted in a block of ``n_pixels`` of ``gsd_m`` ground sampling:
+        ``candidates_per_cell`` per ground cell, at most the ``points_per_tile`` density."""
+        per_cell = self.candidates_per_cell * n_pixels * gsd_m**2 / self.cell_m**2
+        per_tile = self.points_per_tile * n_pixels / self.tile_px**2
+        return max(1, round(min(per_cell, per_tile)))
+
+
+# ---------------------------------------------------------------------------- interest points
+
+
+def valid_pixels(image: ArrayLike, nodata: float | None = 0,
+                 saturation: float | None = None) -> NDArray[np.bool_]:
+    """Pixels that can be matched: finite, not ``nodata`` and below ``saturation`` (when given;
+    e.g. 255 for 8-bit or 4095 for 12-bit images)."""
+    a = np.asarray(image)
+    ok = np.isfinite(a) if a.dtype.kind == "f" else np.ones(a.shape, dtype=bool)
+    if nodata is not None:
+        ok &= a != nodata
+    if saturation is not None:
+        ok &= a < saturation
+    return ok
+
+
+def detect_points(
+    image: ArrayLike,
+    valid_mask: ArrayLike,
+    *,
+    max_points: int,
+    min_spacing_px: int = 8,
+    border_px: int = 7,
+    quality_level: float = 0.01,
+    region: tuple[int, int, int, int] | None = None,
+) -> tuple[IntArray, IntArray]:
+    """Interest points of an image window: (col, row) window indices, strongest first.
+
+    Shi-Tomasi corners (``cv2.cornerMinEigenVal``, 5x5 blocks) that are local maxima within
+    ``min_spacing_px``, whose ``(2 border_px + 1)``-square template is entirely valid
+    (``valid_mask``: no nodata, no saturation), stronger than ``quality_level`` times the
+    window's 99.5th-percentile corner (flat areas give none), and spread evenly: only the
+    strongest per square image cell sized for ``max_points`` over the window (or over
+    ``region`` = (col0, row0, col1, row1), end-exclusive, where points must lie).
+    """
+    img = np.asarray(image, dtype=np.float32)
+    valid = np.asarray(valid_mask, dtype=bool) & np.isfinite(img)
+    if img.ndim != 2 or valid.shape != img.shape:
+        raise InputError(f"detect_points needs a 2-D image and a mask of its shape, got "
+                         f"{img.shape} and {valid.shape}")
+    if max_points < 1 or min_spacing_px < 1 or border_px < 0:
+        raise InputError("detect_points: max_points and min_spacing_px must be >= 1 and "
+                         "border_px >= 0")
+    b = int(border_px)
+    k = np.ones((2 * b + 1, 2 * b + 1), np.uint8)
+    ok = cv2.erode(valid.astype(np.uint8), k, borderType=cv2.BORDER_CONSTANT, borderValue=0) > 0
+    c0, r0, c1, r1 = region if region is not None else (0, 0, img.shape[1], img.shape[0])
+    inside = np.zeros_like(ok)
+    inside[max(r0, 0):max(r1, 0), max(c0, 0):max(c1, 0)] = True
+    ok &= inside
+    empty = (np.empty(0, np.intp), np.empty(0, np.intp))
+    if not ok.any():
+        return empty
+    filled = np.where(valid, img, np.float32(np.mean(img[valid])))
+    resp = cv2.cornerMinEigenVal(filled, blockSize=5, ksize=3)
+    strong = float(np.percentile(resp[ok], 99.5))
+    if not strong > 0:
+        return empty
+    s = int(min_spacing_px)
+    peak = resp >= cv2.dilate(resp, np.ones((2 * s + 1, 2 * s + 1), np.uint8))
+    rows, cols = np.nonzero(ok & peak & (resp > quality_level * strong))
+    score = resp[rows, cols].astype(np.float64)
+    area = float(max(r1 - r0, 1) * max(c1 - c0, 1))
+    grid_px = max(float(s), math.sqrt(area / max_points))
+    keep = best_per_cell(cols.astype(np.float64), rows.astype(np.float64), score, grid_px)
+    keep = keep[np.argsort(-score[keep], kind="stable")][:max_points]
+    return cols[keep].astype(np.intp), rows[keep].astype(np.intp)
+
+
+# ---------------------------------------------------------------------------- heights
+
+
+@dataclass(frozen=True, eq=False)
+class HeightPrior:
+    """Where the search heights come from: a reference DEM, or one range for the whole scene.
+
+    With a DEM, a point's height is where its left line of sight meets the DEM, and its range
+    the DEM's minimum and maximum within ``radius_m`` around that ground point (the model's own
+    error puts it anywhere there) widened by ``margin_m``. Without, every point gets the middle
+    of ``h_range_m`` and the range itself.
+    """
+
+    dem: GeoDEM | None = None
+    dem_lo: GeoDEM | None = None
+    dem_hi: GeoDEM | None = None
+    h_range_m: tuple[float, float] | None = None
+    margin_m: float = 0.0
+
+    @classmethod
+    def from_dem(cls, dem: GeoDEM, radius_m: float, margin_m: float) -> HeightPrior:
+        """The DEM and its local envelope (min/max filters of ``radius_m``), ellipsoidal h."""
+        m_lon, m_lat = metres_per_degree(dem.lat0_deg + 0.5 * (dem.shape[0] - 1) * dem.dlat_deg)
+        ny = 2 * math.ceil(radius_m / (abs(dem.dlat_deg) * float(m_lat))) + 1
+        nx = 2 * math.ceil(radius_m / (abs(dem.dlon_deg) * float(m_lon))) + 1
+        h = dem.h_m
+        lo = ndimage.minimum_filter(np.where(np.isnan(h), np.inf, h), size=(ny, nx))
+        hi = ndimage.maximum_filter(np.where(np.isnan(h), -np.inf, h), size=(ny, nx))
+        lo[~np.isfinite(lo)] = np.nan
+        hi[~np.isfinite(hi)] = np.nan
+        grid = (dem.lon0_deg, dem.lat0_deg, dem.dlon_deg, dem.dlat_deg)
+        return cls(dem, GeoDEM(lo, *grid), GeoDEM(hi, *grid), None, float(margin_m))
+
+    @property
+    def typical_h_m(self) -> float:
+        """The median DEM height, or the middle of the range."""
+        if self.dem is not None:
+            return float(np.nanmedian(self.dem.h_m))
+        return 0.5 * sum(self.h_range_m) if self.h_range_m is not None else 0.0
+
+    @classmethod
+    def from_range(cls, h_min_m: float, h_max_m: float) -> HeightPrior:
+        if not (np.isfinite(h_min_m) and np.isfinite(h_max_m) and h_max_m >= h_min_m):
+            raise InputError(f"height range ({h_min_m}, {h_max_m}) is not a range; give "
+                             "h_min <= h_max in metres (ellipsoidal)")
+        return cls(h_range_m=(float(h_min_m), float(h_max_m)))
+
+    def heights(self, model: SensorModel, col: ArrayLike, row: ArrayLike
+                ) -> tuple[FloatArray, FloatArray, FloatArray]:
+        """(h, h_lo, h_hi) of image points of ``model``; NaN where the ray misses the DEM."""
+        col = np.atleast_1d(np.asarray(col, dtype=np.float64)).ravel()
+        row = np.atleast_1d(np.asarray(row, dtype=np.float64)).ravel()
+        if self.dem is None or self.dem_lo is None or self.dem_hi is None:
+            if self.h_range_m is None:
+                raise InputError("a HeightPrior needs a DEM or a height range")
+            lo, hi = self.h_range_m
+            return (np.full(col.size, 0.5 * (lo + hi)), np.full(col.size, lo),
+                    np.full(col.size, hi))
+        try:
+            lon, lat, h = localize_on_dem(model, col, row, self.dem)
+        except GeometryError:
+            nan = np.full(col.size, np.nan)
+            return nan, nan.copy(), nan.copy()
+        lo = self.dem_lo.height_m(lon, lat) - self.margin_m
+        hi = self.dem_hi.height_m(lon, lat) + self.margin_m
+        return h, np.fmin(lo, h - self.margin_m), np.fmax(hi, h + self.margin_m)
+
+    def with_slopes(self, model: SensorModel, col: ArrayLike, row: ArrayLike, step_px: float
+                    ) -> tuple[FloatArray, FloatArray, FloatArray, FloatArray, FloatArray]:
+        """(h, h_lo, h_hi) as :meth:`heights`, and the terrain slope seen from the image,
+        dh/dcol and dh/drow (metres per pixel; central differences of the DEM heights over
+        +-``step_px``; zero without a DEM or off it), in one DEM intersection."""
+        col = np.atleast_1d(np.asarray(col, dtype=np.float64)).ravel()
+        row = np.atleast_1d(np.asarray(row, dtype=np.float64)).ravel()
+        if self.dem is None:
+            return (*self.heights(model, col, row), np.zeros(col.size), np.zeros(col.size))
+        dc = np.array([0.0, step_px, -step_px, 0.0, 0.0])
+        dr = np.array([0.0, 0.0, 0.0, step_px, -step_px])
+        h, lo, hi = (a.reshape(5, -1) for a in self.heights(
+            model, (col[None] + dc[:, None]).ravel(), (row[None] + dr[:, None]).ravel()))
+        g_col = np.nan_to_num((h[1] - h[2]) / (2.0 * step_px))
+        g_row = np.nan_to_num((h[3] - h[4]) / (2.0 * step_px))
+        return h[0], lo[0], hi[0], g_col, g_row
+
+
+# ---------------------------------------------------------------------------- epipolar prior
+
+
+@dataclass(frozen=True, eq=False)
+class SearchPrior:
+    """Where to search each left point in the right image.
+
+    ``right_col``/``right_row``: the prediction at height ``h_m``; ``jacobian`` (n, 2, 2):
+    d(right col, row)/d(left col, row) there; ``half_col_px``/``half_row_px``: half-extent of
+    the search box in left-geometry pixels (the right image resampled through the Jacobian);
+    ``epipolar`` (n, 2): d(right col, row)/dh, pixels per metre of height (the epipolar
+    direction and the parallax rate). ``valid`` is False where no prediction could be made.
+    """
+
+    right_col: FloatArray
+    right_row: FloatArray
+    jacobian: FloatArray
+    half_col_px: FloatArray
+    half_row_px: FloatArray
+    h_m: FloatArray
+    epipolar: FloatArray
+
+    @property
+    def valid(self) -> NDArray[np.bool_]:
+        vals = [self.right_col, self.right_row, self.half_col_px, self.half_row_px]
+        ok = np.logical_and.reduce([np.isfinite(v) for v in vals])
+        return ok & np.all(np.isfinite(self.jacobian), axis=(1, 2))
+
+
+def predict_search(
+    left_model: SensorModel,
+    right_model: SensorModel,
+    col: ArrayLike,
+    row: ArrayLike,
+    h_m: ArrayLike,
+    h_lo_m: ArrayLike,
+    h_hi_m: ArrayLike,
+    radius_m: float,
+    *,
+    dh_dcol: ArrayLike = 0.0,
+    dh_drow: ArrayLike = 0.0,
+) -> SearchPrior:
+    """The epipolar prior of left points (col, row) with heights h in [h_lo, h_hi] (metres).
+
+    The right position is ``right.project(left.localize(col, row, h), h)``; the Jacobian of
+    that mapping comes from central differences of 1 px; the search half-extent, in left pixels,
+    covers the right positions at h_lo and h_hi (the epipolar segment, mapped back to left
+    geometry through the Jacobian) plus a ground circle of ``radius_m`` converted with the left
+    image's local ground sampling, plus 1 px for the sub-pixel fit.
+    """
+    arrs = np.broadcast_arrays(*(np.atleast_1d(np.asarray(a, dtype=np.float64))
+                                 for a in (col, row, h_m, h_lo_m, h_hi_m)))
+    c, r, h, lo, hi = (a.ravel() for a in arrs)
+    n = c.size
+    if radius_m < 0:
+        raise InputError(f"search radius must be >= 0 m, got {radius_m}")
+    dc = np.array([0.0, 0.5, -0.5, 0.0, 0.0, 0.0, 0.0, 0.0])
+    dr = np.array([0.0, 0.0, 0.0, 0.5, -0.5, 0.0, 0.0, 0.0])
+    cc = (c[None, :] + dc[:, None]).ravel()
+    rr = (r[None, :] + dr[:, None]).ravel()
+    hh = np.concatenate([np.tile(h, 5), lo, hi, h + _EPI_STEP_M])
+    lon, lat = left_model.localize(cc, rr, hh)
+    pc, pr = right_model.project(lon, lat, hh)
+    pc, pr = pc.reshape(8, n), pr.reshape(8, n)
+    jac = np.empty((n, 2, 2))
+    jac[:, 0, 0], jac[:, 1, 0] = pc[1] - pc[2], pr[1] - pr[2]
+    jac[:, 0, 1], jac[:, 1, 1] = pc[3] - pc[4], pr[3] - pr[4]
+    # ground metres per left pixel (east, north) x (col, row), then its inverse
+    lon, lat = lon.reshape(8, n), lat.reshape(8, n)
+    epi = np.stack([pc[7] - pc[0], pr[7] - pr[0]], axis=-1) / _EPI_STEP_M
+    m_lon, m_lat = metres_per_degree(lat[0])
+    g = np.empty((n, 2, 2))
+    g[:, 0, 0], g[:, 1, 0] = (lon[1] - lon[2]) * m_lon, (lat[1] - lat[2]) * m_lat
+    g[:, 0, 1], g[:, 1, 1] = (lon[3] - lon[4]) * m_lon, (lat[3] - lat[4]) * m_lat
+    grad = np.stack(np.broadcast_arrays(np.ravel(dh_dcol) * np.ones(n),
+                                        np.ravel(dh_drow) * np.ones(n)), axis=-1)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        right_px_per_m = jac @ _inv2(g)  # a ground displacement seen in the right image
+        # on sloping terrain the mapping follows the surface: J + (d right / dh) (grad h)^T
+        jac = jac + epi[:, :, None] * grad[:, None, :]
+        jinv = _inv2(jac)
+        ends = np.stack([pc[5:7] - pc[0], pr[5:7] - pr[0]], axis=-1)  # (2 ends, n, 2)
+        seg = np.einsum("nij,enj->eni", jinv, ends)
+        radius_px = radius_m * np.linalg.norm(jinv @ right_px_per_m, axis=2)  # (n, 2)
+        half_col = np.max(np.abs(seg[..., 0]), axis=0) + radius_px[:, 0] + 1.0
+        half_row = np.max(np.abs(seg[..., 1]), axis=0) + radius_px[:, 1] + 1.0
+    return SearchPrior(pc[0], pr[0], jac, half_col, half_row, h, epi)
+
+
+def _inv2(a: FloatArray) -> FloatArray:
+    """Inverses of 2x2 matrices (n, 2, 2); NaN for singular ones."""
+    det = a[:, 0, 0] * a[:, 1, 1] - a[:, 0, 1] * a[:, 1, 0]
+    det = np.where(np.abs(det) > 1e-12, det, np.nan)
+    out = np.empty_like(a)
+    out[:, 0, 0], out[:, 1, 1] = a[:, 1, 1] / det, a[:, 0, 0] / det
+    out[:, 0, 1], out[:, 1, 0] = -a[:, 0, 1] / det, -a[:, 1, 0] / det
+    return out
+
+
+def search_windows(col: ArrayLike, row: ArrayLike, prior: SearchPrior, template_half_px: int
+                   ) -> tuple[tuple[int, int, int, int], tuple[int, int, int, int]] | None:
+    """The (col0, row0, col1, row1) windows, end-exclusive, that :func:`match_points` reads for
+    these points: in the left image their templates and back-match boxes, in the right image
+    their search boxes; None if no point has a prior."""
+    ok = prior.valid
+    if not ok.any():
+        return None
+    ex = np.ceil(prior.half_col_px[ok]) + template_half_px + 2
+    ey = np.ceil(prior.half_row_px[ok]) + template_half_px + 2
+    j = prior.jacobian[ok]
+    boxes = [(np.asarray(col, np.float64)[ok], np.asarray(row, np.float64)[ok], ex, ey),
+             (prior.right_col[ok], prior.right_row[ok], np.abs(j[:, 0, 0]) * ex
+              + np.abs(j[:, 0, 1]) * ey, np.abs(j[:, 1, 0]) * ex + np.abs(j[:, 1, 1]) * ey)]
+    left, right = ((int(np.floor(np.min(c - hc))), int(np.floor(np.min(r - hr))),
+                    int(np.ceil(np.max(c + hc))) + 1, int(np.ceil(np.max(r + hr))) + 1)
+                   for c, r, hc, hr in boxes)
+    return left, right
+
+
+# ---------------------------------------------------------------------------- matching
+
+
+@dataclass(frozen=True, eq=False)
+class Matches:
+    """Every searched point: positions in full-image pixels, the correlation at the sub-pixel
+    match, the back-match distance (left pixels), a :class:`TiePointStatus` code, the height
+    the search was centred on (metres, ellipsoidal), the right position predicted there and
+    the epipolar rate d(right col, row)/dh (pixels per metre)."""
+
+    left_col: FloatArray
+    left_row: FloatArray
+    right_col: FloatArray
+    right_row: FloatArray
+    correlation: FloatArray
+    back_error_px: FloatArray
+    status: NDArray[np.uint8]
+    h_m: FloatArray
+    pred_col: FloatArray
+    pred_row: FloatArray
+    epipolar_col: FloatArray
+    epipolar_row: FloatArray
+
+    def with_status(self, index: ArrayLike, code: int) -> Matches:
+        status = self.status.copy()
+        status[np.asarray(index)] = np.uint8(code)
+        return replace(self, status=status)
+
+    @property
+    def ok(self) -> NDArray[np.bool_]:
+        return self.status == TiePointStatus.OK
+
+    @classmethod
+    def concat(cls, parts: list[Matches]) -> Matches:
+        """The matches of several tiles as one set."""
+        names = [f.name for f in cls.__dataclass_fields__.values()]
+        if not parts:
+            return cls(*(np.empty(0, np.uint8 if k == "status" else np.float64) for k in names))
+        return cls(*(np.concatenate([getattr(p, k) for p in parts]) for k in names))
+
+
+@dataclass
+class _Raster:
+    """An image window ready for matching: float32 data (0 on nodata), float32 invalid mask,
+    float64 data with NaN on nodata (for exact bilinear sampling) and its origin."""
+
+    data: NDArray[np.float32]
+    invalid: NDArray[np.float32]
+    nan: FloatArray
+    col0: int
+    row0: int
+
+    @classmethod
+    def of(cls, image: ArrayLike, origin: tuple[float, float], nodata: float | None) -> _Raster:
+        a = np.asarray(image)
+        if a.ndim != 2:
+            raise InputError(f"matching needs 2-D image windows, got shape {a.shape}")
+        ok = valid_pixels(a, nodata)
+        data = np.where(ok, a, 0).astype(np.float32)
+        return cls(data, (~ok).astype(np.float32), np.where(ok, a, np.nan).astype(np.float64),
+                   int(origin[0]), int(origin[1]))
+
+    def crop(self, c0: int, r0: int, c1: int, r1: int
+             ) -> tuple[NDArray[np.float32], NDArray[np.float32]]:
+        """Data and invalid mask of local [r0:r1, c0:c1], padded as invalid outside."""
+        h, w = self.data.shape
+        if c0 >= 0 and r0 >= 0 and c1 <= w and r1 <= h:
+            return self.data[r0:r1, c0:c1], self.invalid[r0:r1, c0:c1]
+        d = np.zeros((r1 - r0, c1 - c0), np.float32)
+        m = np.ones((r1 - r0, c1 - c0), np.float32)
+        a0, a1, b0, b1 = max(r0, 0), min(r1, h), max(c0, 0), min(c1, w)
+        if a1 > a0 and b1 > b0:
+            d[a0 - r0:a1 - r0, b0 - c0:b1 - c0] = self.data[a0:a1, b0:b1]
+            m[a0 - r0:a1 - r0, b0 - c0:b1 - c0] = self.invalid[a0:a1, b0:b1]
+        return d, m
+
+
+def _masked_ncc(search: NDArray[np.float32], invalid: NDArray[np.float32],
+                template: NDArray[np.float32]) -> NDArray[np.float32]:
+    """TM_CCOEFF_NORMED of ``template`` over ``search``; -2 where the window touches nodata or
+    the correlation is undefined."""
+    ncc = cv2.matchTemplate(search, template, cv2.TM_CCOEFF_NORMED)
+    if invalid.any():
+        th, tw = template.shape
+        counts = cv2.boxFilter(invalid, -1, (tw, th), normalize=False,
+                               anchor=(0, 0), borderType=cv2.BORDER_CONSTANT)
+        ncc[counts[:ncc.shape[0], :ncc.shape[1]] > 1e-3] = -2.0
+    ncc[~np.isfinite(ncc)] = -2.0
+    return ncc
+
+
+_U3, _V3 = np.meshgrid([-1.0, 0.0, 1.0], [-1.0, 0.0, 1.0])
+_QUAD_PINV = np.linalg.pinv(np.stack([np.ones(9), _U3.ravel(), _V3.ravel(), _U3.ravel() ** 2,
+                                      _V3.ravel() ** 2, (_U3 * _V3).ravel()], axis=1))
+
+
+def quadratic_peak(z: ArrayLike) -> tuple[FloatArray, FloatArray]:
+    """Sub-pixel peak offsets (d_col, d_row) of 3x3 correlation neighbourhoods (n, 3, 3).
+
+    A 2-D quadratic is fitted by least squares; where it has no maximum, a parabola through
+    the three values on each axis. Offsets are clipped to +-1 px.
+    """
+    z = np.asarray(z, dtype=np.float64).reshape(-1, 9)
+    _, b, c, d, e, f = (_QUAD_PINV @ z.T)
+    det = 4.0 * d * e - f * f
+    with np.errstate(invalid="ignore", divide="ignore"):
+        good = (d < 0) & (det > 1e-12)
+        dx = np.where(good, (f * c - 2.0 * e * b) / det, np.nan)
+        dy = np.where(good, (f * b - 2.0 * d * c) / det, np.nan)
+        zz = z.reshape(-1, 3, 3)
+        den_x = zz[:, 1, 0] - 2.0 * zz[:, 1, 1] + zz[:, 1, 2]
+        den_y = zz[:, 0, 1] - 2.0 * zz[:, 1, 1] + zz[:, 2, 1]
+        px = np.where(den_x < 0, 0.5 * (zz[:, 1, 0] - zz[:, 1, 2]) / den_x, 0.0)
+        py = np.where(den_y < 0, 0.5 * (zz[:, 0, 1] - zz[:, 2, 1]) / den_y, 0.0)
+    dx = np.where(np.isfinite(dx), dx, px)
+    dy = np.where(np.isfinite(dy), dy, py)
+    return np.clip(np.nan_to_num(dx), -1.0, 1.0), np.clip(np.nan_to_num(dy), -1.0, 1.0)
+
+
+def _peak(ncc: NDArray[np.float32]) -> tuple[int, int, float, NDArray[np.float64] | None]:
+    """Integer peak (col, row), its value and its 3x3 neighbourhood (None on the border)."""
+    iy, ix = np.unravel_index(int(np.argmax(ncc)), ncc.shape)
+    h, w = ncc.shape
+    if 0 < ix < w - 1 and 0 < iy < h - 1:
+        nb = ncc[iy - 1:iy + 2, ix - 1:ix + 2].astype(np.float64)
+        return int(ix), int(iy), float(ncc[iy, ix]), (nb if np.all(nb > -1.5) else None)
+    return int(ix), int(iy), float(ncc[iy, ix]), None
+
+
+def _ncc(a: FloatArray, b: FloatArray) -> FloatArray:
+    """Normalised cross-correlation of stacks of equal patches (n, h, w) -> (n,)."""
+    a = a - a.mean(axis=(1, 2), keepdims=True)
+    b = b - b.mean(axis=(1, 2), keepdims=True)
+    num = np.einsum("nij,nij->n", a, b)
+    den = np.sqrt(np.einsum("nij,nij->n", a, a) * np.einsum("nij,nij->n", b, b))
+    with np.errstate(invalid="ignore", divide="ignore"):
+        return np.where(den > 0, num / den, np.nan)
+
+
+def _right_patches(right: _Raster, pc: FloatArray, pr: FloatArray, jac: FloatArray,
+                   du: FloatArray, dv: FloatArray, half: int) -> FloatArray:
+    """Right image resampled into left geometry (n, 2 half + 1, 2 half + 1) around the left
+    offsets (du, dv) from the predictions; exact bilinear, NaN off the window or on nodata."""
+    g = np.arange(-half, half + 1, dtype=np.float64)
+    u = du[:, None, None] + g[None, None, :]
+    v = dv[:, None, None] + g[None, :, None]
+    x = pc[:, None, None] + jac[:, 0, 0, None, None] * u + jac[:, 0, 1, None, None] * v
+    y = pr[:, None, None] + jac[:, 1, 0, None, None] * u + jac[:, 1, 1, None, None] * v
+    return sample_bilinear(right.nan, y - right.row0, x - right.col0)
+
+
+def _refine(right: _Raster, prior_c: FloatArray, prior_r: FloatArray, jac: FloatArray,
+            du: FloatArray, dv: FloatArray, templates: FloatArray, iterations: int,
+            ) -> tuple[FloatArray, FloatArray, FloatArray, FloatArray]:
+    """Re-centred sub-pixel fits: resample the right image around the current offsets at 3x3
+    shifts of 1, 1/2, 1/4... px, correlate, move to the quadratic peak. Once the shifts are
+    small the quadratic is a good model of the peak and the fit's pixel-locking bias is gone
+    (0.037 -> 0.0095 px RMS on synthetic images). Returns the offsets, the correlation there and
+    the right patches there (the back-match templates)."""
+    t = templates.shape[1] // 2
+    for k in range(iterations):
+        step = 0.5**k
+        z = np.stack([_ncc(_right_patches(right, prior_c, prior_r, jac, du + step * sx,
+                                          dv + step * sy, t), templates)
+                      for sy in (-1, 0, 1) for sx in (-1, 0, 1)], axis=1).reshape(-1, 3, 3)
+        dx, dy = quadratic_peak(np.nan_to_num(z, nan=-2.0))
+        du, dv = du + step * dx, dv + step * dy
+    p = _right_patches(right, prior_c, prior_r, jac, du, dv, t)
+    return du, dv, _ncc(p, templates), p
+
+
+def match_points(
+    left: ArrayLike,
+    left_origin: tuple[float, float],
+    right: ArrayLike,
+    right_origin: tuple[float, float],
+    left_col: ArrayLike,
+    left_row: ArrayLike,
+    prior: SearchPrior,
+    cfg: TiePointConfig,
+    *,
+    nodata: float | None = 0,
+) -> Matches:
+    """Match left points in the right image within their epipolar prior.
+
+    ``left``/``right`` are windows of the two images whose top-left pixels are the full-image
+    pixels ``left_origin``/``right_origin`` (col0, row0); ``left_col``/``left_row`` are
+    full-image pixel centres (rounded to integers: templates are not resampled). For each
+    point: the left ``(2 t + 1)``-square template is correlated (``TM_CCOEFF_NORMED``) over the
+    right image resampled into left geometry through the prior's Jacobian over the search box;
+    the integer peak is refined by re-centred quadratic fits (``cfg.refine_iterations``); then
+    the right patch at the match is searched back over the same box in the left image and must
+    land within ``cfg.back_match_tol_px`` of the left point. The windows must hold what
+    :func:`search_windows` says; what lies outside counts as nodata.
+    """
+    lc = np.rint(np.atleast_1d(np.asarray(left_col, dtype=np.float64)).ravel())
+    lr = np.rint(np.atleast_1d(np.asarray(left_row, dtype=np.float64)).ravel())
+    n = lc.size
+    if prior.h_m.size != n or lr.size != n:
+        raise InputError(f"match_points: {n} columns, {lr.size} rows and a prior of "
+                         f"{prior.h_m.size} points; give one prior per point")
+    L = _Raster.of(left, left_origin, nodata)
+    R = _Raster.of(right, right_origin, nodata)
+    t = cfg.template_half_px
+    status = np.full(n, TiePointStatus.NO_PRIOR, np.uint8)
+    du, dv = np.zeros(n), np.zeros(n)
+    corr, back = np.full(n, np.nan), np.full(n, np.nan)
+    templates = np.zeros((n, 2 * t + 1, 2 * t + 1))
+    for i in np.flatnonzero(prior.valid):
+        ci, ri = int(lc[i]) - L.col0, int(lr[i]) - L.row0
+        tpl, tinv = L.crop(ci - t, ri - t, ci + t + 1, ri + t + 1)
+        if tinv.any():
+            status[i] = TiePointStatus.OUTSIDE
+            continue
+        if not np.ptp(tpl) > 0:
+            status[i] = TiePointStatus.NO_TEXTURE
+            continue
+        ex, ey = math.ceil(prior.half_col_px[i]), math.ceil(prior.half_row_px[i])
+        u = np.arange(-(ex + t), ex + t + 1, dtype=np.float32)
+        v = np.arange(-(ey + t), ey + t + 1, dtype=np.float32)
+        j = prior.jacobian[i]
+        c0 = np.float32(prior.right_col[i] - R.col0)
+        r0 = np.float32(prior.right_row[i] - R.row0)
+        mx = c0 + np.float32(j[0, 0]) * u[None, :] + np.float32(j[0, 1]) * v[:, None]
+        my = r0 + np.float32(j[1, 0]) * u[None, :] + np.float32(j[1, 1]) * v[:, None]
+        s = cv2.remap(R.data, mx, my, cv2.INTER_LINEAR, borderMode=cv2.BORDER_CONSTANT,
+                      borderValue=0)
+        sinv = cv2.remap(R.invalid, mx, my, cv2.INTER_LINEAR, borderMode=cv2.BORDER_CONSTANT,
+                         borderValue=1)
+        ncc = _masked_ncc(s, sinv, tpl)
+        ix, iy, val, nb = _peak(ncc)
+        if val < -1.5:
+            status[i] = TiePointStatus.OUTSIDE
+            continue
+        if nb is None:
+            status[i] = TiePointStatus.EDGE_PEAK
+            continue
+        dx, dy = quadratic_peak(nb)
+        du[i], dv[i] = ix - ex + dx[0], iy - ey + dy[0]
+        templates[i] = tpl
+        status[i] = TiePointStatus.OK
+    idx = np.flatnonzero(status == TiePointStatus.OK)
+    rc, rr = np.full(n, np.nan), np.full(n, np.nan)
+    if idx.size:
+        d_u, d_v, c, g = _refine(R, prior.right_col[idx], prior.right_row[idx],
+                                 prior.jacobian[idx], du[idx], dv[idx], templates[idx],
+                                 cfg.refine_iterations)
+        jac = prior.jacobian[idx]
+        rc[idx] = prior.right_col[idx] + jac[:, 0, 0] * d_u + jac[:, 0, 1] * d_v
+        rr[idx] = prior.right_row[idx] + jac[:, 1, 0] * d_u + jac[:, 1, 1] * d_v
+        corr[idx] = c
+        bad = ~np.isfinite(c)
+        status[idx[bad]] = TiePointStatus.OUTSIDE
+        low = ~bad & (c < cfg.min_correlation)
+        status[idx[low]] = TiePointStatus.LOW_CORRELATION
+        for k in np.flatnonzero(~bad & ~low):
+            i = idx[k]
+            back[i] = _back_match(L, int(lc[i]), int(lr[i]), prior.half_col_px[i],
+                                  prior.half_row_px[i], g[k].astype(np.float32))
+            if not back[i] <= cfg.back_match_tol_px:
+                status[i] = TiePointStatus.BACK_MATCH
+    return Matches(lc, lr, rc, rr, corr, back, status, prior.h_m.copy(), prior.right_col.copy(),
+                   prior.right_row.copy(), prior.epipolar[:, 0].copy(),
+                   prior.epipolar[:, 1].copy())
+
+
+def _back_match(left: _Raster, col: int, row: int, half_col: float, half_row: float,
+                template: NDArray[np.float32]) -> float:
+    """Distance (left px) from (col, row) to the best match of a right template searched in
+    the left image over the search box; inf when the peak is on the box's border."""
+    t = template.shape[0] // 2
+    ex, ey = math.ceil(half_col), math.ceil(half_row)
+    ci, ri = col - left.col0, row - left.row0
+    s, sinv = left.crop(ci - ex - t, ri - ey - t, ci + ex + t + 1, ri + ey + t + 1)
+    ix, iy, val, nb = _peak(_masked_ncc(s, sinv, template))
+    if nb is None or val < -1.5:
+        return math.inf
+    dx, dy = quadratic_peak(nb)
+    return float(math.hypot(ix - ex + dx[0], iy - ey + dy[0]))
+
+
+# ---------------------------------------------------------------------------- ground cells
+
+
+def ground_xy_m(model: SensorModel, col: ArrayLike, row: ArrayLike, h_m: ArrayLike,
+                origin: tuple[float, float, float]) -> tuple[FloatArray, FloatArray]:
+    """East, north metres, in the local frame at ``origin`` (lon, lat, h), of image points
+    localised at heights ``h_m``."""
+    lon, lat = model.localize(col, row, h_m)
+    e, n, _ = geodetic_to_enu(lon, lat, h_m, origin)
+    return np.asarray(e, np.float64), np.asarray(n, np.float64)
+
+
+def default_search_radius_m(gsd_m: float) -> float:
+    """The metadata's ground uncertainty when none is stated: 30 pixels, between 10 and 300 m
+    (archive SPOT: 100-300 m at 10-20 m; Pleiades: about 10 m at 0.5 m)."""
+    return float(np.clip(30.0 * gsd_m, 10.0, 300.0))
+
+
+def ground_sampling_m(model: SensorModel, col: float, row: float, h_m: float) -> float:
+    """Ground metres per pixel of ``model`` at (col, row) and height ``h_m``: the geometric
+    mean of the ground steps of one column and one row."""
+    h = np.full(3, h_m)
+    lon, lat = model.localize([col, col + 1.0, col], [row, row, row + 1.0], h)
+    e, n, _ = geodetic_to_enu(lon, lat, h, (lon[0], lat[0], h_m))
+    gsd = math.sqrt(math.hypot(e[1], n[1]) * math.hypot(e[2], n[2]))
+    if not gsd > 0:
+        raise GeometryError(f"the sensor model gives no ground sampling at pixel ({col:.0f}, "
+                            f"{row:.0f}); check the model")
+    return gsd
+
+
+def cell_ids(x_m: ArrayLike, y_m: ArrayLike, cell_m: float) -> NDArray[np.int64]:
+    """The id of the ``cell_m`` square grid cell (origin 0, 0) holding each point; -1 for
+    non-finite coordinates."""
+    x = np.asarray(x_m, dtype=np.float64)
+    y = np.asarray(y_m, dtype=np.float64)
+    ok = np.isfinite(x) & np.isfinite(y)
+    ix = np.floor(np.where(ok, x, 0.0) / cell_m).astype(np.int64)
+    iy = np.floor(np.where(ok, y, 0.0) / cell_m).astype(np.int64)
+    if np.any(np.abs(ix[ok]) >= _CELL_OFFSET) or np.any(np.abs(iy[ok]) >= _CELL_OFFSET):
+        raise InputError(f"cell size {cell_m} m is too small for points {np.nanmax(np.abs(x))} "
+                         "m from the origin; use a larger cell")
+    return np.where(ok, (iy + _CELL_OFFSET) * _CELL_STRIDE + ix + _CELL_OFFSET, -1)
+
+
+def best_per_cell(x_m: ArrayLike, y_m: ArrayLike, score: ArrayLike, cell_m: float) -> IntArray:
+    """Indices (ascending) of the highest-``score`` point in each ``cell_m`` square cell of the
+    (x, y) plane; points with a non-finite coordinate or score are never kept. Ties go to the
+    first point."""
+    if not cell_m > 0:
+        raise InputError(f"cell size must be > 0, got {cell_m}")
+    s = np.asarray(score, dtype=np.float64).ravel()
+    ids = cell_ids(np.ravel(x_m), np.ravel(y_m), cell_m)
+    cand = np.flatnonzero((ids >= 0) & np.isfinite(s))
+    if cand.size == 0:
+        return np.empty(0, np.intp)
+    order = cand[np.lexsort((cand, -s[cand], ids[cand]))]
+    first = np.ones(order.size, bool)
+    first[1:] = ids[order[1:]] != ids[order[:-1]]
+    return np.sort(order[first]).astype(np.intp)
+
+
+def overlap_cells(left_model: SensorModel, right_model: SensorModel,
+                  left_size: tuple[int, int], right_size: tuple[int, int],
+                  heights: HeightPrior, origin: tuple[float, float, float], cell_m: float,
+                  ) -> NDArray[np.int64]:
+    """Ids of the ground cells of the overlap: left pixels are sampled about four times per
+    cell side, at their heights; a cell belongs to the overlap when at least half of its samples
+    project inside the right image (slivers on the border do not count)."""
+    n_cols, n_rows = left_size
+    gsd = ground_sampling_m(left_model, (n_cols - 1) / 2.0, (n_rows - 1) / 2.0,
+                            heights.typical_h_m)
+    step = max(1.0, cell_m / 4.0 / gsd)
+    cc, rr = np.meshgrid(np.arange(0.0, n_cols, step), np.arange(0.0, n_rows, step))
+    cc, rr = cc.ravel(), rr.ravel()
+    h, h_lo, h_hi = heights.heights(left_model, cc, rr)
+    ok = np.isfinite(h)
+    cc, rr, h, h_lo, h_hi = cc[ok], rr[ok], h[ok], h_lo[ok], h_hi[ok]
+    inside = np.zeros(cc.size, bool)
+    for hh in (h, h_lo, h_hi):  # inside the right image at some height of the point's range
+        pc, pr = right_model.project(*left_model.localize(cc, rr, hh), hh)
+        inside |= (pc >= 0) & (pc <= right_size[0] - 1) & (pr >= 0) & (pr <= right_size[1] - 1)
+    lon, lat = left_model.localize(cc[inside], rr[inside], h[inside])
+    e, n, _ = geodetic_to_enu(lon, lat, h[inside], origin)
+    ids, counts = np.unique(cell_ids(e, n, cell_m), return_counts=True)
+    full = (cell_m / (step * gsd)) ** 2
+    return ids[(ids >= 0) & (counts >= 0.5 * full)]
+
+
+def check_consistency(matches: Matches, x_m: ArrayLike, y_m: ArrayLike, cfg: TiePointConfig,
+                      *, heights_known: bool = True, min_neighbours: int = 3) -> Matches:
+    """Flag matches whose offset from their prediction disagrees with their neighbours'.
+
+    The delivered models' error moves the matches of an area together, and heights move them
+    along the epipolar line by the parallax of the terrain above the reference DEM. So the
+    offset (match - prediction, right pixels) of a good match differs from the median offset
+    of the other matches within ``cfg.consistency_radius_m`` (ground x, y in metres) by at most
+    ``cfg.consistency_tol_px`` across the epipolar line, and by that plus the parallax of
+    ``cfg.consistency_height_m`` along it (canopy, buildings, reference errors). Without a
+    reference DEM (``heights_known`` False) heights are unknown and only the across-epipolar
+    part is checked. Matches with fewer than ``min_neighbours`` neighbours are kept. Returns
+    the matches with ``INCONSISTENT`` statuses.
+    """
+    idx = np.flatnonzero(matches.ok & np.isfinite(np.asarray(x_m)) & np.isfinite(np.asarray(y_m)))
+    if idx.size <= min_neighbours:
+        return matches
+    xy = np.stack([np.asarray(x_m, np.float64)[idx], np.asarray(y_m, np.float64)[idx]], axis=1)
+    off = np.stack([matches.right_col - matches.pred_col,
+                    matches.right_row - matches.pred_row], axis=1)[idx]
+    epi = np.stack([matches.epipolar_col, matches.epipolar_row], axis=1)[idx]
+    rate = np.linalg.norm(epi, axis=1)
+    unit = epi / np.where(rate > 0, rate, 1.0)[:, None]
+    bad = np.zeros(idx.size, bool)
+    for k, nb in enumerate(cKDTree(xy).query_ball_point(xy, cfg.consistency_radius_m)):
+        nb = [j for j in nb if j != k]
+        if len(nb) < min_neighbours:
+            continue
+        d = off[k] - np.median(off[nb], axis=0)
+        along = d @ unit[k]
+        across = d[1] * unit[k, 0] - d[0] * unit[k, 1]
+        bad[k] = abs(across) > cfg.consistency_tol_px or (heights_known and abs(along) > (
+            cfg.consistency_tol_px + cfg.consistency_height_m * rate[k]))
+    return matches.with_status(idx[bad], TiePointStatus.INCONSISTENT)
+
+
+def select_tie_points(matches: Matches, x_m: ArrayLike, y_m: ArrayLike, cell_m: float
+                      ) -> TiePoints:
+    """The best matched point (highest correlation) of each ``cell_m`` ground cell, with its
+    cell id and prior height; ``x_m``, ``y_m`` are the ground positions of all matches
+    (:func:`ground_xy_m`)."""
+    ok = np.flatnonzero(matches.ok)
+    ids = cell_ids(x_m, y_m, cell_m)
+    keep = ok[best_per_cell(np.asarray(x_m)[ok], np.asarray(y_m)[ok],
+                            matches.correlation[ok], cell_m)]
+    return TiePoints(matches.left_col[keep], matches.left_row[keep], matches.right_col[keep],
+                     matches.right_row[keep], matches.correlation[keep], matches.status[keep],
+                     ids[keep], matches.h_m[keep])

@@ -1,0 +1,118 @@
+"""Flow and command ``gcpfree relative``: tie points and the relative orientation of a pair.
+
+models of both images -> reference DEM (given, or prepared from SRTM tiles) -> tie points ->
+right model adjusted to the left -> rel.json, <rel>.tiepoints.json.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from pathlib import Path
+
+from prefect import flow
+
+from core.matching.tiepoints import TiePointConfig
+from core.orientation.relative import RelativeConfig
+from tasks.sensor_io import LoadedModel
+
+
+@dataclass(frozen=True)
+class RelativeParams:
+    """Parameters of :func:`relative_flow` (see ``gcpfree relative --help``)."""
+
+    left: Path
+    right: Path
+    out: Path
+    left_model: Path | None = None
+    right_model: Path | None = None
+    band: int | None = None
+    reference: Path | None = None
+    reference_vertical: str = "auto"
+    srtm_dir: Path | None = None
+    height_range_m: tuple[float, float] | None = None
+    corrections: str = "offset"
+    cell_m: float = 2000.0
+    search_radius_m: float | None = None  # default: from the GSD (default_search_radius_m)
+    reference_sigma_m: float = 5.0
+    tie_points: TiePointConfig = field(default_factory=TiePointConfig)
+
+
+@dataclass(frozen=True, eq=False)
+class RelativeOutcome:
+    """The pair after relative orientation: ``right.model`` is adjusted to ``left.model``;
+    ``reference`` an ellipsoidal reference DEM covering the pair when one was given or made."""
+
+    left: LoadedModel
+    right: LoadedModel
+    reference: Path | None
+    rel_json: Path
+    lines: tuple[str, ...] = ()
+
+
+@flow(name="relative-orientation", log_prints=True)
+def relative_flow(params: RelativeParams) -> RelativeOutcome:
+    """Models -> reference -> tie points -> relative orientation -> rel.json."""
+    from dataclasses import replace
+
+    from core.matching.tiepoints import default_search_radius_m, ground_sampling_m
+    from tasks.reference import build_reference, locate_tiles
+    from tasks.relative import (
+        check_overlap,
+        height_range_m,
+        load_pair,
+        orient_relative,
+        pair_box,
+        read_reference_dem,
+        reference_box_heights,
+        scene_height_m,
+    )
+    from tasks.tiepoints import find_tie_points
+
+    out = Path(params.out)
+    left, right = load_pair(params.left, params.right, params.left_model, params.right_model,
+                            params.band)
+    reference_path, vertical = params.reference, params.reference_vertical
+    first_range = params.height_range_m or (-500.0, 9000.0)
+    if reference_path is None and params.srtm_dir is not None:
+        box = pair_box(left, right, first_range)
+        tiles = locate_tiles(Path(params.srtm_dir), box, True)
+        reference_path = Path(build_reference(tiles, box, out.with_name(out.stem +
+                                                                        ".reference.tif")).path)
+        vertical = "ellipsoidal"
+    dem = None
+    if reference_path is not None:
+        dem = read_reference_dem(Path(reference_path), vertical,
+                                 pair_box(left, right, first_range))
+        h_range = reference_box_heights(dem)
+    else:
+        h_range = height_range_m(left, right, params.height_range_m)
+    check_overlap(left, right, scene_height_m(left, dem, h_range))
+    radius = params.search_radius_m
+    if radius is None:
+        c, r = 0.5 * (left.size[0] - 1), 0.5 * (left.size[1] - 1)
+        radius = default_search_radius_m(ground_sampling_m(left.model, c, r, 0.5 * (h_range[0]
+                                                                               + h_range[1])))
+    cfg = replace(params.tie_points, cell_m=params.cell_m, search_radius_m=radius)
+    ties = find_tie_points(left.image or left.source, right.image or right.source, left.model,
+                           right.model, dem, cfg, h_range_m=h_range)
+    products = orient_relative(left, right, ties, out, dem, h_range,
+                               RelativeConfig(corrections=params.corrections),
+                               params.reference_sigma_m)
+    for line in products.lines():
+        print(line)
+    return RelativeOutcome(left, replace(right, model=products.right_model), reference_path,
+                           products.rel_json, tuple(products.lines()))
+
+
+@flow(name="relative-models")
+def relative_models(left: Path, right: Path, *, left_model: Path | None = None,
+                    right_model: Path | None = None, band: int | None = None,
+                    reference: Path | None = None, srtm_dir: Path | None = None,
+                    out_dir: Path) -> RelativeOutcome:
+    """The pair relatively oriented (for the steps that follow, e.g. ``gcpfree dsm``); writes
+    ``out_dir/rel.json`` and its tie points."""
+    out_dir = Path(out_dir)
+    out_dir.mkdir(parents=True, exist_ok=True)
+    return relative_flow(RelativeParams(
+        left=Path(left), right=Path(right), out=out_dir / "rel.json", left_model=left_model,
+        right_model=right_model, band=band, reference=reference, srtm_dir=srtm_dir))
