@@ -30,7 +30,7 @@ class RelativeParams:
     reference_vertical: str = "auto"
     srtm_dir: Path | None = None
     height_range_m: tuple[float, float] | None = None
-    corrections: str = "offset"
+    corrections: str = "linear"
     cell_m: float = 2000.0
     search_radius_m: float | None = None  # default: from the GSD (default_search_radius_m)
     reference_sigma_m: float = 5.0

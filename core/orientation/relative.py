@@ -37,14 +37,14 @@ ARCSEC_PER_RAD = 180.0 / np.pi * 3600.0
 class RelativeConfig:
     """Settings of :func:`relative_orientation`.
 
-    ``corrections``: ``"offset"`` (pushbroom attitude biases, RPC image shift) or ``"linear"``
-    (biases and rates, RPC affine). ``huber_k`` and ``reject_k`` are in robust sigmas of the
+    ``corrections``: ``"linear"`` (pushbroom attitude biases and rates, RPC affine: archive
+    attitudes drift, by ~2 px over a SPOT scene) or ``"offset"`` (biases only, RPC shift). ``huber_k`` and ``reject_k`` are in robust sigmas of the
     y-parallax (never below ``sigma_floor_px``); ``min_observable`` is the smallest share of a
     parameter direction's image motion that must lie across the epipolar lines for the tie
     points to measure it.
     """
 
-    corrections: CorrectionKind = "offset"
+    corrections: CorrectionKind = "linear"
     max_iterations: int = 30
     tol_px: float = 1e-4
     huber_k: float = 1.5

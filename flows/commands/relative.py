@@ -40,9 +40,9 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--height-range", type=float, nargs=2, metavar=("MIN", "MAX"), default=None,
                    help="ellipsoidal height range of the scene when there is no reference "
                         "(default for RPCs: their own height offset +- scale)")
-    p.add_argument("--corrections", choices=("offset", "linear"), default="offset",
-                   help="offset: attitude biases / image shift (default); linear: also rates "
-                        "/ an affine")
+    p.add_argument("--corrections", choices=("offset", "linear"), default="linear",
+                   help="linear (default): attitude biases and rates / an RPC affine; offset: "
+                        "biases / an RPC shift only")
     p.add_argument("--cell-m", type=float, default=2000.0,
                    help="keep the best tie point per ground cell of this size (default 2000 m)")
     p.add_argument("--search-radius-m", type=float, default=None,

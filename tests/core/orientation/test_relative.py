@@ -20,6 +20,7 @@ from core.sensors.pushbroom_synthetic import SyntheticSpec, synthetic_pushbroom
 from core.sensors.rpcfit import fit_rpc
 
 N_PX, GSD = 600, 40.0
+OFFSET = RelativeConfig(corrections="offset")
 
 
 def pair(incidences=(25.5, -20.0), pitches=(0.0, 0.0)):
@@ -66,7 +67,7 @@ def test_parallax_is_the_distance_across_the_epipolar_curve(across):
 
 def test_pushbroom_biases_recovered_across_the_epipolar_lines(across):
     left, right, truth, (lc, lr, rc, rr, h) = across
-    res = relative_orientation(left, right, lc, lr, rc, rr, 900.0)
+    res = relative_orientation(left, right, lc, lr, rc, rr, 900.0, OFFSET)
     assert res.converged and res.rejected.size <= 3
     assert res.parallax_rms_before_px > 0.8
     assert res.parallax_rms_after_px < 0.12  # the matching noise, 0.1 px
@@ -85,7 +86,7 @@ def test_pushbroom_biases_recovered_across_the_epipolar_lines(across):
 def test_outliers_are_all_rejected_and_change_nothing(across):
     """10 % of the tie points moved by 5-20 px: all rejected, result unchanged within 0.05 px."""
     left, right, _, (lc, lr, rc, rr, _) = across
-    clean = relative_orientation(left, right, lc, lr, rc, rr, 900.0)
+    clean = relative_orientation(left, right, lc, lr, rc, rr, 900.0, OFFSET)
     rng = np.random.default_rng(3)
     bad = rng.choice(lc.size, lc.size // 10, replace=False)
     ang = rng.uniform(0, 2 * np.pi, bad.size)
@@ -93,7 +94,7 @@ def test_outliers_are_all_rejected_and_change_nothing(across):
     rc2, rr2 = rc.copy(), rr.copy()
     rc2[bad] += mag * np.cos(ang)
     rr2[bad] += mag * np.sin(ang)
-    dirty = relative_orientation(left, right, lc, lr, rc2, rr2, 900.0)
+    dirty = relative_orientation(left, right, lc, lr, rc2, rr2, 900.0, OFFSET)
     fit = epipolar_fit(left, right, lc[bad], lr[bad], rc2[bad], rr2[bad], 900.0)
     visible = np.abs(fit.parallax_px) > 1.0  # a move along the epipolar line is a height
     assert set(bad[visible]) <= set(dirty.rejected.tolist())
@@ -107,7 +108,7 @@ def test_along_track_pair_cannot_see_pitch():
     left, right = pair((0.0, 0.0), (20.0, -20.0))
     truth = right.with_params(np.array([-2e-5, 3e-5, 1e-5, 0.0, 0.0, 0.0]))
     lc, lr, rc, rr, _ = tie_points(left, truth, seed=5)
-    res = relative_orientation(left, right, lc, lr, rc, rr, 900.0)
+    res = relative_orientation(left, right, lc, lr, rc, rr, 900.0, OFFSET)
     # pitch moves points along the epipolar lines (rows); fore/aft, roll and yaw both shift the
     # columns almost uniformly, so one combination of them barely moves the image at all
     span = np.array([[u.direction[n] for n in res.param_names] for u in res.unobservable])
@@ -140,7 +141,7 @@ def test_rpc_bias_compensation(across, corrections):
 
 def test_reference_heights_set_the_along_epipolar_part(across):
     left, right, truth, (lc, lr, rc, rr, h) = across
-    res = relative_orientation(left, right, lc, lr, rc, rr, 900.0)
+    res = relative_orientation(left, right, lc, lr, rc, rr, 900.0, OFFSET)
     rng = np.random.default_rng(2)
     fixed, along = fix_along_epipolar(left, res, lc, lr, rc, rr, h + rng.normal(0, 3, h.size),
                                       N_PX, N_PX)
@@ -158,7 +159,7 @@ def test_reference_heights_set_the_along_epipolar_part(across):
 def test_bad_input(across):
     left, right, _, (lc, lr, rc, rr, _) = across
     with pytest.raises(InsufficientDataError, match="5 tie points"):
-        relative_orientation(left, right, lc[:5], lr[:5], rc[:5], rr[:5], 900.0)
+        relative_orientation(left, right, lc[:5], lr[:5], rc[:5], rr[:5], 900.0, OFFSET)
     with pytest.raises(InputError, match="differ in length"):
         relative_orientation(left, right, lc, lr[:-1], rc, rr, 900.0)
     with pytest.raises(InputError, match="corrections"):
