@@ -16,6 +16,7 @@ from tasks.simulate import (
     define_scene,
     make_checkpoints,
     make_lidar,
+    make_reference,
     render_image,
     summarize,
     write_spot_metadata,
@@ -54,6 +55,7 @@ def simulate_scene(params: SimulationParams) -> SimulationSummary:
         build_radiance(scene, out, i)
         render_image(scene, out, i)
     make_checkpoints(scene, out)
+    make_reference(scene, out)
     if params.lidar:
         make_lidar(scene, out)
     return summarize(scene, out)

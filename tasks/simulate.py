@@ -30,7 +30,7 @@ from rasterio.windows import Window, from_bounds
 
 from core.dem import GeoDEM
 from core.errors import InputError, InsufficientDataError
-from core.geodesy import BBox, utm_epsg
+from core.geodesy import BBox, metres_per_degree, utm_epsg
 from core.points import CheckPointSet, GeoPoint
 from core.sensors.pushbroom import PushbroomModel
 from core.sensors.rpcfit import fit_rpc
@@ -39,6 +39,7 @@ from core.simulation.checkpoints import select_checkpoints
 from core.simulation.hashing import derive_seed
 from core.simulation.landcover import LandCover, LandCoverConfig
 from core.simulation.lidar import lidar_extent, lidar_tile
+from core.simulation.reference import ReferenceErrors, srtm_like
 from core.simulation.raycast import ray_levels
 from core.simulation.render import ground_radiance, render_dn
 from core.simulation.scene import (
@@ -53,7 +54,7 @@ from core.simulation.scene import (
     scene_models,
     terrain_levels,
 )
-from core.simulation.surface import SurfaceSpec, sample_surface
+from core.simulation.surface import SurfaceSpec, sample_surface, slope_deg
 from tasks.crs import Projection
 from tasks.dimap import write_dimap
 from tasks.geoid import load_geoid
@@ -428,6 +429,43 @@ def make_checkpoints(scene: SceneDef, out: Path, n_wanted: int = 100) -> Path:
     doc = CheckPointSet(f"EPSG:{scene.epsg}", scene.image_names, tuple(points))
     atomic_write_text(paths.checkpoints, json.dumps(doc.to_dict(), indent=1))
     return paths.checkpoints
+
+
+# ---------------------------------------------------------------------------- G. reference
+
+
+@task(name="srtm-like-reference")
+def make_reference(scene: SceneDef, out: Path, errors: ReferenceErrors | None = None) -> Path:
+    """``DIR/reference.tif``: the world's bare terrain as SRTM would show it (3" posting,
+    correlated noise, misregistration, voids on steep slopes; ellipsoidal heights, EPSG:4326),
+    the reference the chain should be tested against; the errors drawn go to
+    ``truth/reference_errors.json``."""
+    paths = ScenePaths(Path(out))
+    target = paths.root / "reference.tif"
+    if _exist(target):
+        return target
+    errors = errors or ReferenceErrors.drawn(derive_seed(scene.seed, "reference"))
+    d = 3.0 / 3600.0
+    w = scene.dem_window
+    lons = np.arange(np.ceil(w.lon_min / d), np.floor(w.lon_max / d) + 1) * d
+    lats = np.arange(np.floor(w.lat_max / d), np.ceil(w.lat_min / d) - 1, -1) * d
+    lon, lat = np.meshgrid(lons, lats)
+    m_lon, m_lat = metres_per_degree(lat)
+    seen_lon = lon - errors.shift_east_m / m_lon  # the node shows the terrain moved
+    seen_lat = lat - errors.shift_north_m / m_lat
+    proj = Projection(scene.epsg)
+    x, y = proj.to_xy(seen_lon.ravel(), seen_lat.ravel())
+    spec = _spec(scene)
+    s = sample_surface(spec, x, y, proj.to_lonlat)
+    h = srtm_like(s.dtm_m, x, y, slope_deg(spec, seen_lon.ravel(), seen_lat.ravel()),
+                  derive_seed(scene.seed, "reference"), errors).reshape(lon.shape)
+    tags = {"vertical_datum": "WGS84 ellipsoid", "units": "m",
+            "source": "SRTM-like reference of the simulated world (gcpfree simulate)"}
+    write_arrays_cog([CogItem(h.astype(np.float32), target, CogOptions(
+        transform=(d, 0.0, lons[0] - d / 2, 0.0, -d, lats[0] + d / 2), crs="EPSG:4326",
+        nodata=np.nan, tags=tags))])
+    atomic_write_text(paths.truth / "reference_errors.json", json.dumps(vars(errors), indent=1))
+    return target
 
 
 # ---------------------------------------------------------------------------- F. lidar

@@ -25,6 +25,7 @@ def run_scene(out: Path, dem: Path = DEM, centre: tuple[float, float] | None = C
         S.build_radiance.fn(scene, out, i)
         S.render_image.fn(scene, out, i)
     S.make_checkpoints.fn(scene, out)
+    S.make_reference.fn(scene, out)
     if lidar:
         S.make_lidar.fn(scene, out)
     return scene

@@ -19,7 +19,8 @@ def test_flow_is_deterministic(prefect_harness, tmp_path, tiny_scene):
     files = ["left.tif", "right.tif", "left.json", "right.json", "left.DIM", "right.DIM",
              "truth/dsm.tif",
              "truth/dtm.tif", "truth/landcover.tif", "truth/checkpoints.json",
-             "truth/lidar.laz", "truth/left_truth.json"]
+             "truth/lidar.laz", "truth/left_truth.json", "reference.tif",
+             "truth/reference_errors.json"]
     for f in files:
         assert (a / f).read_bytes() == (b / f).read_bytes(), f
 

@@ -181,3 +181,26 @@ def test_truth_grid_covers_the_points_with_the_margin_on_the_lattice():
     assert yy[:, 0].tolist() == [ymax - 10.0, ymax - 30.0]
     a, b, c, d_, e, f = g.geotransform()
     assert (a, b, c, d_, e, f) == (20.0, 0.0, xmin, 0.0, -20.0, ymax)
+
+
+def test_srtm_like_reference_has_the_stated_errors():
+    """Correlated noise of the stated size and length, voids only on steep slopes, and the
+    misregistration drawn within its bound."""
+    from core.simulation.reference import ReferenceErrors, srtm_like
+
+    g = np.arange(0.0, 30_000.0, 90.0)
+    x, y = np.meshgrid(g, g)
+    slope = np.where(x > 25_000.0, 40.0, 10.0)
+    err = ReferenceErrors(noise_m=4.5, correlation_m=300.0)
+    h = srtm_like(np.zeros_like(x), x, y, slope, 5, err)
+    flat = h[:, : int(25_000 / 90)]
+    assert np.isfinite(flat).all() and 3.0 < flat.std() < 6.0
+    # correlated: neighbours (90 m apart) much alike, 3 km apart nearly independent
+    near = np.corrcoef(flat[:, :-1].ravel(), flat[:, 1:].ravel())[0, 1]
+    far = np.corrcoef(flat[:, :-33].ravel(), flat[:, 33:].ravel())[0, 1]
+    assert near > 0.7 and abs(far) < 0.3
+    steep = np.isnan(h[:, int(25_000 / 90) + 1:])
+    assert 0.3 < steep.mean() < 0.7
+    for seed in range(5):
+        d = ReferenceErrors.drawn(seed)
+        assert np.hypot(d.shift_east_m, d.shift_north_m) <= 5.0
