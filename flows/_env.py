@@ -22,14 +22,19 @@ DEFAULTS = {
 }
 
 
-def configure_environment(prefect_home: str | Path | None = None) -> None:
+def configure_environment(prefect_home: str | Path | None = None, *,
+                          verbose: bool | None = None) -> None:
     """Set offline, quiet defaults without overriding what the user set.
 
     With ``prefect_home``, Prefect's state (its SQLite database, profiles) and Dask's
     temporary files go to that folder, whatever the environment says (tests, benchmarks).
+    ``verbose`` False (the command line's default) keeps Prefect's INFO chatter off; True
+    brings it back; None leaves Prefect's own default.
     """
     for k, v in DEFAULTS.items():
         os.environ.setdefault(k, v)
+    if verbose is not None:
+        os.environ["PREFECT_LOGGING_LEVEL"] = "INFO" if verbose else "WARNING"
     if prefect_home is not None:
         home = Path(prefect_home)
         os.environ["PREFECT_HOME"] = str(home)
@@ -44,7 +49,23 @@ class _OurErrorsOnce(logging.Filter):
         from core.errors import GcpFreeError
 
         exc = record.exc_info[1] if record.exc_info else None
-        return not isinstance(exc, GcpFreeError)
+        if isinstance(exc, GcpFreeError):
+            return False
+        if record.levelno >= logging.ERROR:  # "Finished in state Failed(... InputError: ...)"
+            message = record.getMessage()
+            return not any(f"{name}:" in message for name in _error_names())
+        return True
+
+
+def _error_names() -> set[str]:
+    from core.errors import GcpFreeError
+
+    names, todo = set(), [GcpFreeError]
+    while todo:
+        cls = todo.pop()
+        names.add(cls.__name__)
+        todo.extend(cls.__subclasses__())
+    return names
 
 
 @contextlib.contextmanager

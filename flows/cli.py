@@ -181,6 +181,8 @@ def build_parser() -> argparse.ArgumentParser:
         prog="gcpfree",
         description="Orient satellite stereo pairs without ground control points, using SRTM.",
     )
+    parser.add_argument("--verbose", action="store_true",
+                        help="show Prefect's and Dask's progress logs (off by default)")
     sub = parser.add_subparsers(dest="command", required=True, metavar="COMMAND")
     _add_prepare_reference(sub)
     _add_simulate(sub)
@@ -197,8 +199,8 @@ COMMANDS = {"prepare-reference": _run_prepare_reference, "simulate": _run_simula
 
 
 def main(argv: Sequence[str] | None = None) -> int:
-    configure_environment()
     args = build_parser().parse_args(argv)
+    configure_environment(verbose=args.verbose)
     from core.errors import GcpFreeError
 
     try:

@@ -16,7 +16,7 @@ import numpy as np
 from prefect import task
 
 from core.dem import GeoDEM
-from core.errors import CoverageError, GeometryError, InputError
+from core.errors import CoverageError, GeometryError, InputError, InsufficientDataError
 from core.geodesy import BBox
 from core.intersection import triangulate
 from core.matching.tiepoint_results import TiePointResult, TiePointStatus
@@ -151,7 +151,15 @@ def orient_relative(
                                                   tp.right_row))
     h_mid = 0.5 * sum(h_range) if h_range is not None else 0.0
     h0 = np.where(np.isfinite(tp.h_m[ok]), tp.h_m[ok], h_mid) if tp.h_m.size else h_mid
-    rel = relative_orientation(left.model, right.model, lc, lr, rc, rr, h0, config)
+    try:
+        rel = relative_orientation(left.model, right.model, lc, lr, rc, rr, h0, config)
+    except InsufficientDataError as exc:
+        r = ties.report
+        why = ", ".join(f"{k.lower().replace('_', ' ')} {v}" for k, v in r.rejected.items())
+        raise InsufficientDataError(
+            f"{exc}. The search tried {r.n_candidates} interest points in "
+            f"{r.n_cells_textured} of {r.n_cells} ground cells with texture; rejected: "
+            f"{why or 'none'} (clouds, change between the dates or no texture)") from None
     model = rel.right_model
     along = AlongEpipolar(observable=not rel.unobservable)
     if reference is not None and rel.unobservable:

@@ -203,6 +203,30 @@ class RelativeOrientation:
         }
 
 
+def relative_from_dict(d: dict[str, Any], right_model: SensorModel,
+                       parallax_px: ArrayLike, inlier: ArrayLike) -> RelativeOrientation:
+    """Inverse of :meth:`RelativeOrientation.to_dict`, with the adjusted model and the
+    per-point arrays (written beside it, in the tie-point file)."""
+    try:
+        pa = d["point_angle"]
+        return RelativeOrientation(
+            param_names=tuple(d["param_names"]), param_units=tuple(d["param_units"]),
+            params_before=np.asarray(d["params_before"], dtype=np.float64),
+            params_after=np.asarray(d["params_after"], dtype=np.float64),
+            covariance=np.asarray(d["covariance"], dtype=np.float64),
+            sigma_px=float(d["sigma_px"]),
+            parallax_rms_before_px=float(d["parallax_rms_before_px"]),
+            parallax_rms_after_px=float(d["parallax_rms_after_px"]),
+            parallax_px=np.asarray(parallax_px, dtype=np.float64),
+            inlier=np.asarray(inlier, dtype=bool), n_iterations=int(d["n_iterations"]),
+            converged=bool(d["converged"]),
+            unobservable=tuple(Unobservable(**u) for u in d["unobservable"]),
+            point_angle=None if pa is None else PointAngleStats(**pa), right_model=right_model)
+    except (KeyError, TypeError) as exc:
+        raise InputError(f"relative orientation record lacks {exc}; give the 'adjustment' of "
+                         "a rel.json") from exc
+
+
 def _robust_sigma(y: FloatArray, floor: float) -> float:
     return max(float(1.4826 * np.median(np.abs(y - np.median(y)))), floor)
 

@@ -149,3 +149,24 @@ def test_bad_input_is_one_line(tiny_clean_scene, tmp_path):
     assert r.returncode == 2 and "Traceback" not in r.stderr
     assert "do not overlap" in r.stderr or "does not cover" in r.stderr, r.stderr
     assert not (tmp_path / "r.json").exists()
+    # a featureless right image (cloud): too few tie points, and the reasons
+    import rasterio
+
+    import warnings
+
+    from rasterio.errors import NotGeoreferencedWarning
+
+    blank = tmp_path / "blank.tif"
+    with rasterio.open(right) as src:
+        size, dtype = (src.height, src.width), src.dtypes[0]
+    with warnings.catch_warnings():  # a raw Level 1A image has no georeferencing
+        warnings.simplefilter("ignore", NotGeoreferencedWarning)
+        with rasterio.open(blank, "w", driver="GTiff", width=size[1], height=size[0], count=1,
+                           dtype=dtype) as dst:
+            dst.write(np.full(size, 230, dtype), 1)
+    shutil.copy(scene_dir / "right.DIM", tmp_path / "blank.DIM")
+    r = cli("--left", str(left), "--right", str(blank), "--reference", str(SRTM),
+            "--out", str(tmp_path / "r.json"))
+    assert r.returncode == 2 and "Traceback" not in r.stderr
+    assert "tie points" in r.stderr and "interest points" in r.stderr, r.stderr
+    assert len(r.stderr.strip().splitlines()) == 1

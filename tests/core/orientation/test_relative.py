@@ -80,7 +80,11 @@ def test_pushbroom_biases_recovered_across_the_epipolar_lines(across):
     assert abs(u.direction["roll_bias"]) > 0.9 and u.observable_share < 1e-6
     assert res.point_angle.name == "pitch_bias" and res.point_angle.unit == "arcsec"
     assert res.point_angle.mean == pytest.approx(res.params_after[1] * 206264.806, abs=0.5)
-    json.dumps(res.to_dict())
+    from core.orientation.relative import relative_from_dict
+
+    back = relative_from_dict(json.loads(json.dumps(res.to_dict())), res.right_model,
+                              res.parallax_px, res.inlier)
+    assert json.dumps(back.to_dict()) == json.dumps(res.to_dict())
 
 
 def test_outliers_are_all_rejected_and_change_nothing(across):
