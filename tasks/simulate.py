@@ -39,8 +39,8 @@ from core.simulation.checkpoints import select_checkpoints
 from core.simulation.hashing import derive_seed
 from core.simulation.landcover import LandCover, LandCoverConfig
 from core.simulation.lidar import lidar_extent, lidar_tile
-from core.simulation.reference import ReferenceErrors, srtm_like
 from core.simulation.raycast import ray_levels
+from core.simulation.reference import ReferenceErrors, srtm_like
 from core.simulation.render import ground_radiance, render_dn
 from core.simulation.scene import (
     PRESETS,

@@ -9,7 +9,7 @@ from flows._env import configure_environment
 
 configure_environment(prefect_home=tempfile.mkdtemp(prefix="gcpfree-tests-prefect-"))
 
-import pytest  # noqa: E402  (after the environment is configured)
+import pytest
 
 DATA = Path(__file__).parent / "data"
 REPO = Path(__file__).resolve().parents[1]

@@ -67,8 +67,8 @@ from core.geodesy import (
 )
 from core.jsonio import parse_json
 from core.sensors import base
-from core.sensors.base import CORRECTION_KINDS
 from core.sensors._dictio import get_float, get_int, get_str, get_str_tuple
+from core.sensors.base import CORRECTION_KINDS
 from core.sensors.linear_array import (
     Camera,
     LensDistortion,
@@ -83,7 +83,6 @@ from core.sensors.orbit import (
     Attitude,
     AttitudeModel,
     Orbit,
-    SampledAttitude,
     attitude_from_dict,
     orbital_frame,
     rotation_rpy,

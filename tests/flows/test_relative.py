@@ -150,10 +150,9 @@ def test_bad_input_is_one_line(tiny_clean_scene, tmp_path):
     assert "do not overlap" in r.stderr or "does not cover" in r.stderr, r.stderr
     assert not (tmp_path / "r.json").exists()
     # a featureless right image (cloud): too few tie points, and the reasons
-    import rasterio
-
     import warnings
 
+    import rasterio
     from rasterio.errors import NotGeoreferencedWarning
 
     blank = tmp_path / "blank.tif"

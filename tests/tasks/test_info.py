@@ -13,8 +13,8 @@ from rasterio.transform import RPCTransformer, from_origin
 from core.errors import CoverageError, InputError
 from core.geodesy import BBox
 from core.sensors.pushbroom_synthetic import SyntheticSpec, synthetic_pushbroom
-from tasks.geoid import BUNDLED_SRTM_DIR, load_geoid
 from tasks.dem_io import check_reference, read_reference, resolve_vertical
+from tasks.geoid import BUNDLED_SRTM_DIR, load_geoid
 from tasks.info import describe_image, gather_info, write_info_json
 
 DATA = Path(__file__).resolve().parents[1] / "data"

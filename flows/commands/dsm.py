@@ -1,0 +1,101 @@
+"""``gcpfree dsm``: a stereo pair's DSM by dense matching (relative orientation first)."""
+
+from __future__ import annotations
+
+import argparse
+from pathlib import Path
+
+
+def add_parser(sub: argparse._SubParsersAction) -> None:
+    p = sub.add_parser(
+        "dsm",
+        help="DSM of a stereo pair by dense matching (relative orientation first)",
+        description=(
+            "Orient the pair (the right model adjusted to the left one), cut the left region "
+            "of interest into tiles, rectify each (an affine per image), match it by "
+            "semi-global matching with a left-right check, triangulate every match with the "
+            "models and grid the points in the local UTM zone (median per cell, holes under 5 "
+            "cells filled). Writes OUT (float32 heights, NaN nodata), OUT_mask.tif (0 valid, "
+            "1 mismatch, 2 occluded/outside) and OUT.json (figures per tile)."),
+    )
+    p.add_argument("--left", type=Path, required=True, help="left image (its model stays fixed)")
+    p.add_argument("--right", type=Path, required=True, help="right image")
+    p.add_argument("--left-model", type=Path, default=None,
+                   help="model of the left image (.DIM, gcpfree .json, .geom, RPC .XML or a "
+                        "GeoTIFF's RPC); default: found beside the image")
+    p.add_argument("--right-model", type=Path, default=None, help="model of the right image")
+    p.add_argument("--band", type=int, default=None,
+                   help="SPOT multispectral band whose look angles to use (default the first)")
+    p.add_argument("--roi", type=int, nargs=4, default=None,
+                   metavar=("COL", "ROW", "WIDTH", "HEIGHT"),
+                   help="region of the left image (pixels); default the whole image")
+    p.add_argument("--resolution", type=float, default=None, metavar="M",
+                   help="DSM cell size in metres (default 2 x the left image's GSD)")
+    ref = p.add_mutually_exclusive_group()
+    ref.add_argument("--reference", type=Path, default=None, metavar="REF",
+                     help="reference DEM in EPSG:4326 (prepare-reference output or SRTM .hgt): "
+                          "sizes the disparity search")
+    ref.add_argument("--srtm-dir", type=Path, default=None, metavar="DIR",
+                     help="folder of SRTM tiles: a reference is prepared over the pair")
+    p.add_argument("--reference-vertical", choices=("auto", "ellipsoidal", "egm96"),
+                   default="auto", help="heights of --reference (auto: .hgt and SRTM-named "
+                                        "files are EGM96, others ellipsoidal)")
+    p.add_argument("--height-range", type=float, nargs=2, default=None, metavar=("MIN", "MAX"),
+                   help="ellipsoidal height range of the scene when there is no reference "
+                        "(default for RPCs: their height offset +- scale)")
+    p.add_argument("--vertical", choices=("ellipsoidal", "egm96"), default="ellipsoidal",
+                   help="heights of the DSM: WGS84 ellipsoidal (default) or EGM96 orthometric")
+    p.add_argument("--margin", type=float, default=50.0, metavar="M",
+                   help="height uncertainty searched around the reference, metres (default 50)")
+    p.add_argument("--tile-px", type=int, default=1000,
+                   help="tile size in left-image pixels (default 1000)")
+    p.add_argument("--min-match-rate", type=float, default=0.2, metavar="F",
+                   help="refuse the pair when less than this fraction of the overlap matches "
+                        "(default 0.2)")
+    p.add_argument("--no-orient", action="store_true",
+                   help="use the models as they are (skip the relative orientation)")
+    p.add_argument("--no-pointing-correction", action="store_true",
+                   help="do not correct each tile's residual y-parallax from patch matches")
+    p.add_argument("--workers", type=int, default=None,
+                   help="parallel tiles (default: one per core)")
+    p.add_argument("--no-progress", action="store_true", help="no progress bar")
+    p.add_argument("--out", type=Path, required=True, help="output DSM (GeoTIFF, COG)")
+
+
+def run(args: argparse.Namespace) -> int:
+    from core.errors import InputError
+    from tasks.dem_io import check_reference
+    from tasks.dense import check_roi
+    from tasks.sensor_io import load_model
+
+    # check the input before Prefect starts: bad input is one clean line
+    for path in (args.left, args.right):
+        if not Path(path).exists():
+            raise InputError(f"{path} does not exist; give the two images of the pair")
+    left = load_model(args.left, model=args.left_model, band=args.band)
+    load_model(args.right, model=args.right_model, band=args.band)
+    check_roi(tuple(args.roi) if args.roi else None, left.size)
+    if args.reference is not None:
+        check_reference(args.reference)
+    if args.srtm_dir is not None and not Path(args.srtm_dir).is_dir():
+        raise InputError(f"SRTM directory {args.srtm_dir} does not exist")
+    out_dir = Path(args.out).resolve().parent
+    if not out_dir.is_dir():
+        raise InputError(f"the folder of --out ({out_dir}) does not exist; create it first")
+    from flows.dsm import DsmParams, dsm_flow
+
+    params = DsmParams(
+        left=args.left, right=args.right, out=args.out, left_model=args.left_model,
+        right_model=args.right_model, band=args.band,
+        roi=tuple(args.roi) if args.roi else None, resolution_m=args.resolution,
+        reference=args.reference, reference_vertical=args.reference_vertical,
+        srtm_dir=args.srtm_dir,
+        height_range_m=tuple(args.height_range) if args.height_range else None,
+        vertical=args.vertical, orient=not args.no_orient, margin_m=args.margin,
+        tile_px=args.tile_px, min_match_rate=args.min_match_rate,
+        pointing_correction=not args.no_pointing_correction, workers=args.workers,
+        progress=not args.no_progress)
+    params.config()  # a bad setting is one line too
+    summary = dsm_flow(params)
+    print("\n".join(summary.lines()))
+    return 0

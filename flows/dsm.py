@@ -1,0 +1,116 @@
+"""Flow and command ``gcpfree dsm``: a stereo pair's DSM by dense matching, on Dask tiles.
+
+relative orientation of the pair (``flows.relative``) -> tiles rectified and sized from the
+reference DEM -> each tile matched (SGM) and triangulated -> median per cell in the local UTM
+zone, small holes filled -> ``DSM.tif``, ``DSM_mask.tif``, ``DSM.json``.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, replace
+from pathlib import Path
+
+from prefect import flow
+
+from core.matching.dense import MatchingConfig
+from tasks.dense import DemSummary, DenseConfig
+from tasks.sensor_io import LoadedModel
+
+VERTICALS = ("ellipsoidal", "egm96")
+
+
+@dataclass(frozen=True)
+class DsmParams:
+    """Parameters of :func:`dsm_flow` (see ``gcpfree dsm --help``).
+
+    ``orient``: orient the pair first (``flows.relative.relative_models``); without it the
+    models are used as they are (consistent models, e.g. the simulator's truth or RPCs
+    trusted relative to each other). ``height_range_m``: the scene's ellipsoidal heights when
+    there is no reference DEM (default for RPCs: their height offset +- scale).
+    """
+
+    left: Path
+    right: Path
+    out: Path
+    left_model: Path | None = None
+    right_model: Path | None = None
+    band: int | None = None
+    roi: tuple[int, int, int, int] | None = None
+    resolution_m: float | None = None
+    reference: Path | None = None
+    reference_vertical: str = "auto"
+    srtm_dir: Path | None = None
+    height_range_m: tuple[float, float] | None = None
+    vertical: str = "ellipsoidal"
+    orient: bool = True
+    margin_m: float = 50.0
+    tile_px: int = 1000
+    min_match_rate: float = 0.2
+    pointing_correction: bool = True
+    workers: int | None = None
+    progress: bool = True
+
+    def config(self) -> DenseConfig:
+        """The tasks' settings (checked: a bad value raises InputError)."""
+        return DenseConfig(
+            tile_px=self.tile_px, margin_m=self.margin_m, resolution_m=self.resolution_m,
+            vertical=self.vertical, min_match_rate=self.min_match_rate,
+            num_workers=self.workers, progress=self.progress,
+            matching=replace(MatchingConfig(), pointing_correction=self.pointing_correction))
+
+
+@dataclass(frozen=True, eq=False)
+class OrientedPair:
+    """The two models ready for matching and the reference DEM (with its vertical datum)."""
+
+    left: LoadedModel
+    right: LoadedModel
+    reference: Path | None
+    reference_vertical: str
+
+
+def oriented_pair(params: DsmParams) -> OrientedPair:
+    """The pair relatively oriented by ``flows.relative.relative_models`` (its products in
+    ``<out>_relative/``), or with ``orient=False`` the models as found; a reference prepared
+    from ``srtm_dir`` when that is what was given."""
+    out = Path(params.out)
+    if params.orient:
+        from flows.relative import relative_models
+
+        outcome = relative_models(
+            Path(params.left), Path(params.right), left_model=params.left_model,
+            right_model=params.right_model, band=params.band, reference=params.reference,
+            srtm_dir=params.srtm_dir, out_dir=out.parent / f"{out.stem}_relative")
+        same = params.reference is not None and outcome.reference is not None and \
+            Path(outcome.reference).resolve() == Path(params.reference).resolve()
+        return OrientedPair(outcome.left, outcome.right, outcome.reference,
+                            params.reference_vertical if same else "ellipsoidal")
+    from tasks.sensor_io import load_model
+
+    left = load_model(params.left, model=params.left_model, band=params.band)
+    right = load_model(params.right, model=params.right_model, band=params.band)
+    if params.srtm_dir is None:
+        return OrientedPair(left, right, params.reference, params.reference_vertical)
+    from tasks.dense import pair_box
+    from tasks.reference import build_reference, locate_tiles
+
+    box = pair_box(left, right, params.height_range_m or (-500.0, 9000.0))
+    tiles = locate_tiles(Path(params.srtm_dir), box, True)
+    ref = build_reference(tiles, box, out.with_name(out.stem + ".reference.tif"))
+    return OrientedPair(left, right, Path(ref.path), "ellipsoidal")
+
+
+@flow(name="dsm", log_prints=True)
+def dsm_flow(params: DsmParams) -> DemSummary:
+    """Orient the pair -> plan the tiles -> match and triangulate them -> grid the DSM."""
+    from tasks.dense import grid_dem_cog, match_tiles, plan_dense, scene_height_range
+
+    out = Path(params.out)
+    cfg = params.config()
+    pair = oriented_pair(params)
+    h_range = scene_height_range(pair.left, pair.right, params.height_range_m, pair.reference)
+    plan = plan_dense(pair.left, pair.right, params.roi, pair.reference, h_range,
+                      pair.reference_vertical, cfg)
+    work = out.parent / f".{out.name}.work"
+    stats = match_tiles(plan, pair.left, pair.right, work, cfg)
+    return grid_dem_cog(plan, stats, work, out, cfg)

@@ -1,0 +1,159 @@
+"""Triangulation of rectified matches (tile polynomials against exact ray intersection) and the
+gridding of ground points into a DEM (median per cell, hole filling, mask)."""
+
+import numpy as np
+import pytest
+
+from core.errors import GeometryError, InputError
+from core.geodesy import geodetic_to_enu
+from core.matching.dense import PixelStatus
+from core.matching.grid import (
+    MASK_MISMATCH,
+    MASK_OCCLUDED,
+    MASK_VALID,
+    GridSpec,
+    fill_small_holes,
+    grid_dem,
+    median_per_cell,
+    remove_offset_and_tilt,
+)
+from core.matching.rectify import TerrainSample, plan_tile
+from core.matching.triangulate import fit_disparity_to_ground, triangulate_matches
+from core.points import GeoPoint
+from core.simulation.scene import PRESETS, ErrorConfig, scene_models
+
+H0 = 600.0
+ORIGIN = (5.25, 44.2, 0.0)
+
+
+def to_enu(lon, lat):
+    """A local projection for the tests: east and north metres at the scene centre."""
+    e, n, _ = geodetic_to_enu(lon, lat, np.zeros(np.shape(lon)), ORIGIN)
+    return e, n
+
+
+@pytest.fixture(scope="module")
+def tile():
+    models = scene_models(PRESETS["spot"], GeoPoint(5.25, 44.2, H0), ErrorConfig(), seed=1)
+    left, right = models["left"].truth, models["right"].truth
+    rng = np.random.default_rng(1)
+    terrain = TerrainSample(rng.uniform(2000, 2999, 50), rng.uniform(2000, 2999, 50),
+                            rng.uniform(H0 - 600.0, H0 + 600.0, 50))
+    plan = plan_tile(0, left, right, (2000, 2000, 3000, 3000), terrain, margin_m=50.0)
+    return left, right, plan
+
+
+def test_tile_polynomials_match_exact_triangulation(tile):
+    left, right, plan = tile
+    g2g = fit_disparity_to_ground(plan.rect, left, right, plan.window, (0, plan.n_disp - 1),
+                                  to_enu)
+    assert g2g.degree == 3 and g2g.fit_max_m < 0.01
+    rng = np.random.default_rng(7)
+    u0, v0, w, h = plan.window
+    u = rng.uniform(u0, u0 + w - 1, 3000)
+    v = rng.uniform(v0, v0 + h - 1, 3000)
+    d = rng.uniform(0, plan.n_disp - 1, 3000)
+    exact = triangulate_matches(plan.rect, left, right, u, v, d, to_enu, (-1000.0, 3000.0))
+    fast = g2g(u, v, d)
+    for a, b in ((fast.x_m, exact.x_m), (fast.y_m, exact.y_m), (fast.h_m, exact.h_m)):
+        assert np.max(np.abs(a - b)) < 0.01
+    # the rays of rectified matches meet: the rectification's y-parallax is all that is missed
+    assert np.max(exact.miss_m) < 0.1 * 10.0 + 0.5
+    # an independent truth: a ground point's two projections triangulate back onto it
+    lon, lat = left.localize(2500.0, 2600.0, 1000.0)
+    cr, rr = right.project(lon, lat, 1000.0)
+    ul, vl = plan.rect.left_to_rect(2500.0, 2600.0)
+    ur, _ = plan.rect.right_to_rect(cr, rr)
+    p = g2g(ul, vl, ul - ur)
+    e, n = to_enu(lon, lat)
+    assert p.h_m[0] == pytest.approx(1000.0, abs=0.3)  # within the y-residual's effect
+    assert np.hypot(p.x_m[0] - e, p.y_m[0] - n) < 0.3
+
+
+def test_a_lower_degree_is_raised_until_the_check_passes(tile):
+    left, right, plan = tile
+    g2g = fit_disparity_to_ground(plan.rect, left, right, plan.window, (0, plan.n_disp - 1),
+                                  to_enu, degree=1, tol_m=0.01)
+    assert g2g.degree >= 3 and g2g.fit_max_m < 0.01
+
+
+def test_models_that_see_different_ground_are_refused(tile):
+    left, _right, plan = tile
+    far = scene_models(PRESETS["spot"], GeoPoint(-70.0, -30.0, H0), ErrorConfig(), seed=1)
+    with pytest.raises(GeometryError):
+        fit_disparity_to_ground(plan.rect, left, far["right"].truth, plan.window,
+                                (0, plan.n_disp - 1), to_enu)
+
+
+def test_median_per_cell_against_a_loop():
+    rng = np.random.default_rng(3)
+    x = rng.uniform(0, 50, 4000)
+    y = rng.uniform(-40, 0, 4000)
+    h = rng.normal(100, 5, 4000)
+    h[::17] = np.nan
+    z = median_per_cell(x, y, h, 0.0, 0.0, 5.0, (8, 10))
+    for i in range(8):
+        for j in range(10):
+            sel = (np.floor(x / 5) == j) & (np.floor(-y / 5) == i) & np.isfinite(h)
+            want = np.median(h[sel]) if sel.any() else np.nan
+            np.testing.assert_allclose(z[i, j], want, rtol=1e-6)
+
+
+def test_small_holes_are_filled_large_and_border_ones_are_not():
+    z = np.ones((20, 20), np.float32) * 10.0
+    z[5, 5:7] = np.nan  # 2 cells
+    z[10:13, 10:13] = np.nan  # 9 cells
+    z[0, 15] = np.nan  # touches the border
+    out, filled = fill_small_holes(z, 5)
+    assert out[5, 5] == pytest.approx(10.0) and filled[5, 5:7].all()
+    assert np.isnan(out[10:13, 10:13]).all() and np.isnan(out[0, 15])
+    assert filled.sum() == 2
+
+
+def test_grid_dem_mask_says_why_a_cell_is_empty():
+    # cell (0, 0): matched points; (0, 1): only mismatched pixels; (0, 2): occluded ones;
+    # (0, 3): nothing; (1, 0): outside the pair only
+    pts = [(0.5, -0.5, 10.0, PixelStatus.VALID), (0.6, -0.4, 12.0, PixelStatus.VALID),
+           (1.5, -0.5, np.nan, PixelStatus.MISMATCH), (1.4, -0.6, np.nan, PixelStatus.MISMATCH),
+           (2.5, -0.5, np.nan, PixelStatus.OCCLUDED), (0.5, -1.5, np.nan, PixelStatus.OUTSIDE)]
+    x, y, h, s = (np.array(c) for c in zip(*pts))
+    cells = grid_dem(x, y, h, s.astype(np.uint8), 0.0, 0.0, 1.0, (2, 4), max_hole_cells=0)
+    assert cells.z_m[0, 0] == pytest.approx(11.0)
+    assert cells.mask[0].tolist() == [MASK_VALID, MASK_MISMATCH, MASK_OCCLUDED, MASK_OCCLUDED]
+    assert cells.mask[1, 0] == MASK_OCCLUDED
+    assert cells.overlap[0].tolist() == [True, True, True, False]
+    assert not cells.overlap[1, 0]
+
+
+def test_grid_spec_is_aligned_on_the_resolution():
+    g = GridSpec.covering((1003.0, 2001.0, 1041.0, 2019.5), 2.0)
+    assert (g.x0_m, g.y0_m, g.n_cols, g.n_rows) == (1002.0, 2020.0, 20, 10)
+    assert g.geotransform() == (2.0, 0.0, 1002.0, 0.0, -2.0, 2020.0)
+    assert g.bounds_of(0, 10, 0, 20) == (1002.0, 2000.0, 1042.0, 2020.0)
+    with pytest.raises(InputError):
+        GridSpec.covering((0, 0, 1, 1), 0.0)
+
+
+def test_offset_and_tilt_are_recovered_and_removed():
+    """A surface shifted by (12, -7) m, raised by 3 m and tilted, plus noise and blunders."""
+    rng = np.random.default_rng(5)
+    x, y = rng.uniform(-5000, 5000, (2, 20000))
+
+    def surface(x, y):
+        return 300.0 * np.sin(x / 1500.0) * np.cos(y / 2100.0) + 0.02 * x
+
+    def slope(x, y):
+        return (300.0 / 1500.0 * np.cos(x / 1500.0) * np.cos(y / 2100.0) + 0.02,
+                -300.0 / 2100.0 * np.sin(x / 1500.0) * np.sin(y / 2100.0))
+
+    dem = surface(x - 12.0, y + 7.0) + 3.0 + 1e-4 * x - 2e-4 * y + rng.normal(0, 0.5, x.size)
+    dem[:300] += 80.0  # blunders
+    gx, gy = slope(x, y)
+    fit = remove_offset_and_tilt(dem - surface(x, y), x, y, gx, gy)
+    assert fit.dx_m == pytest.approx(12.0, abs=0.3) and fit.dy_m == pytest.approx(-7.0, abs=0.3)
+    assert fit.dz_m == pytest.approx(3.0 + 1e-4 * x.mean() - 2e-4 * y.mean(), abs=0.1)
+    assert fit.tilt_x == pytest.approx(1e-4, abs=1e-5)
+    r = fit.residual_m[300:]
+    assert 1.4826 * np.median(np.abs(r - np.median(r))) < 0.7
+    with pytest.raises(InputError):
+        remove_offset_and_tilt([1.0], [0.0], [0.0], [0.0], [0.0])

@@ -1,0 +1,151 @@
+"""The DEM tasks on the tiny simulated pair (true models, so consistent) against its truth DSM,
+and the refusals: a pair that does not correlate, no overlap, an ROI outside the image."""
+
+from __future__ import annotations
+
+import json
+import warnings
+from pathlib import Path
+
+import numpy as np
+import pytest
+import rasterio
+from rasterio.errors import NotGeoreferencedWarning
+
+from core.dem import sample_bilinear
+from core.errors import GeometryError, InputError, InsufficientDataError
+from core.matching.grid import MASK_VALID, remove_offset_and_tilt
+from core.sensors.pushbroom import PushbroomModel
+from core.simulation.landcover import LandCover
+from tasks.dense import DenseConfig, check_roi, grid_dem_cog, match_tiles, plan_dense, tile_boxes
+from tasks.geoid import BUNDLED_SRTM_DIR
+from tasks.sensor_io import LoadedModel, load_model
+
+SRTM = BUNDLED_SRTM_DIR / "N44E005.hgt"
+GSD_M = 40.0  # the tiny preset
+CFG = DenseConfig(tile_px=300, progress=False)
+
+
+def truth_pair(scene_dir: Path, right_image: Path | None = None) -> tuple[LoadedModel, ...]:
+    out = []
+    for name in ("left", "right"):
+        model = PushbroomModel.from_json((scene_dir / "truth" / f"{name}_truth.json").read_text())
+        image = scene_dir / f"{name}.tif"
+        if name == "right" and right_image is not None:
+            image = right_image
+        out.append(LoadedModel(model, "pushbroom", scene_dir / "truth" / f"{name}_truth.json",
+                               image, (model.n_cols, model.n_rows)))
+    return tuple(out)
+
+
+@pytest.fixture(scope="module")
+def dem(tiny_clean_scene, tmp_path_factory):
+    scene_dir, _ = tiny_clean_scene
+    left, right = truth_pair(scene_dir)
+    out = tmp_path_factory.mktemp("dense") / "dem.tif"
+    plan = plan_dense.fn(left, right, None, SRTM, (0.0, 3000.0), "auto", CFG)
+    work = out.parent / ".work"
+    stats = match_tiles.fn(plan, left, right, work, CFG)
+    summary = grid_dem_cog.fn(plan, stats, work, out, CFG)
+    return scene_dir, plan, summary, out
+
+
+def test_the_relative_dem_matches_the_truth_dsm_on_bare_soil(dem):
+    """NMAD <= 1 GSD on bare soil after the best-fit 3-D offset and tilt (issue 10)."""
+    scene_dir, plan, _summary, out = dem
+    with rasterio.open(out) as src:
+        z = src.read(1)
+        t = src.transform
+        assert src.crs.to_epsg() == plan.epsg
+    rows, cols = np.nonzero(np.isfinite(z))
+    x = t.c + (cols + 0.5) * t.a
+    y = t.f + (rows + 0.5) * t.e
+    with rasterio.open(scene_dir / "truth" / "dsm.tif") as src:
+        truth = src.read(1).astype(np.float64)
+        tt = src.transform
+        assert src.crs.to_epsg() == plan.epsg
+    with rasterio.open(scene_dir / "truth" / "landcover.tif") as src:
+        classes = src.read(1)
+    fi = (tt.f - y) / -tt.e - 0.5
+    fj = (x - tt.c) / tt.a - 0.5
+    z_true = sample_bilinear(truth, fi, fj)
+    gy, gx = np.gradient(truth, -tt.e, tt.a)  # per metre, rows go south
+    slope_x = sample_bilinear(gx, fi, fj)
+    slope_y = -sample_bilinear(gy, fi, fj)
+    fit = remove_offset_and_tilt(z[rows, cols] - z_true, x, y, slope_x, slope_y)
+    cls = classes[np.clip(np.rint(fi).astype(int), 0, classes.shape[0] - 1),
+                  np.clip(np.rint(fj).astype(int), 0, classes.shape[1] - 1)]
+    bare = fit.residual_m[(cls == LandCover.BARE_SOIL) & np.isfinite(fit.residual_m)]
+    nmad = 1.4826 * np.median(np.abs(bare - np.median(bare)))
+    assert bare.size > 5000
+    assert nmad <= GSD_M  # measured 13 m (0.3 GSD)
+    # the true models leave no datum error worth a pixel
+    assert abs(fit.dz_m) < GSD_M and np.hypot(fit.dx_m, fit.dy_m) < GSD_M
+
+
+def test_products_and_figures(dem):
+    _, _plan, summary, out = dem
+    assert summary.completeness_pct > 95.0 and summary.match_rate_pct > 95.0
+    assert summary.mismatched_pct < 5.0 and summary.y_residual_max_px < 0.1
+    assert summary.resolution_m == pytest.approx(2 * GSD_M, rel=0.05)
+    assert 100.0 < summary.h_min_m < summary.h_max_m < 2100.0
+    with rasterio.open(out) as src:
+        assert "WGS84 ellipsoid" in src.tags()["vertical_datum"]
+        assert src.tags(ns="IMAGE_STRUCTURE").get("LAYOUT") == "COG"
+        z = src.read(1)
+    with rasterio.open(summary.mask_path) as src:
+        mask = src.read(1)
+    assert set(np.unique(mask)) <= {0, 1, 2}
+    assert ((mask == MASK_VALID) == np.isfinite(z)).all()
+    doc = json.loads(Path(summary.json_path).read_text())
+    assert doc["format"] == "gcpfree.dem" and len(doc["tiles"]) == summary.n_tiles
+    assert all(0.9 < t["match_rate"] <= 1.0 for t in doc["tiles"])
+    assert not (out.parent / ".work").exists()  # the tiles' points are removed
+
+
+def test_a_pair_that_does_not_correlate_is_refused(tiny_clean_scene, tmp_path):
+    scene_dir, _ = tiny_clean_scene
+    with rasterio.open(scene_dir / "right.tif") as src:
+        profile = src.profile
+        noise = np.random.default_rng(0).integers(1, 255, (src.height, src.width), np.uint8)
+    fake = tmp_path / "clouds.tif"
+    profile.update(driver="GTiff")
+    with warnings.catch_warnings():  # a raw sensor image has no geotransform
+        warnings.simplefilter("ignore", NotGeoreferencedWarning)
+        with rasterio.open(fake, "w", **profile) as dst:
+            dst.write(noise, 1)
+    left, right = truth_pair(scene_dir, right_image=fake)
+    plan = plan_dense.fn(left, right, (150, 150, 300, 300), SRTM, (0.0, 3000.0), "auto", CFG)
+    with pytest.raises(InsufficientDataError, match="do not correlate"):
+        match_tiles.fn(plan, left, right, tmp_path / "work", CFG)
+
+
+def test_no_overlap_and_an_roi_outside_the_image(tiny_clean_scene, data_dir):
+    scene_dir, _ = tiny_clean_scene
+    left, _ = truth_pair(scene_dir)
+    elsewhere = load_model(data_dir / "pleiades_ventoux" / "right_image.tif")
+    with pytest.raises(GeometryError, match="do not overlap"):
+        plan_dense.fn(left, elsewhere, None, SRTM, (0.0, 3000.0), "auto", CFG)
+    with pytest.raises(InputError, match="outside the left image"):
+        check_roi((700, 10, 100, 100), (600, 600))
+    assert check_roi((-10, 500, 100, 200), (600, 600)) == (0, 500, 90, 600)
+
+
+def test_tiles_cover_the_roi_once():
+    boxes = tile_boxes((10, 20, 2510, 1020), 1000)
+    assert len(boxes) == 2 * 1 or len(boxes) == 3
+    area = sum((c1 - c0) * (r1 - r0) for c0, r0, c1, r1 in boxes)
+    assert area == 2500 * 1000
+    assert min(c1 - c0 for c0, _, c1, _ in boxes) >= 500
+
+
+def test_tiles_in_processes_give_what_threads_give(tiny_clean_scene, tmp_path):
+    scene_dir, _ = tiny_clean_scene
+    left, right = truth_pair(scene_dir)
+    plan = plan_dense.fn(left, right, (0, 100, 600, 300), SRTM, (0.0, 3000.0), "auto", CFG)
+    assert len(plan.tiles) == 2
+    runs = []
+    for processes in (False, True):
+        cfg = DenseConfig(tile_px=300, progress=False, processes=processes, num_workers=2)
+        runs.append(match_tiles.fn(plan, left, right, tmp_path / str(processes), cfg))
+    assert [s.to_dict() for s in runs[0]] == [s.to_dict() for s in runs[1]]
