@@ -27,14 +27,18 @@ resample of ``n`` points from the empirical distribution ``F`` has its ``k``-th 
 statistic distributed as ``F^-1(U_(k))`` with ``U_(k) ~ Beta(k, n + 1 - k)``, so each bootstrap
 replicate of a percentile costs two random draws, exact in distribution, for any ``n``.
 
-No I/O here: ``tasks.evaluate`` reads the points and the DEM and calls these functions.
+The bookkeeping of a run is here too: which points are evaluated and where the others
+went (:class:`PointTally`), the names of the classes, the mask and GCP checks. No I/O
+here: ``tasks.evaluate`` reads the points and the DEM and calls these functions; heights
+are brought to metres and one datum by :mod:`core.heights`, points placed on the DEM's
+grid by :mod:`core.grid_points`.
 """
 
 from __future__ import annotations
 
 import json
 import math
-from collections.abc import Mapping, Sequence
+from collections.abc import Iterable, Mapping, Sequence
 from dataclasses import asdict, dataclass, fields
 from typing import Any
 
@@ -43,13 +47,24 @@ from numpy.typing import ArrayLike, NDArray
 
 from core.errors import InputError
 from core.geoid import GeoidGrid
+from core.heights import HeightFrame, height_difference_m
+from core.points import GeoPoint
 
 FloatArray = NDArray[np.float64]
 
 NMAD_FACTOR = 1.4826
-DATUMS = ("ellipsoidal", "egm96")
 #: ASPRS classes that are not a surface: 7 low point (noise), 18 high noise
 NOISE_CLASSES = (7, 18)
+#: the report's labels of the ASPRS LAS classes
+ASPRS_LABELS = {
+    0: "never classified", 1: "unclassified", 2: "ground", 3: "low vegetation",
+    4: "medium vegetation", 5: "high vegetation", 6: "building", 7: "low point (noise)",
+    8: "model key-point", 9: "water", 10: "rail", 11: "road surface", 12: "overlap",
+    13: "wire guard", 14: "wire conductor", 15: "transmission tower", 16: "wire connector",
+    17: "bridge deck", 18: "high noise",
+}
+NO_LANDCOVER = "no_landcover"  # points off the land-cover raster or on its nodata
+NO_CODE = -1  # their class code
 REPORT_FORMAT = "gcpfree.evaluation"
 
 
@@ -608,129 +623,7 @@ class EvaluationReport:
         return json.dumps(self.to_dict(), indent=1)
 
 
-# ---------------------------------------------------------------------------- heights
-
-
-@dataclass(frozen=True)
-class HeightFrame:
-    """How a height value is stored: its vertical ``datum`` (``"ellipsoidal"`` WGS84 or
-    ``"egm96"`` orthometric) and ``z_factor_m``, metres per stored unit (0.3048 for the
-    international foot, 1200/3937 for the US survey foot)."""
-
-    datum: str
-    z_factor_m: float = 1.0
-
-    def __post_init__(self) -> None:
-        if self.datum not in DATUMS:
-            raise InputError(f"vertical datum {self.datum!r} unknown; use one of {DATUMS}")
-        if not (self.z_factor_m > 0 and math.isfinite(self.z_factor_m)):
-            raise InputError(f"height unit factor must be positive, got {self.z_factor_m}")
-
-
-def height_difference_m(dem_z: ArrayLike, dem: HeightFrame, ref_z: ArrayLike, ref: HeightFrame,
-                        lon_deg: ArrayLike | None = None, lat_deg: ArrayLike | None = None,
-                        geoid: GeoidGrid | None = None) -> FloatArray:
-    """``dz = DEM - reference`` in metres, both in the DEM's datum.
-
-    Heights are scaled to metres; when the datums differ, the EGM96 heights are made
-    ellipsoidal with ``h = H + N`` (``N`` from ``geoid`` at ``lon_deg``, ``lat_deg``), which
-    then must be given. Equal datums need no geoid (N cancels).
-    """
-    d = np.asarray(dem_z, dtype=np.float64) * dem.z_factor_m
-    r = np.asarray(ref_z, dtype=np.float64) * ref.z_factor_m
-    if dem.datum == ref.datum:
-        return d - r
-    if geoid is None or lon_deg is None or lat_deg is None:
-        raise InputError(f"DEM heights are {dem.datum} and reference heights {ref.datum}: "
-                         "give the geoid and the points' lon/lat to convert them")
-    n_m = geoid.undulation_m(lon_deg, lat_deg)
-    return d - r + (n_m if dem.datum == "egm96" else -n_m)
-
-
-# ---------------------------------------------------------------------------- grids and points
-
-
-def affine_nodes(transform: Sequence[float], x: ArrayLike,
-                 y: ArrayLike) -> tuple[FloatArray, FloatArray]:
-    """Fractional grid-node indices ``(fi, fj)`` (row, col; pixel centres at integers) of
-    points ``(x, y)`` in a raster with the GDAL/affine transform ``(a, b, c, d, e, f)``
-    (pixel corner origin; rotation terms allowed)."""
-    a, b, c, d, e, f = (float(v) for v in tuple(transform)[:6])
-    det = a * e - b * d
-    if det == 0:
-        raise InputError("raster transform is singular (zero pixel size); fix its "
-                         "georeferencing")
-    dx = np.asarray(x, dtype=np.float64) - c
-    dy = np.asarray(y, dtype=np.float64) - f
-    col = (e * dx - b * dy) / det
-    row = (-d * dx + a * dy) / det
-    return row - 0.5, col - 0.5
-
-
-@dataclass(frozen=True, eq=False)
-class WindowGroup:
-    """Points ``index`` (into the chunk) whose bilinear neighbours lie in rows
-    ``[row0, row1)`` and columns ``[col0, col1)`` of the grid."""
-
-    index: NDArray[np.intp]
-    row0: int
-    row1: int
-    col0: int
-    col1: int
-
-
-def inside_grid(fi: FloatArray, fj: FloatArray, shape: tuple[int, int],
-                nearest: bool = False) -> NDArray[np.bool_]:
-    """Points with a value on the grid: node indices within ``[0, n - 1]`` (bilinear), or
-    within the cells, ``[-0.5, n - 0.5)`` (``nearest``)."""
-    nr, nc = shape
-    if nearest:
-        return (fi >= -0.5) & (fi < nr - 0.5) & (fj >= -0.5) & (fj < nc - 0.5)
-    return (fi >= 0) & (fi <= nr - 1) & (fj >= 0) & (fj <= nc - 1)
-
-
-def window_groups(fi: FloatArray, fj: FloatArray, shape: tuple[int, int],
-                  tile_cells: int = 2048, nearest: bool = False) -> list[WindowGroup]:
-    """Split the points on a grid (:func:`inside_grid`) into groups whose windows span at
-    most about ``tile_cells`` x ``tile_cells`` cells, so that reading a window keeps memory
-    bounded whatever the spread of the points. A window holds every node bilinear
-    interpolation needs, or with ``nearest`` the cell of each point. Points off the grid are
-    left out."""
-    if tile_cells < 2:
-        raise InputError(f"tile_cells must be >= 2, got {tile_cells}")
-    nr, nc = shape
-    idx = np.flatnonzero(inside_grid(fi, fj, shape, nearest))
-    if idx.size == 0:
-        return []
-    shift, extra = (0.5, 1) if nearest else (0.0, 2)
-    r = np.floor(fi[idx] + shift).astype(np.int64)
-    c = np.floor(fj[idx] + shift).astype(np.int64)
-
-    def group(sel: NDArray[np.intp], rr: NDArray[np.int64], cc: NDArray[np.int64]) -> WindowGroup:
-        return WindowGroup(sel, int(rr.min()), int(min(rr.max() + extra, nr)), int(cc.min()),
-                           int(min(cc.max() + extra, nc)))
-
-    if r.max() - r.min() < tile_cells and c.max() - c.min() < tile_cells:
-        return [group(idx, r, c)]
-    ntc = nc // tile_cells + 1
-    tile = (r // tile_cells) * ntc + c // tile_cells
-    order = np.argsort(tile, kind="stable")
-    _, start = np.unique(tile[order], return_index=True)
-    return [group(idx[part], r[part], c[part]) for part in np.split(order, start[1:])]
-
-
-def sample_nearest(grid: NDArray, fi: ArrayLike, fj: ArrayLike, fill: int) -> NDArray:
-    """Value of the cell containing each point (node indices, pixel centres at integers);
-    ``fill`` outside the grid. For class rasters (land cover)."""
-    fi = np.asarray(fi, dtype=np.float64)
-    fj = np.asarray(fj, dtype=np.float64)
-    nr, nc = np.shape(grid)
-    i = np.floor(fi + 0.5)
-    j = np.floor(fj + 0.5)
-    ok = (i >= 0) & (i < nr) & (j >= 0) & (j < nc)
-    out = np.full(fi.shape, fill, dtype=np.asarray(grid).dtype)
-    out[ok] = np.asarray(grid)[i[ok].astype(np.intp), j[ok].astype(np.intp)]
-    return out
+# ---------------------------------------------------------------------------- classes and points
 
 
 def select_points(codes: ArrayLike, withheld: ArrayLike | None = None,
@@ -750,3 +643,81 @@ def code_counts(values: ArrayLike, codes: Sequence[int]) -> dict[int, int]:
     """How many of ``values`` equal each of ``codes`` (a mask raster block, say)."""
     v = np.asarray(values).ravel()
     return {int(c): int(np.count_nonzero(v == c)) for c in codes}
+
+
+# ---------------------------------------------------------------------------- bookkeeping
+
+
+@dataclass
+class PointTally:
+    """Where the points of a stream went, chunk by chunk; :meth:`counts` gives the report's
+    :class:`PointCounts`."""
+
+    read: int = 0
+    withheld: int = 0
+    excluded_class: int = 0
+    outside_dem: int = 0
+    on_void: int = 0
+    evaluated: int = 0
+
+    def add(self, withheld: ArrayLike, keep: ArrayLike, inside: ArrayLike,
+            valid: ArrayLike) -> None:
+        """One chunk: ``withheld`` and ``keep`` (:func:`select_points`) flag all its points,
+        ``inside`` (on the DEM's grid) and ``valid`` (a DEM value there) the kept ones."""
+        withheld = np.asarray(withheld, dtype=bool)
+        keep = np.asarray(keep, dtype=bool)
+        inside = np.asarray(inside, dtype=bool)
+        valid = np.asarray(valid, dtype=bool)
+        self.read += withheld.size
+        self.withheld += int(withheld.sum())
+        self.excluded_class += int((~keep & ~withheld).sum())
+        self.outside_dem += int((~inside).sum())
+        self.on_void += int((inside & ~valid).sum())
+        self.evaluated += int(valid.sum())
+
+    def counts(self, in_file: int) -> PointCounts:
+        return PointCounts(in_file, self.read, self.withheld, self.excluded_class,
+                           self.outside_dem, self.on_void, self.evaluated)
+
+
+def class_tables(stats: Mapping[int, DzStats], landcover_names: Sequence[tuple[int, str]] | None
+                 ) -> tuple[dict[str, DzStats], dict[str, str]]:
+    """The report's ``classes`` and ``class_labels`` from the statistics per code: with
+    ``landcover_names`` (``(code, name)`` pairs) keyed by name (a code without one by its
+    number, :data:`NO_CODE` as :data:`NO_LANDCOVER`) with empty labels; otherwise keyed by LAS
+    code and labelled with the ASPRS names."""
+    if landcover_names is not None:
+        names = dict(landcover_names)
+        classes = {(NO_LANDCOVER if c == NO_CODE else names.get(c, str(c))): s
+                   for c, s in stats.items()}
+        return classes, {k: "" for k in classes}
+    return {str(c): s for c, s in stats.items()}, {str(c): ASPRS_LABELS.get(c, "") for c in stats}
+
+
+def mask_summary(path: str, blocks: Iterable[ArrayLike]) -> MaskSummary:
+    """Count the codes of a mask raster given block by block (0 valid, 1 mismatch, 2 occluded
+    or outside, anything else other)."""
+    totals = {0: 0, 1: 0, 2: 0}
+    cells = 0
+    for block in blocks:
+        cells += np.size(block)
+        for c, k in code_counts(block, (0, 1, 2)).items():
+            totals[c] += k
+    pct = 100.0 / max(cells, 1)
+    return MaskSummary(path, totals[0], totals[1], totals[2], cells - sum(totals.values()),
+                       totals[1] * pct, totals[2] * pct)
+
+
+def gcp_check(path: str, points: Sequence[GeoPoint], dem_z: ArrayLike, dem: HeightFrame,
+              geoid: GeoidGrid | None, config: StatsConfig) -> GcpCheck:
+    """``dz = DEM - h`` at ground points (ellipsoidal ``h``), ``dem_z`` the DEM at them (NaN
+    off the DEM or on a void); ``geoid`` needed when the DEM's heights are not ellipsoidal."""
+    lon = np.array([p.lon_deg for p in points])
+    lat = np.array([p.lat_deg for p in points])
+    h = np.array([p.h_m for p in points])
+    dem_z = np.asarray(dem_z)
+    ok = np.isfinite(dem_z)
+    acc = DzAccumulator(config)
+    acc.add(height_difference_m(dem_z[ok], dem, h[ok], HeightFrame("ellipsoidal"), lon[ok],
+                                lat[ok], geoid))
+    return GcpCheck(path, len(points), int((~ok).sum()), acc.stats())

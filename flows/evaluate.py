@@ -25,7 +25,7 @@ if TYPE_CHECKING:
     from tasks.evaluate import EvaluationOptions
 
 VERTICALS = ("auto", "ellipsoidal", "egm96")  # tasks.evaluate.VERTICALS, without importing it
-Z_UNITS = ("auto", "m", "ft", "us-ft")
+Z_UNITS = ("auto", "m", "ft", "us-ft")  # "auto" and the keys of core.heights.Z_UNITS
 
 
 @functools.cache

@@ -1,17 +1,18 @@
 """Accuracy statistics of dz: against NumPy (exact path) and within the bin width (histogram
-path), streaming in chunks, the bootstrap interval against brute-force resampling, heights,
-grids and the report's JSON round trip."""
+path), streaming in chunks, the bootstrap interval against brute-force resampling, the
+bookkeeping of a run (point tally, class names, mask and GCP checks) and the report's JSON
+round trip."""
 
 import json
 import math
 
 import numpy as np
 import pytest
-from affine import Affine
 
-from core.dem import sample_bilinear
 from core.errors import InputError
 from core.evaluation import (
+    NO_CODE,
+    NO_LANDCOVER,
     ClassedDz,
     CrsInfo,
     DemInfo,
@@ -19,21 +20,21 @@ from core.evaluation import (
     DzStats,
     EvaluationReport,
     GcpCheck,
-    HeightFrame,
     LandcoverInfo,
     LidarInfo,
     MaskSummary,
     PointCounts,
+    PointTally,
     StatsConfig,
-    affine_nodes,
+    class_tables,
     code_counts,
-    height_difference_m,
-    inside_grid,
-    sample_nearest,
+    gcp_check,
+    mask_summary,
     select_points,
-    window_groups,
 )
 from core.geoid import GeoidGrid
+from core.heights import HeightFrame
+from core.points import GeoPoint
 
 
 def _numpy_stats(x: np.ndarray) -> dict[str, float]:
@@ -183,78 +184,57 @@ def test_classes_match_numpy_on_each_subset_and_all():
         acc.add(dz[:3], codes[:2])
 
 
-def test_height_difference_units_and_datums():
-    geoid = GeoidGrid(np.full((3, 3), 48.0), 43.0, 4.0, 1.0, 1.0)  # N = 48 m everywhere
-    dem_h = np.array([150.0, 260.0])
-    lidar_h_ft = np.array([100.0, 200.0]) / 0.3048  # 100 m, 200 m ellipsoidal, in feet
-    same = height_difference_m(dem_h, HeightFrame("ellipsoidal"), lidar_h_ft,
-                               HeightFrame("ellipsoidal", 0.3048))
-    np.testing.assert_allclose(same, [50.0, 60.0], atol=1e-9)
-    lidar_H = np.array([52.0, 152.0])  # EGM96: h = H + 48
-    dz = height_difference_m(dem_h, HeightFrame("ellipsoidal"), lidar_H, HeightFrame("egm96"),
-                             [5.0, 5.0], [44.0, 44.0], geoid)
-    np.testing.assert_allclose(dz, [50.0, 60.0], atol=1e-9)
-    dz = height_difference_m(dem_h - 48.0, HeightFrame("egm96"), [100.0, 200.0],
-                             HeightFrame("ellipsoidal"), [5.0, 5.0], [44.0, 44.0], geoid)
-    np.testing.assert_allclose(dz, [50.0, 60.0], atol=1e-9)
-    with pytest.raises(InputError, match="geoid"):
-        height_difference_m(dem_h, HeightFrame("egm96"), dem_h, HeightFrame("ellipsoidal"))
-    with pytest.raises(InputError, match="datum"):
-        HeightFrame("navd88")
-
-
-@pytest.mark.parametrize("transform", [
-    (2.0, 0.0, 500_000.0, 0.0, -2.0, 4_900_000.0),
-    (0.5, 0.1, 10.0, 0.2, -0.4, 46.0),  # rotated
-])
-def test_affine_nodes_agree_with_the_affine_library(transform):
-    x = np.array([500_003.0, 500_101.0, 10.3, 11.0])
-    y = np.array([4_899_995.0, 4_899_900.0, 45.7, 45.1])
-    fi, fj = affine_nodes(transform, x, y)
-    col, row = ~Affine(*transform) * (x, y)
-    np.testing.assert_allclose(fj, np.asarray(col) - 0.5, atol=1e-9)
-    np.testing.assert_allclose(fi, np.asarray(row) - 0.5, atol=1e-9)
-
-
-def test_window_groups_cover_the_points_and_sample_as_the_whole_grid():
-    rng = np.random.default_rng(8)
-    z = rng.normal(size=(300, 410))
-    z[100:103, 50:60] = np.nan
-    fi = rng.uniform(-5, 305, 3000)
-    fj = rng.uniform(-5, 415, 3000)
-    whole = sample_bilinear(z, fi, fj)
-    groups = window_groups(fi, fj, z.shape, tile_cells=64)
-    assert len(groups) > 10
-    got = np.full(fi.size, np.nan)
-    seen = np.zeros(fi.size, int)
-    for g in groups:
-        assert g.row1 - g.row0 <= 66 and g.col1 - g.col0 <= 66
-        got[g.index] = sample_bilinear(z[g.row0:g.row1, g.col0:g.col1], fi[g.index] - g.row0,
-                                       fj[g.index] - g.col0)
-        seen[g.index] += 1
-    inside = inside_grid(fi, fj, z.shape)
-    assert (seen == inside).all()
-    np.testing.assert_array_equal(got, whole)  # NaN off the grid and next to the void
-
-
-def test_nearest_cells_and_their_windows():
-    grid = np.arange(12).reshape(3, 4)
-    fi = np.array([0.0, -0.49, 2.49, 1.51, -0.51, 1.0])
-    fj = np.array([0.0, 3.49, -0.5, 2.2, 0.0, 3.6])
-    np.testing.assert_array_equal(sample_nearest(grid, fi, fj, -1), [0, 3, 8, 10, -1, -1])
-    got = np.full(fi.size, -1)
-    for g in window_groups(fi, fj, grid.shape, nearest=True):
-        got[g.index] = sample_nearest(grid[g.row0:g.row1, g.col0:g.col1], fi[g.index] - g.row0,
-                                      fj[g.index] - g.col0, -1)
-    np.testing.assert_array_equal(got, [0, 3, 8, 10, -1, -1])
-
-
 def test_point_selection_and_code_counts():
     codes = np.array([1, 2, 7, 18, 5, 2])
     withheld = np.array([0, 0, 0, 0, 1, 0], bool)
     np.testing.assert_array_equal(select_points(codes, withheld), [1, 1, 0, 0, 0, 1])
     np.testing.assert_array_equal(select_points(codes, None, keep=(2, 7)), [0, 1, 1, 0, 0, 1])
     assert code_counts(np.array([[0, 1], [2, 2]]), (0, 1, 2, 3)) == {0: 1, 1: 1, 2: 2, 3: 0}
+
+
+def test_point_tally_accounts_for_every_point():
+    withheld = np.array([0, 1, 0, 0, 0, 0], bool)
+    keep = np.array([1, 0, 0, 1, 1, 1], bool)  # class 7 at index 2
+    inside = np.array([1, 1, 0, 1])  # over the 4 kept points
+    valid = np.array([1, 0, 0, 1])
+    tally = PointTally()
+    tally.add(withheld, keep, inside, valid)
+    tally.add(withheld[:2], keep[:2], inside[:1], valid[:1])
+    c = tally.counts(in_file=10)
+    assert c == PointCounts(in_file=10, read=8, withheld=2, excluded_class=1, outside_dem=1,
+                            on_void=1, evaluated=3)
+    assert c.read == c.withheld + c.excluded_class + c.outside_dem + c.on_void + c.evaluated
+
+
+def test_class_tables_name_las_and_landcover_classes():
+    s = DzAccumulator(StatsConfig(n_bootstrap=0)).stats()
+    classes, labels = class_tables({2: s, 64: s}, None)
+    assert list(classes) == ["2", "64"] and labels == {"2": "ground", "64": ""}
+    classes, labels = class_tables({NO_CODE: s, 1: s, 3: s}, ((1, "bare_soil"), (2, "forest")))
+    assert list(classes) == [NO_LANDCOVER, "bare_soil", "3"]
+    assert set(labels.values()) == {""}
+
+
+def test_mask_summary_over_blocks():
+    blocks = [np.array([[0, 1], [2, 2]], np.uint8), np.array([[0, 0, 7, 0]], np.uint8)]
+    m = mask_summary("m.tif", iter(blocks))
+    assert (m.valid, m.mismatch, m.occluded_or_outside, m.other) == (4, 1, 2, 1)
+    assert m.mismatched_pct == pytest.approx(12.5) and m.occluded_pct == pytest.approx(25.0)
+    assert mask_summary("empty.tif", []).mismatched_pct == 0.0
+
+
+def test_gcp_check_in_the_dem_datum():
+    geoid = GeoidGrid(np.full((3, 3), 48.0), 43.0, 4.0, 1.0, 1.0)  # N = 48 m everywhere
+    points = (GeoPoint(5.0, 44.0, 100.0), GeoPoint(5.1, 44.1, 200.0), GeoPoint(5.2, 44.2, 0.0))
+    cfg = StatsConfig(n_bootstrap=0)
+    g = gcp_check("g.json", points, [101.0, 202.0, np.nan], HeightFrame("ellipsoidal"), None,
+                  cfg)
+    assert (g.path, g.points, g.outside_dem, g.stats.count) == ("g.json", 3, 1, 2)
+    assert g.stats.mean_m == pytest.approx(1.5)
+    egm = gcp_check("g.json", points, [52.0, 152.0, np.nan], HeightFrame("egm96"), geoid, cfg)
+    assert egm.stats.mean_m == pytest.approx(0.0, abs=1e-9)  # H = h - N exactly
+    with pytest.raises(InputError, match="geoid"):
+        gcp_check("g.json", points, [52.0, 152.0, 1.0], HeightFrame("egm96"), None, cfg)
 
 
 def test_config_checks():

@@ -28,12 +28,12 @@ from tasks.evaluate import (
     EvaluationOptions,
     evaluate_lidar,
     evaluate_plan,
-    inspect_lidar,
-    parse_landcover_names,
     plan_evaluation,
     write_evaluation,
 )
+from tasks.evaluation_rasters import parse_landcover_names
 from tasks.geoid import EGM96_GTX
+from tasks.lidar_io import inspect_lidar
 
 DATA = Path(__file__).resolve().parents[1] / "data"
 AUTZEN = DATA / "lidar" / "autzen_trim.laz"
