@@ -102,7 +102,7 @@ def _add_simulate(sub: argparse._SubParsersAction) -> None:
 
 
 def _run_simulate(args: argparse.Namespace) -> int:
-    from tasks.simulate import check_dem
+    from tasks.simulate_io import check_dem
 
     dem = args.dem
     if dem is None:

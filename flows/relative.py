@@ -55,10 +55,10 @@ def relative_flow(params: RelativeParams) -> RelativeOutcome:
     from dataclasses import replace
 
     from core.matching.tiepoints import default_search_radius_m, ground_sampling_m
+    from tasks.dense import scene_height_range
     from tasks.reference import build_reference, locate_tiles
     from tasks.relative import (
         check_overlap,
-        height_range_m,
         load_pair,
         orient_relative,
         pair_box,
@@ -85,7 +85,7 @@ def relative_flow(params: RelativeParams) -> RelativeOutcome:
                                  pair_box(left, right, first_range))
         h_range = reference_box_heights(dem)
     else:
-        h_range = height_range_m(left, right, params.height_range_m)
+        h_range = scene_height_range(left, right, params.height_range_m, None)
     check_overlap(left, right, scene_height_m(left, dem, h_range))
     radius = params.search_radius_m
     if radius is None:

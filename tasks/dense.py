@@ -20,18 +20,17 @@ cells; freed memory is handed back after each tile and block, so the peak stays 
 scene: 1.41 GB for half of it, 1.42 GB for all of it). Tiles run in Dask worker processes
 from 8 tiles on (part of the resampling holds Python's lock), in threads below; OpenCV is set
 to one thread in each. Scripts that call these tasks need the ``if __name__ == "__main__":``
-guard (worker processes are spawned).
+guard (worker processes are spawned). The per-tile and per-block functions the workers run
+are in :mod:`tasks.dense_blocks`.
 """
 
 from __future__ import annotations
 
-import ctypes
 import json
 import math
 import os
 import shutil
 import sys
-import warnings
 from dataclasses import asdict, dataclass, field, replace
 from pathlib import Path
 from typing import Any
@@ -40,19 +39,15 @@ import cv2
 import dask
 import dask.array as darr
 import numpy as np
-import rasterio
 from dask.diagnostics import ProgressBar
 from prefect import task
 from prefect.cache_policies import NO_CACHE
-from rasterio.errors import NotGeoreferencedWarning, RasterioIOError
-from rasterio.windows import Window
 
 from core.dem import GeoDEM
 from core.errors import CoverageError, GeometryError, InputError, InsufficientDataError
 from core.geodesy import BBox, utm_epsg
-from core.geoid import GeoidGrid
-from core.matching.dense import MatchingConfig, TileStats, dense_tile
-from core.matching.grid import MASK_MISMATCH, MASK_VALID, GridSpec, grid_dem
+from core.matching.dense import MatchingConfig, TileStats
+from core.matching.grid import MASK_MISMATCH, MASK_VALID, GridSpec
 from core.matching.rectify import (
     Box,
     RectifyConfig,
@@ -65,6 +60,7 @@ from core.sensors.rpc import RPCModel
 from core.sensors.viewing import point_geometry
 from tasks.crs import Projection
 from tasks.dem_io import read_reference, resolve_vertical
+from tasks.dense_blocks import check_roi, dense_block, grid_block, tile_boxes, tile_points_path
 from tasks.geoid import load_geoid
 from tasks.raster_io import CogItem, CogOptions, atomic_write_text, write_arrays_cog
 from tasks.sensor_io import LoadedModel
@@ -186,34 +182,6 @@ class DemSummary:
         ]
 
 
-# ---------------------------------------------------------------------------- reading
-
-
-def _open(path: str | Path) -> rasterio.io.DatasetReader:
-    try:
-        with warnings.catch_warnings():
-            warnings.simplefilter("ignore", NotGeoreferencedWarning)
-            return rasterio.open(path)
-    except RasterioIOError as exc:
-        raise InputError(f"cannot read image {path}: {exc}; check the path") from exc
-
-
-def read_window(path: str | Path, box: Box) -> tuple[np.ndarray, float | None]:
-    """Sensor pixels ``box`` (col0, row0, col1, row1) of band 1 as float32, zeros (or the
-    nodata value) beyond the image; and the image's nodata value."""
-    c0, r0, c1, r1 = box
-    with _open(path) as src:
-        nodata = src.nodata
-        fill = 0.0 if nodata is None or math.isnan(nodata) else float(nodata)
-        out = np.full((r1 - r0, c1 - c0), fill, dtype=np.float32)
-        a0, b0 = max(r0, 0), max(c0, 0)
-        a1, b1 = min(r1, src.height), min(c1, src.width)
-        if a1 > a0 and b1 > b0:
-            out[a0 - r0:a1 - r0, b0 - c0:b1 - c0] = src.read(
-                1, window=Window(b0, a0, b1 - b0, a1 - a0)).astype(np.float32)
-    return out, nodata
-
-
 # ---------------------------------------------------------------------------- 1. plan
 
 
@@ -222,7 +190,8 @@ def scene_height_range(left: LoadedModel, right: LoadedModel,
                        ) -> tuple[float, float]:
     """Ellipsoidal heights to assume where the reference has none (or when there is none):
     the range given, else the RPCs' own (height offset +- scale); with a reference the plan
-    takes its range and this is only a fallback."""
+    takes its range and this is only a fallback. The relative orientation uses it too (with
+    no reference), so both steps read the scene's heights the same way."""
     if given is not None:
         lo, hi = map(float, given)
         if not hi > lo:
@@ -250,33 +219,6 @@ def pair_box(left: LoadedModel, right: LoadedModel, h_range_m: tuple[float, floa
     lon, lat = np.concatenate(lons), np.concatenate(lats)
     return BBox(float(lon.min()), float(lat.min()), float(lon.max()),
                 float(lat.max())).expanded(0.01)
-
-
-def tile_boxes(roi: Box, tile_px: int) -> list[Box]:
-    """The ROI cut into tiles of about ``tile_px`` (equal sizes, none thinner than half)."""
-    c0, r0, c1, r1 = roi
-    nc = max(1, round((c1 - c0) / tile_px))
-    nr = max(1, round((r1 - r0) / tile_px))
-    cs = np.linspace(c0, c1, nc + 1).round().astype(int)
-    rs = np.linspace(r0, r1, nr + 1).round().astype(int)
-    return [(int(cs[j]), int(rs[i]), int(cs[j + 1]), int(rs[i + 1]))
-            for i in range(nr) for j in range(nc)]
-
-
-def check_roi(roi: tuple[int, int, int, int] | None, size: tuple[int, int]) -> Box:
-    """``(col, row, width, height)`` in the left image -> a box; the whole image for None."""
-    cols, rows = size
-    if roi is None:
-        return (0, 0, cols, rows)
-    col, row, w, h = (int(v) for v in roi)
-    if w < 16 or h < 16:
-        raise InputError(f"--roi {col} {row} {w} {h} is too small; give a width and height of "
-                         "at least 16 px")
-    box = (max(col, 0), max(row, 0), min(col + w, cols), min(row + h, rows))
-    if box[2] - box[0] < 16 or box[3] - box[1] < 16:
-        raise InputError(f"--roi {col} {row} {w} {h} lies outside the left image ({cols} x "
-                         f"{rows} px); give COL ROW WIDTH HEIGHT inside it")
-    return box
 
 
 def _reference_dem(reference: Path, vertical: str, model: SensorModel, roi: Box,
@@ -338,40 +280,6 @@ def plan_dense(left: LoadedModel, right: LoadedModel, roi: tuple[int, int, int, 
 # ---------------------------------------------------------------------------- 2. match
 
 
-def _trim_heap() -> None:
-    """Hand the memory a block freed back to the system (glibc ``malloc_trim``): the blocks'
-    large temporaries otherwise stay in the allocator's arenas and the resident size creeps
-    up with the number of blocks a worker has run (measured: +1 GB over a SPOT scene)."""
-    try:
-        ctypes.CDLL("libc.so.6").malloc_trim(0)
-    except (OSError, AttributeError):  # not glibc
-        pass
-
-
-def tile_points_path(work: Path, index: int) -> Path:
-    return Path(work) / f"tile_{index:05d}.npz"
-
-
-def dense_block(plan: TilePlan, left_path: str, right_path: str, left: SensorModel,
-                right: SensorModel, left_size: tuple[int, int], right_size: tuple[int, int],
-                epsg: int, origin_m: tuple[float, float], geoid: GeoidGrid | None,
-                cfg: MatchingConfig, out: str) -> TileStats:
-    """One tile: read both sensor windows, :func:`dense_tile`, save the points (float32
-    offsets from ``origin_m``, heights, status) to ``out``; return the tile's figures."""
-    cv2.setNumThreads(1)
-    lw, l_nodata = read_window(left_path, plan.left_read)
-    rw, r_nodata = read_window(right_path, plan.right_read)
-    res = dense_tile(plan, lw, plan.left_read[:2], rw, plan.right_read[:2], left, right,
-                     left_size, right_size, Projection(epsg).to_xy, left_nodata=l_nodata,
-                     right_nodata=r_nodata, geoid=geoid, cfg=cfg)
-    np.savez(out, dx=(res.x_m - origin_m[0]).astype(np.float32),
-             dy=(res.y_m - origin_m[1]).astype(np.float32), h=res.h_m, status=res.status)
-    stats = res.stats
-    del res, lw, rw
-    _trim_heap()
-    return stats
-
-
 def _compute(parts: list[Any], cfg: DenseConfig, label: str) -> list[Any]:
     workers = cfg.num_workers or os.cpu_count() or 1
     processes = cfg.processes if cfg.processes is not None else len(parts) >= 8
@@ -429,40 +337,6 @@ def check_match_rate(stats: tuple[TileStats, ...], min_rate: float) -> None:
 
 
 # ---------------------------------------------------------------------------- 3. grid
-
-
-def grid_block(block: np.ndarray, spec: GridSpec, stats: tuple[TileStats, ...], work: str,
-               origin_m: tuple[float, float], halo: int, max_hole_cells: int,
-               min_island_cells: int, block_info: dict | None = None) -> np.ndarray:
-    """(3, h, w) float32: heights, mask and overlap of the DEM grid's ``block`` (its position),
-    from the point files of the tiles whose ground reaches the block, with a ``halo`` of cells
-    for the hole filling."""
-    (r0, r1), (c0, c1) = block_info[0]["array-location"][-2:]
-    xmin, ymin, xmax, ymax = spec.bounds_of(r0 - halo, r1 + halo, c0 - halo, c1 + halo)
-    parts: dict[str, list[np.ndarray]] = {"x": [], "y": [], "h": [], "s": []}
-    for s in stats:
-        b = s.bounds_m
-        if b is None or b[0] > xmax or b[2] < xmin or b[1] > ymax or b[3] < ymin:
-            continue
-        with np.load(tile_points_path(Path(work), s.index)) as f:
-            x = f["dx"].astype(np.float64) + origin_m[0]
-            y = f["dy"].astype(np.float64) + origin_m[1]
-            keep = (x >= xmin) & (x < xmax) & (y > ymin) & (y <= ymax)
-            parts["x"].append(x[keep])
-            parts["y"].append(y[keep])
-            parts["h"].append(f["h"][keep])
-            parts["s"].append(f["status"][keep])
-    shape = (r1 - r0 + 2 * halo, c1 - c0 + 2 * halo)
-    cat = {k: np.concatenate(v) if v else np.zeros(0) for k, v in parts.items()}
-    cells = grid_dem(cat["x"], cat["y"], cat["h"], cat["s"].astype(np.uint8), xmin, ymax,
-                     spec.res_m, shape, max_hole_cells=max_hole_cells,
-                     min_island_cells=min_island_cells)
-    inner = (slice(halo, shape[0] - halo), slice(halo, shape[1] - halo))
-    out = np.stack([cells.z_m[inner], cells.mask[inner].astype(np.float32),
-                    cells.overlap[inner].astype(np.float32)])
-    del cells, cat, parts
-    _trim_heap()
-    return out
 
 
 def _grid_spec(plan: DensePlan, stats: tuple[TileStats, ...]) -> GridSpec:

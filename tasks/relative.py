@@ -16,7 +16,7 @@ import numpy as np
 from prefect import task
 
 from core.dem import GeoDEM
-from core.errors import CoverageError, GeometryError, InputError, InsufficientDataError
+from core.errors import CoverageError, GeometryError, InsufficientDataError
 from core.geodesy import BBox
 from core.intersection import triangulate
 from core.matching.tiepoint_results import TiePointResult, TiePointStatus
@@ -29,7 +29,6 @@ from core.orientation.relative import (
     relative_orientation,
 )
 from core.sensors.base import SensorModel, footprint_lonlat
-from core.sensors.rpc import RPCModel
 from core.sensors.viewing import footprint_mean_height_m, pair_geometry
 from tasks.dem_io import read_reference, resolve_vertical
 from tasks.raster_io import atomic_write_text
@@ -37,6 +36,7 @@ from tasks.sensor_io import LoadedModel, load_model
 
 FORMAT = "gcpfree.relative"
 FOOTPRINT_MARGIN_DEG = 0.05
+DEFAULT_CONFIG = RelativeConfig()
 
 
 @task(name="load-pair")
@@ -46,24 +46,6 @@ def load_pair(left: Path, right: Path, left_model: Path | None = None,
     """The sensor models of both images (found beside them unless given)."""
     return (load_model(left, model=left_model, band=band),
             load_model(right, model=right_model, band=band))
-
-
-def height_range_m(left: LoadedModel, right: LoadedModel,
-                   given: tuple[float, float] | None) -> tuple[float, float]:
-    """The scene's ellipsoidal height range when there is no reference DEM: the one given, else
-    the RPCs' own (height offset +- scale); a rigorous model states none."""
-    if given is not None:
-        lo, hi = map(float, given)
-        if not hi > lo:
-            raise InputError(f"height range {given} is empty; give --height-range MIN MAX")
-        return lo, hi
-    rpcs = [m.model for m in (left, right) if isinstance(m.model, RPCModel)]
-    if not rpcs:
-        raise InputError("a rigorous (pushbroom) model states no terrain heights: give "
-                         "--reference REF.tif, --srtm-dir DIR or --height-range MIN MAX")
-    lo = min(r.alt_off - r.alt_scale for r in rpcs)
-    hi = max(r.alt_off + r.alt_scale for r in rpcs)
-    return float(lo), float(hi)
 
 
 def pair_box(left: LoadedModel, right: LoadedModel, h_range: tuple[float, float]) -> BBox:
@@ -124,10 +106,10 @@ class RelativeProducts:
                  if ae.sigma_px is not None else "observable")
         return [
             f"relative orientation  {self.rel_json}",
-            f"tie points            {self.n_points} used, {self.n_rejected} rejected "
-            f"({self.tie_points_json.name})",
-            f"y-parallax RMS        {self.parallax_rms_before_px:.3f} px before, "
-            f"{self.parallax_rms_after_px:.3f} px after",
+            (f"tie points            {self.n_points} used, {self.n_rejected} rejected "
+             f"({self.tie_points_json.name})"),
+            (f"y-parallax RMS        {self.parallax_rms_before_px:.3f} px before, "
+             f"{self.parallax_rms_after_px:.3f} px after"),
             f"along epipolar        {along}",
         ]
 
@@ -140,7 +122,7 @@ def _model_dict(model: SensorModel) -> dict[str, Any]:
 def orient_relative(
     left: LoadedModel, right: LoadedModel, ties: TiePointResult, out: Path,
     reference: GeoDEM | None = None, h_range: tuple[float, float] | None = None,
-    config: RelativeConfig = RelativeConfig(), reference_sigma_m: float = 5.0,
+    config: RelativeConfig = DEFAULT_CONFIG, reference_sigma_m: float = 5.0,
 ) -> RelativeProducts:
     """Adjust the right model to the left from the tie points, set the along-epipolar part
     from the reference DEM when there is one, intersect the tie points, write ``out``

@@ -65,7 +65,7 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
 def run(args: argparse.Namespace) -> int:
     from core.errors import InputError
     from tasks.dem_io import check_reference
-    from tasks.dense import check_roi
+    from tasks.dense_blocks import check_roi
     from tasks.sensor_io import load_model
 
     # check the input before Prefect starts: bad input is one clean line

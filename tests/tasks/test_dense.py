@@ -17,7 +17,8 @@ from core.errors import GeometryError, InputError, InsufficientDataError
 from core.matching.grid import MASK_VALID, remove_offset_and_tilt
 from core.sensors.pushbroom import PushbroomModel
 from core.simulation.landcover import LandCover
-from tasks.dense import DenseConfig, check_roi, grid_dem_cog, match_tiles, plan_dense, tile_boxes
+from tasks.dense import DenseConfig, grid_dem_cog, match_tiles, plan_dense
+from tasks.dense_blocks import check_roi, tile_boxes
 from tasks.geoid import BUNDLED_SRTM_DIR
 from tasks.sensor_io import LoadedModel, load_model
 

@@ -19,6 +19,7 @@ from core.simulation.landcover import LandCover
 from core.simulation.scene import ErrorConfig
 from tasks import simulate as S
 from tasks.geoid import EGM96_GTX, load_geoid
+from tasks.simulate_io import check_dem
 from tests.scenes import CENTRE, DEM, run_scene
 
 
@@ -316,8 +317,8 @@ def test_projected_or_missing_dem_is_refused(tmp_path):
     dem = tmp_path / "utm.tif"
     write_dem(dem, 600000.0, 5000000.0, 30.0, (50, 50), crs="EPSG:32632")
     with pytest.raises(InputError, match="reproject it to EPSG:4326"):
-        S.check_dem(dem)
+        check_dem(dem)
     with pytest.raises(InputError, match="does not exist"):
-        S.check_dem(tmp_path / "nope.tif")
+        check_dem(tmp_path / "nope.tif")
     with pytest.raises(InputError, match="date-change"):
         S.define_scene.fn(DEM, tmp_path / "o", "tiny", 0, ErrorConfig(), date_change=2.0)
