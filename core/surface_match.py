@@ -20,6 +20,7 @@ correlation length of the reference's errors) the shift is known to about ``s / 
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from dataclasses import dataclass
 from enum import IntEnum
 from typing import Any
@@ -55,7 +56,10 @@ class SurfaceMatchConfig:
     is the correlation length of the reference's height errors (SRTM: a few hundred metres),
     ``height_noise_m`` their standard deviation (SRTM: about 4-5 m), both used by the
     predicted precision. A window is refused when that prediction, or the measured precision,
-    exceeds ``max_precision_m``.
+    exceeds ``max_precision_m``. ``detrend``: compare the two surfaces about their best-fit
+    planes (the relative DEM may be tilted: an along-epipolar drift that tie points cannot see
+    tilts it by metres per kilometre), the vertical shift then being the plane's height at
+    the window's centre.
     """
 
     radius_m: float = 4000.0
@@ -69,6 +73,7 @@ class SurfaceMatchConfig:
     max_precision_m: float = 10.0
     height_noise_m: float = 5.0
     error_length_m: float = 300.0
+    detrend: bool = True
 
     def __post_init__(self) -> None:
         if not (self.radius_m > 0 and self.shift_max_arcsec > 0
@@ -141,6 +146,8 @@ class WindowCells:
     lon_deg: FloatArray
     lat_deg: FloatArray
     h_m: FloatArray
+    x_m: FloatArray
+    y_m: FloatArray
     cell_m: float
     shape: tuple[int, int]
     n_input: int
@@ -151,7 +158,9 @@ class WindowCells:
 def window_cells(lon_deg: ArrayLike, lat_deg: ArrayLike, h_m: ArrayLike,
                  centre: tuple[float, float], radius_m: float, cell_m: float) -> WindowCells:
     """Average the relative DEM's cells (NaN heights = mismatched) within ``radius_m`` of
-    ``centre`` onto a square lattice of ``cell_m`` around it."""
+    ``centre`` onto a square lattice of ``cell_m`` around it, or coarser when the relative DEM
+    is: a lattice cell is at least sqrt(2) times the input's spacing, so that every cell of a
+    complete input receives a value whatever the grids' orientations."""
     lon = np.ravel(np.asarray(lon_deg, dtype=np.float64))
     lat = np.ravel(np.asarray(lat_deg, dtype=np.float64))
     h = np.ravel(np.asarray(h_m, dtype=np.float64))
@@ -159,6 +168,7 @@ def window_cells(lon_deg: ArrayLike, lat_deg: ArrayLike, h_m: ArrayLike,
     x = (lon - centre[0]) * float(m_lon)
     y = (lat - centre[1]) * float(m_lat)
     inside = np.hypot(x, y) <= radius_m
+    cell_m = max(float(cell_m), np.sqrt(2.0) * _spacing_m(x[inside], y[inside]))
     n_side = 2 * int(np.ceil(radius_m / cell_m))
     ix = np.floor((x[inside] + n_side * cell_m / 2) / cell_m).astype(np.int64)
     iy = np.floor((y[inside] + n_side * cell_m / 2) / cell_m).astype(np.int64)
@@ -175,41 +185,81 @@ def window_cells(lon_deg: ArrayLike, lat_deg: ArrayLike, h_m: ArrayLike,
     in_disk = (np.hypot(xx, yy) <= radius_m).ravel()
     mean = np.where(in_disk, mean, np.nan)
     return WindowCells(centre[0] + xx.ravel() / float(m_lon), centre[1] + yy.ravel() / float(m_lat),
-                       mean, float(cell_m), (n_side, n_side), int(inside.sum()),
+                       mean, xx.ravel(), yy.ravel(), float(cell_m), (n_side, n_side),
+                       int(inside.sum()),
                        int((~np.isfinite(h[inside])).sum()), int(in_disk.sum()))
+
+
+def _spacing_m(x: FloatArray, y: FloatArray, n_sample: int = 400) -> float:
+    """Typical distance between neighbouring input cells (median nearest-neighbour distance of
+    a sample)."""
+    if x.size < 2:
+        return 0.0
+    from scipy.spatial import cKDTree
+
+    pts = np.stack([x, y], axis=1)
+    sample = pts[np.linspace(0, len(pts) - 1, min(n_sample, len(pts))).astype(np.int64)]
+    d, _ = cKDTree(pts).query(sample, k=2)
+    return float(np.median(d[:, 1]))
 
 
 # ------------------------------------------------------------------------- matching
 
 
+def _basis(cells: WindowCells, ok: NDArray[np.bool_], detrend: bool) -> FloatArray:
+    """Regressors removed before correlating: a constant, and a plane with ``detrend`` (x, y
+    in kilometres from the centre, for conditioning)."""
+    one = np.ones(int(ok.sum()))
+    if not detrend:
+        return one[:, None]
+    return np.stack([one, cells.x_m[ok] / 1000.0, cells.y_m[ok] / 1000.0], axis=1)
+
+
 def _correlations(cells: WindowCells, reference: GeoDEM, shifts_deg: FloatArray,
-                  chunk: int = 128) -> tuple[FloatArray, FloatArray]:
-    """Correlation coefficient and valid-pair count for each (dlon, dlat) shift (n, 2)."""
+                  detrend: bool = True, chunk: int = 128) -> tuple[FloatArray, FloatArray]:
+    """Correlation coefficient (partial: about the best constant, or plane with ``detrend``,
+    of each set over the pairs valid at that shift) and valid-pair count for each (dlon, dlat)
+    shift (n, 2)."""
     ok = np.isfinite(cells.h_m)
-    lon, lat, h = cells.lon_deg[ok], cells.lat_deg[ok], cells.h_m[ok]
+    lon, lat = cells.lon_deg[ok], cells.lat_deg[ok]
+    h = cells.h_m[ok] - np.mean(cells.h_m[ok])
+    b = _basis(cells, ok, detrend)
+    bb = b[:, :, None] * b[:, None, :]  # (n, k, k)
     rho = np.full(len(shifts_deg), np.nan)
     count = np.zeros(len(shifts_deg))
     for s in range(0, len(shifts_deg), chunk):
         sh = shifts_deg[s:s + chunk]
         ref = reference.height_m(lon[None, :] + sh[:, :1], lat[None, :] + sh[:, 1:])
         valid = np.isfinite(ref)
-        n = valid.sum(axis=1).astype(np.float64)
-        hv = np.where(valid, h[None, :], 0.0)
-        rv = np.where(valid, ref, 0.0)
+        v = valid.astype(np.float64)
+        r = np.where(valid, ref - np.nanmedian(ref) if valid.any() else 0.0, 0.0)
+        gram = np.einsum("sn,nij->sij", v, bb)
+        bh = v @ (b * h[:, None])
+        br = r @ b
         with np.errstate(invalid="ignore", divide="ignore"):
-            mh, mr = hv.sum(1) / n, rv.sum(1) / n
-            dh = np.where(valid, hv - mh[:, None], 0.0)
-            dr = np.where(valid, rv - mr[:, None], 0.0)
-            cov = (dh * dr).sum(1)
-            rho[s:s + chunk] = cov / np.sqrt((dh * dh).sum(1) * (dr * dr).sum(1))
-        count[s:s + chunk] = n
+            try:
+                sol_h = np.linalg.solve(gram, bh[:, :, None])[:, :, 0]
+                sol_r = np.linalg.solve(gram, br[:, :, None])[:, :, 0]
+            except np.linalg.LinAlgError:  # a shift with too few pairs: solve one by one
+                sol_h, sol_r = _lstsq_each(gram, bh), _lstsq_each(gram, br)
+            hh = v @ (h * h) - np.sum(bh * sol_h, axis=1)
+            rr = np.sum(r * r, axis=1) - np.sum(br * sol_r, axis=1)
+            hr = r @ h - np.sum(bh * sol_r, axis=1)
+            rho[s:s + chunk] = hr / np.sqrt(hh * rr)
+        count[s:s + chunk] = v.sum(axis=1)
     return rho, count
 
 
+def _lstsq_each(gram: FloatArray, rhs: FloatArray) -> FloatArray:
+    return np.stack([np.linalg.lstsq(g, y, rcond=None)[0] for g, y in zip(gram, rhs,
+                                                                            strict=True)])
+
+
 def _valid_rho(cells: WindowCells, reference: GeoDEM, sx_arcsec: FloatArray,
-               sy_arcsec: FloatArray, min_cells: int) -> FloatArray:
+               sy_arcsec: FloatArray, min_cells: int, detrend: bool) -> FloatArray:
     """Correlations at shifts (arcsec), NaN where fewer than ``min_cells`` pairs are valid."""
-    rho, count = _correlations(cells, reference, np.stack([sx_arcsec, sy_arcsec], 1) * ARCSEC)
+    rho, count = _correlations(cells, reference, np.stack([sx_arcsec, sy_arcsec], 1) * ARCSEC,
+                               detrend)
     return np.where(count >= min_cells, rho, np.nan)
 
 
@@ -238,12 +288,18 @@ def _grid(half: float, step: float) -> FloatArray:
 
 def predicted_precision_m(cells: WindowCells, cfg: SurfaceMatchConfig) -> tuple[float, float,
                                                                                  float, int]:
-    """(precision m, relief m, RMS slope, independent patches) the window's relief promises."""
+    """(precision m, relief m, RMS slope, independent patches) the window's relief promises.
+
+    With ``cfg.detrend`` the relief is the heights' spread about their best-fit plane and the
+    slopes are taken about their mean: a plane carries no information once a tilt is free.
+    """
     h = cells.h_m.reshape(cells.shape)
     gy, gx = np.gradient(h, cells.cell_m)
+    if cfg.detrend and np.isfinite(gx).any():
+        gx, gy = gx - np.nanmean(gx), gy - np.nanmean(gy)
     g2 = gx**2 + gy**2
     ok = np.isfinite(g2)
-    relief = float(np.nanstd(h)) if np.isfinite(h).any() else 0.0
+    relief = _relief_m(cells, cfg.detrend)
     if ok.sum() < 3:
         return float("inf"), relief, 0.0, 0
     slope = float(np.sqrt(np.mean(g2[ok])))
@@ -252,6 +308,17 @@ def predicted_precision_m(cells: WindowCells, cfg: SurfaceMatchConfig) -> tuple[
     if slope <= 0:
         return float("inf"), relief, slope, n_eff
     return cfg.height_noise_m / (slope * np.sqrt(n_eff)), relief, slope, n_eff
+
+
+def _relief_m(cells: WindowCells, detrend: bool) -> float:
+    """Standard deviation of the window's heights (about their best-fit plane with
+    ``detrend``)."""
+    ok = np.isfinite(cells.h_m)
+    if ok.sum() < 4:
+        return 0.0
+    b = _basis(cells, ok, detrend)
+    coef, *_ = np.linalg.lstsq(b, cells.h_m[ok], rcond=None)
+    return float(np.std(cells.h_m[ok] - b @ coef))
 
 
 def match_window(lon_deg: ArrayLike, lat_deg: ArrayLike, h_m: ArrayLike,
@@ -282,14 +349,16 @@ def match_window(lon_deg: ArrayLike, lat_deg: ArrayLike, h_m: ArrayLike,
     rho = np.full(gx.shape, np.nan)
     coarse = np.zeros(gx.shape, dtype=bool)
     coarse[::2, ::2] = True
-    rho[coarse] = _valid_rho(cells, reference, gx[coarse], gy[coarse], cfg.min_cells)
+    rho[coarse] = _valid_rho(cells, reference, gx[coarse], gy[coarse], cfg.min_cells,
+                              cfg.detrend)
     if not np.isfinite(rho).any():
         return WindowMatch(WindowStatus.MASKED, **base)
     cy, cx = np.unravel_index(int(np.nanargmax(rho)), rho.shape)
     near = np.zeros(gx.shape, dtype=bool)
     near[max(cy - 3, 0):cy + 4, max(cx - 3, 0):cx + 4] = True
     near &= ~coarse
-    rho[near] = _valid_rho(cells, reference, gx[near], gy[near], cfg.min_cells)
+    rho[near] = _valid_rho(cells, reference, gx[near], gy[near], cfg.min_cells,
+                            cfg.detrend)
     iy, ix = np.unravel_index(int(np.nanargmax(rho)), rho.shape)
     if iy in (0, rho.shape[0] - 1) or ix in (0, rho.shape[1] - 1):
         return WindowMatch(WindowStatus.EDGE_PEAK, correlation=float(rho[iy, ix]), **base)
@@ -304,7 +373,7 @@ def match_window(lon_deg: ArrayLike, lat_deg: ArrayLike, h_m: ArrayLike,
         fine = _grid(1.5 * step, cfg.refine_step_arcsec)
         fx, fy = np.meshgrid(sx + fine, sy + fine)
         rf, _ = _correlations(cells, reference,
-                              np.stack([fx.ravel(), fy.ravel()], 1) * ARCSEC)
+                              np.stack([fx.ravel(), fy.ravel()], 1) * ARCSEC, cfg.detrend)
         rf = rf.reshape(fx.shape)
         if np.isfinite(rf).all():
             jy, jx = np.unravel_index(int(np.argmax(rf)), rf.shape)
@@ -317,8 +386,10 @@ def match_window(lon_deg: ArrayLike, lat_deg: ArrayLike, h_m: ArrayLike,
     ref = reference.height_m(cells.lon_deg[valid] + sx * ARCSEC,
                              cells.lat_deg[valid] + sy * ARCSEC)
     diff = ref - cells.h_m[valid]
-    diff = diff[np.isfinite(diff)]
-    dz, spread = _robust_mean(diff)
+    use = np.isfinite(diff)
+    basis = _basis(cells, valid, cfg.detrend)[use]
+    coef, spread = _robust_fit(diff[use], basis)
+    dz = float(coef[0])  # at the centre: x = y = 0 there
     # precision: near its peak rho(s) ~ 1 - k s^2 / 2 with k = slope^2 / relief^2 along the
     # flattest direction (the peak's curvature, per m^2); least squares then knows the shift to
     # spread / (slope sqrt(N)) = spread / (relief sqrt(k N)) over N independent patches
@@ -338,13 +409,70 @@ def match_window(lon_deg: ArrayLike, lat_deg: ArrayLike, h_m: ArrayLike,
     return result
 
 
-def _robust_mean(d: FloatArray, k: float = 1.5, n_iter: int = 10) -> tuple[float, float]:
-    """Huber mean and robust spread (1.4826 MAD) of ``d``."""
-    if d.size == 0:
-        return float("nan"), float("nan")
-    mu = float(np.median(d))
-    s = max(float(1.4826 * np.median(np.abs(d - mu))), 1e-6)
+def _robust_fit(d: FloatArray, basis: FloatArray, k: float = 1.5,
+                n_iter: int = 10) -> tuple[FloatArray, float]:
+    """Huber fit of ``d`` on ``basis`` (n, k) by iteratively reweighted least squares, and the
+    residuals' robust spread (1.4826 MAD)."""
+    if d.size < basis.shape[1]:
+        return np.full(basis.shape[1], np.nan), float("nan")
+    coef, *_ = np.linalg.lstsq(basis, d, rcond=None)
+    res = d - basis @ coef
+    s = max(float(1.4826 * np.median(np.abs(res - np.median(res)))), 1e-6)
     for _ in range(n_iter):
-        w = 1.0 / np.maximum(np.abs(d - mu) / (k * s), 1.0)
-        mu = float(np.sum(w * d) / np.sum(w))
-    return mu, s
+        w = 1.0 / np.maximum(np.abs(res) / (k * s), 1.0)
+        sw = np.sqrt(w)
+        coef, *_ = np.linalg.lstsq(basis * sw[:, None], d * sw, rcond=None)
+        res = d - basis @ coef
+        s = max(float(1.4826 * np.median(np.abs(res - np.median(res)))), 1e-6)
+    return coef, s
+
+
+# ------------------------------------------------------------------------- relief sufficiency
+
+
+@dataclass(frozen=True)
+class ReliefVerdict:
+    """Whether the terrain has the relief surface matching needs, judged before orienting.
+
+    ``n_qualified``: windows whose relief promises ``max_precision_m`` (the precision predicted
+    from the relief, see :func:`predicted_precision_m`); ``relief_found_m``: the median relief
+    (std of heights) of the windows with enough cells; ``relief_needed_m``: the median over
+    those windows of the relief that would have made them qualify (the predicted precision
+    goes as one over the slopes, so as one over the relief of a terrain of the same shape).
+    """
+
+    n_windows: int
+    n_qualified: int
+    n_needed: int
+    relief_found_m: float
+    relief_needed_m: float
+    max_precision_m: float
+
+    @property
+    def enough(self) -> bool:
+        return self.n_qualified >= self.n_needed
+
+    def message(self) -> str:
+        return (f"the terrain is too flat for GCP-free orientation: {self.n_qualified} of "
+                f"{self.n_windows} surface-matching windows have the relief to fix the position "
+                f"to {self.max_precision_m:g} m ({self.n_needed} needed); relief found "
+                f"{self.relief_found_m:.1f} m (median std of heights per window), needed about "
+                f"{self.relief_needed_m:.1f} m; use real GCPs or a scene with more relief")
+
+    def to_dict(self) -> dict[str, Any]:
+        return {**vars(self), "enough": self.enough}
+
+
+def relief_sufficiency(matches: Sequence[WindowMatch], cfg: SurfaceMatchConfig,
+                       n_needed: int) -> ReliefVerdict:
+    """The verdict on ``matches`` (windows matched or refused by :func:`match_window`)."""
+    sized = [m for m in matches if m.status not in (WindowStatus.TOO_FEW_CELLS,
+                                                    WindowStatus.MASKED)
+             and np.isfinite(m.relief_m)]
+    qualified = [m for m in sized if m.predicted_precision_m <= cfg.max_precision_m]
+    found = float(np.median([m.relief_m for m in sized])) if sized else 0.0
+    need = [m.relief_m * m.predicted_precision_m / cfg.max_precision_m for m in sized
+            if np.isfinite(m.predicted_precision_m) and m.relief_m > 0]
+    needed = float(np.median(need)) if need else float("nan")
+    return ReliefVerdict(len(matches), len(qualified), n_needed, found, needed,
+                         cfg.max_precision_m)

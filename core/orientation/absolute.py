@@ -23,6 +23,7 @@ from numpy.typing import ArrayLike, NDArray
 
 from core.errors import ConvergenceError, InputError, InsufficientDataError
 from core.geodesy import geodetic_to_ecef
+from core.points import ControlPoint
 from core.sensors.base import SensorModel
 
 FloatArray = NDArray[np.float64]
@@ -71,6 +72,24 @@ class Observations:
         if np.shape(self.col) != np.shape(self.row) or np.shape(self.col)[0] != n:
             raise InputError("GCP image coordinates must be (n_gcp, n_images), cols and rows "
                              "alike")
+
+    @classmethod
+    def from_control_points(cls, points: Sequence[ControlPoint],
+                            names: Sequence[str]) -> Observations:
+        """The measurements of ``points`` in the images ``names`` (NaN where a point is not
+        measured in an image)."""
+        col = np.full((len(points), len(names)), np.nan)
+        row = np.full_like(col, np.nan)
+        for i, p in enumerate(points):
+            for j, name in enumerate(names):
+                if name in p.image_points:
+                    col[i, j], row[i, j] = p.image_points[name].col, p.image_points[name].row
+
+        def arr(attr: str) -> FloatArray:
+            return np.array([getattr(p, attr) for p in points], dtype=np.float64)
+
+        return cls(arr("lon_deg"), arr("lat_deg"), arr("h_m"), col, row, arr("sigma_xy_m"),
+                   arr("sigma_h_m"))
 
 
 @dataclass(frozen=True, eq=False)

@@ -3,6 +3,8 @@ shifts recovered, precision estimates honest, flat or masked windows refused."""
 
 from __future__ import annotations
 
+from dataclasses import replace
+
 import numpy as np
 import pytest
 from scipy.ndimage import gaussian_filter
@@ -63,12 +65,31 @@ def test_known_shift_recovered(ref, shift):
     assert w.ok and w.correlation > 0.99
     err_e = (w.shift_lon_arcsec - shift[0]) / 3600 * M_LON
     err_n = (w.shift_lat_arcsec - shift[1]) / 3600 * M_LAT
-    assert np.hypot(err_e, err_n) < 3.0  # the reference's correlated noise: 4 m
+    assert np.hypot(err_e, err_n) < 3.5  # the reference's correlated noise: 4 m
     assert abs(w.shift_h_m - shift[2]) < 1.0
     assert w.shift_east_m == pytest.approx(w.shift_lon_arcsec / 3600 * M_LON, rel=2e-3)
     # the precisions are of the size of the errors, and the prediction agrees with the measure
     assert 0.5 < w.precision_m < 6.0 and 0.5 < w.predicted_precision_m < 6.0
     assert 0.5 < w.precision_m / w.predicted_precision_m < 2.0
+
+
+@pytest.mark.parametrize("detrend", [True, False])
+def test_a_tilted_relative_dem_is_matched_about_its_plane(ref, detrend):
+    """A relative DEM tilted by 5 m/km (an along-epipolar drift the tie points cannot see):
+    comparing the surfaces about their planes recovers the shift, and the height at the
+    centre; comparing them raw confuses the tilt with a slope and misplaces the window."""
+    shift = (7.3, -4.6, 12.0)
+    lon, lat, h = relative_dem(shift)
+    x, y = (lon - LON0) * M_LON, (lat - LAT0) * M_LAT
+    h = h + 5.0 * (x + 0.5 * y) / 1000.0
+    w = match_window(lon, lat, h, (LON0, LAT0), ref, replace(SurfaceMatchConfig(),
+                                                             detrend=detrend))
+    err = np.hypot((w.shift_lon_arcsec - shift[0]) / 3600 * M_LON,
+                   (w.shift_lat_arcsec - shift[1]) / 3600 * M_LAT)
+    if detrend:
+        assert w.ok and err < 3.5 and abs(w.shift_h_m - shift[2]) < 1.0
+    else:
+        assert err > 10.0
 
 
 def test_precision_estimate_is_honest_over_many_noise_draws():
