@@ -388,7 +388,7 @@ def match_window(lon_deg: ArrayLike, lat_deg: ArrayLike, h_m: ArrayLike,
     diff = ref - cells.h_m[valid]
     use = np.isfinite(diff)
     basis = _basis(cells, valid, cfg.detrend)[use]
-    coef, spread = _robust_fit(diff[use], basis)
+    coef, spread = _robust_fit(diff[use], basis, mode_scale_m=cfg.height_noise_m)
     dz = float(coef[0])  # at the centre: x = y = 0 there
     # precision: near its peak rho(s) ~ 1 - k s^2 / 2 with k = slope^2 / relief^2 along the
     # flattest direction (the peak's curvature, per m^2); least squares then knows the shift to
@@ -409,22 +409,53 @@ def match_window(lon_deg: ArrayLike, lat_deg: ArrayLike, h_m: ArrayLike,
     return result
 
 
-def _robust_fit(d: FloatArray, basis: FloatArray, k: float = 1.5,
-                n_iter: int = 10) -> tuple[FloatArray, float]:
-    """Huber fit of ``d`` on ``basis`` (n, k) by iteratively reweighted least squares, and the
-    residuals' robust spread (1.4826 MAD)."""
+def _robust_fit(d: FloatArray, basis: FloatArray, k: float = 1.5, n_iter: int = 10,
+                mode_scale_m: float | None = None) -> tuple[FloatArray, float]:
+    """Fit of ``d`` on ``basis`` (n, k) and the robust spread (1.4826 MAD) of its residuals.
+
+    Huber IRLS first; then, with ``mode_scale_m``, the fit is moved to the dominant mode of
+    the residuals (the peak of their kernel density) and refined with Gaussian (Welsch)
+    weights of that scale, which ignore a second population: the relative DEM is a surface
+    model, the reference has no canopy (SRTM partly, the simulator's not at all), and
+    forests on a third of a window pulled the Huber fit 5 m down on the simulated ``spot``
+    pair (17.5 m trees on 32 % of it); the spread is then that of the dominant population.
+    """
     if d.size < basis.shape[1]:
         return np.full(basis.shape[1], np.nan), float("nan")
+
+    def mad(r: FloatArray) -> float:
+        return max(float(1.4826 * np.median(np.abs(r - np.median(r)))), 1e-6)
+
     coef, *_ = np.linalg.lstsq(basis, d, rcond=None)
     res = d - basis @ coef
-    s = max(float(1.4826 * np.median(np.abs(res - np.median(res)))), 1e-6)
+    s = mad(res)
     for _ in range(n_iter):
         w = 1.0 / np.maximum(np.abs(res) / (k * s), 1.0)
         sw = np.sqrt(w)
         coef, *_ = np.linalg.lstsq(basis * sw[:, None], d * sw, rcond=None)
         res = d - basis @ coef
-        s = max(float(1.4826 * np.median(np.abs(res - np.median(res)))), 1e-6)
-    return coef, s
+        s = mad(res)
+    if mode_scale_m is None:
+        return coef, s
+    h = float(mode_scale_m)
+    lo, hi = np.percentile(res, (0.5, 99.5))
+    step = h / 10.0
+    edges = np.arange(lo - 3 * h, hi + 3 * h + step, step)
+    density, _ = np.histogram(res, bins=edges)
+    from scipy.ndimage import gaussian_filter1d
+
+    peak = int(np.argmax(gaussian_filter1d(density.astype(np.float64), 0.5 * h / step)))
+    coef = coef.copy()
+    coef[0] += 0.5 * (edges[peak] + edges[peak + 1])
+    for _ in range(n_iter):
+        res = d - basis @ coef
+        sw = np.exp(-0.25 * (res / h) ** 2)  # sqrt of the Gaussian weight exp(-r^2 / 2h^2)
+        if np.count_nonzero(sw > 0.1) < basis.shape[1]:
+            break
+        coef, *_ = np.linalg.lstsq(basis * sw[:, None], d * sw, rcond=None)
+    res = d - basis @ coef
+    core = np.abs(res) < 3.0 * h
+    return coef, mad(res[core]) if core.sum() >= basis.shape[1] else mad(res)
 
 
 # ------------------------------------------------------------------------- relief sufficiency

@@ -100,17 +100,23 @@ def oriented_pair(params: DsmParams) -> OrientedPair:
     return OrientedPair(left, right, Path(ref.path), "ellipsoidal")
 
 
-@flow(name="dsm", log_prints=True)
-def dsm_flow(params: DsmParams) -> DemSummary:
-    """Orient the pair -> plan the tiles -> match and triangulate them -> grid the DSM."""
+def pair_dem(pair: OrientedPair, out: Path, cfg: DenseConfig,
+             roi: tuple[int, int, int, int] | None = None,
+             height_range_m: tuple[float, float] | None = None) -> DemSummary:
+    """Plan the tiles -> match and triangulate them -> grid the DEM into ``out``."""
     from tasks.dense import grid_dem_cog, match_tiles, plan_dense, scene_height_range
 
-    out = Path(params.out)
-    cfg = params.config()
-    pair = oriented_pair(params)
-    h_range = scene_height_range(pair.left, pair.right, params.height_range_m, pair.reference)
-    plan = plan_dense(pair.left, pair.right, params.roi, pair.reference, h_range,
+    out = Path(out)
+    h_range = scene_height_range(pair.left, pair.right, height_range_m, pair.reference)
+    plan = plan_dense(pair.left, pair.right, roi, pair.reference, h_range,
                       pair.reference_vertical, cfg)
     work = out.parent / f".{out.name}.work"
     stats = match_tiles(plan, pair.left, pair.right, work, cfg)
     return grid_dem_cog(plan, stats, work, out, cfg)
+
+
+@flow(name="dsm", log_prints=True)
+def dsm_flow(params: DsmParams) -> DemSummary:
+    """Orient the pair -> plan the tiles -> match and triangulate them -> grid the DSM."""
+    return pair_dem(oriented_pair(params), Path(params.out), params.config(), params.roi,
+                    params.height_range_m)

@@ -3,6 +3,8 @@
 from __future__ import annotations
 
 import contextlib
+import json
+import math
 import os
 import tempfile
 import threading
@@ -170,6 +172,27 @@ def atomic_write_bytes(path: str | Path, data: bytes) -> Path:
 
 def atomic_write_text(path: str | Path, text: str) -> Path:
     return atomic_write_bytes(path, text.encode("utf-8"))
+
+
+def json_ready(obj: Any) -> Any:
+    """``obj`` as strict JSON values: NaN and infinities -> None, tuples and arrays -> lists,
+    NumPy scalars -> Python numbers, paths -> strings."""
+    if isinstance(obj, dict):
+        return {str(k): json_ready(v) for k, v in obj.items()}
+    if isinstance(obj, (list, tuple, np.ndarray)):
+        return [json_ready(v) for v in (obj.tolist() if isinstance(obj, np.ndarray) else obj)]
+    if isinstance(obj, np.generic):
+        obj = obj.item()
+    if isinstance(obj, float) and not math.isfinite(obj):
+        return None
+    if isinstance(obj, Path):
+        return str(obj)
+    return obj
+
+
+def atomic_write_json(path: str | Path, doc: Any, indent: int | None = 1) -> Path:
+    """``doc`` written as strict JSON (see :func:`json_ready`) through a temporary file."""
+    return atomic_write_text(path, json.dumps(json_ready(doc), indent=indent, allow_nan=False))
 
 
 def read_surface_window(path: str | Path, bounds_m: tuple[float, float, float, float],

@@ -97,77 +97,58 @@ def _with_terms(model: SensorModel, terms: Sequence[str]) -> SensorModel:
                                                                if t not in model.param_names))
 
 
-def _t_values(result: AbsoluteOrientation, chosen: dict[str, list[str]]
-              ) -> dict[tuple[str, str], tuple[float, float, float]]:
-    """(estimate, sigma, |t|) of every chosen lens term in ``result``."""
-    out = {}
-    for name, pn, pa, sd in zip(result.names, result.param_names, result.params_after,
-                                result.sigmas(), strict=True):
-        for t in chosen.get(name, []):
-            e, s = float(pa[pn.index(t)]), float(sd[pn.index(t)])
-            out[(name, t)] = (e, s, abs(e) / s if s > 0 else 0.0)
-    return out
+def _wald(result: AbsoluteOrientation, name: str, terms: Sequence[str]) -> float:
+    """Wald statistic ``theta' C^-1 theta`` of image ``name``'s lens terms in ``result``
+    (chi-square with ``len(terms)`` degrees of freedom when the terms are zero)."""
+    k = result.names.index(name)
+    start = sum(len(p) for p in result.param_names[:k])
+    pn = result.param_names[k]
+    idx = np.array([start + pn.index(t) for t in terms])
+    theta = result.params_after[k][[pn.index(t) for t in terms]]
+    cov = result.covariance[np.ix_(idx, idx)]
+    try:
+        return float(theta @ np.linalg.solve(cov, theta))
+    except np.linalg.LinAlgError:
+        return float(theta @ np.linalg.pinv(cov) @ theta)
 
 
 def self_calibrate(models: Sequence[SensorModel], obs: Observations, names: Sequence[str],
                    config: AbsoluteConfig = AbsoluteConfig(), terms: Sequence[str] = LENS_TERMS,
                    t_threshold: float = 3.0) -> SelfCalibration:
-    """Orient without lens terms, then add them to the pushbroom images one at a time.
+    """Orient without lens terms, then with ``terms`` on every pushbroom image; keep an
+    image's terms when they are significant together, and orient again with those.
 
-    Forward selection: each round tries every (image, term) not yet chosen and adds the one
-    with the largest ``|estimate| / sigma`` above ``t_threshold``; after each addition, the
-    chosen terms that are no longer significant are dropped. Testing the four terms together
-    would drown them: ``k1 r`` and ``k3 r^3`` are nearly collinear over a CCD line, so on
-    simulated ``tiny`` a real ``k3`` of -35 had t = -1.8 next to ``k1`` and t = -8.3 alone.
-    GCPs rejected without lens terms stay rejected (blunders, not distortion).
+    The test is on the block of an image's terms against their covariance (Wald: chi-square
+    with one degree of freedom per term, at the two-sided probability of ``t_threshold``
+    sigmas, 0.27 % for 3): one term at a time would drown them, ``k1 r`` and ``k3 r^3`` being
+    nearly collinear over a CCD line (simulated ``tiny``: a real ``k3`` of -35 had t = -1.8
+    next to ``k1``, t = -8.3 alone). GCPs rejected without lens terms stay rejected
+    (blunders, not distortion).
     """
+    from scipy.stats import chi2, norm
+
     names = tuple(names)
     without = absolute_orientation(models, obs, names, config)
-    base = list(without.models)
-    candidates = [(n, t) for n, m in zip(names, base, strict=True)
-                  if isinstance(m, PushbroomModel) for t in terms]
-    if not candidates:
+    trial_models = [_with_terms(m, terms) for m in without.models]
+    if all(tm is m for tm, m in zip(trial_models, without.models, strict=True)):
         return SelfCalibration(without, None, {}, t_threshold)
     keep = without.inlier
     trial_obs = Observations(obs.lon_deg[keep], obs.lat_deg[keep], obs.h_m[keep],
                              np.asarray(obs.col)[keep], np.asarray(obs.row)[keep],
                              obs.sigma_xy_m[keep], obs.sigma_h_m[keep])
-
-    def fit(chosen: dict[str, list[str]]) -> AbsoluteOrientation:
-        trial = [_with_terms(m, chosen.get(n, [])) for m, n in zip(base, names, strict=True)]
-        return absolute_orientation(trial, trial_obs, names, config)
-
-    chosen: dict[str, list[str]] = {}
-    dropped: set[tuple[str, str]] = set()  # never tried again: the selection cannot cycle
-    best_fit: AbsoluteOrientation | None = None
-    while True:
-        best: tuple[float, str, str, AbsoluteOrientation] | None = None
-        for name, term in candidates:
-            if term in chosen.get(name, []) or (name, term) in dropped:
-                continue
-            trial_terms = {**chosen, name: [*chosen.get(name, []), term]}
-            trial = fit(trial_terms)
-            t = _t_values(trial, trial_terms)[(name, term)][2]
-            if t > t_threshold and (best is None or t > best[0]):
-                best = (t, name, term, trial)
-        if best is None:
-            break
-        _, name, term, best_fit = best
-        chosen = {**chosen, name: [*chosen.get(name, []), term]}
-        while True:  # drop what the new term made redundant
-            weak = [k for k, (_, _, t) in _t_values(best_fit, chosen).items() if t <= t_threshold]
-            if not weak:
-                break
-            n_, t_ = min(weak, key=lambda k: _t_values(best_fit, chosen)[k][2])
-            dropped.add((n_, t_))
-            chosen = {k: [x for x in v if not (k == n_ and x == t_)] for k, v in chosen.items()}
-            chosen = {k: v for k, v in chosen.items() if v}
-            best_fit = fit(chosen)
-        if not chosen:
-            break
-    if not chosen or best_fit is None:
+    trial = absolute_orientation(trial_models, trial_obs, names, config)
+    limit = float(chi2.ppf(1.0 - 2.0 * norm.sf(t_threshold), len(terms)))
+    chosen = [n for n, m in zip(names, trial_models, strict=True)
+              if isinstance(m, PushbroomModel) and _wald(trial, n, terms) > limit]
+    if not chosen:
         return SelfCalibration(without, None, {}, t_threshold)
+    final_models = [_with_terms(m, terms if n in chosen else ())
+                    for m, n in zip(without.models, names, strict=True)]
+    with_lens = absolute_orientation(final_models, trial_obs, names, config)
     significant: dict[str, dict[str, tuple[float, float]]] = {}
-    for (name, term), (e, sd, _) in _t_values(best_fit, chosen).items():
-        significant.setdefault(name, {})[term] = (e, sd)
-    return SelfCalibration(without, best_fit, significant, t_threshold)
+    for name, pn, pa, sd in zip(names, with_lens.param_names, with_lens.params_after,
+                                with_lens.sigmas(), strict=True):
+        if name in chosen:
+            significant[name] = {t: (float(pa[pn.index(t)]), float(sd[pn.index(t)]))
+                                 for t in terms}
+    return SelfCalibration(without, with_lens, significant, t_threshold)

@@ -5,6 +5,8 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
+from flows.commands._pair import add_pair_arguments, add_reference_arguments, check_pair
+
 
 def add_parser(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser(
@@ -18,28 +20,13 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
             "cells filled). Writes OUT (float32 heights, NaN nodata), OUT_mask.tif (0 valid, "
             "1 mismatch, 2 occluded/outside) and OUT.json (figures per tile)."),
     )
-    p.add_argument("--left", type=Path, required=True, help="left image (its model stays fixed)")
-    p.add_argument("--right", type=Path, required=True, help="right image")
-    p.add_argument("--left-model", type=Path, default=None,
-                   help="model of the left image (.DIM, gcpfree .json, .geom, RPC .XML or a "
-                        "GeoTIFF's RPC); default: found beside the image")
-    p.add_argument("--right-model", type=Path, default=None, help="model of the right image")
-    p.add_argument("--band", type=int, default=None,
-                   help="SPOT multispectral band whose look angles to use (default the first)")
+    add_pair_arguments(p)
     p.add_argument("--roi", type=int, nargs=4, default=None,
                    metavar=("COL", "ROW", "WIDTH", "HEIGHT"),
                    help="region of the left image (pixels); default the whole image")
     p.add_argument("--resolution", type=float, default=None, metavar="M",
                    help="DSM cell size in metres (default 2 x the left image's GSD)")
-    ref = p.add_mutually_exclusive_group()
-    ref.add_argument("--reference", type=Path, default=None, metavar="REF",
-                     help="reference DEM in EPSG:4326 (prepare-reference output or SRTM .hgt): "
-                          "sizes the disparity search")
-    ref.add_argument("--srtm-dir", type=Path, default=None, metavar="DIR",
-                     help="folder of SRTM tiles: a reference is prepared over the pair")
-    p.add_argument("--reference-vertical", choices=("auto", "ellipsoidal", "egm96"),
-                   default="auto", help="heights of --reference (auto: .hgt and SRTM-named "
-                                        "files are EGM96, others ellipsoidal)")
+    add_reference_arguments(p, use="sizes the disparity search")
     p.add_argument("--height-range", type=float, nargs=2, default=None, metavar=("MIN", "MAX"),
                    help="ellipsoidal height range of the scene when there is no reference "
                         "(default for RPCs: their height offset +- scale)")
@@ -64,21 +51,10 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
 
 def run(args: argparse.Namespace) -> int:
     from core.errors import InputError
-    from tasks.dem_io import check_reference
     from tasks.dense_blocks import check_roi
-    from tasks.sensor_io import load_model
 
-    # check the input before Prefect starts: bad input is one clean line
-    for path in (args.left, args.right):
-        if not Path(path).exists():
-            raise InputError(f"{path} does not exist; give the two images of the pair")
-    left = load_model(args.left, model=args.left_model, band=args.band)
-    load_model(args.right, model=args.right_model, band=args.band)
+    left, _ = check_pair(args)
     check_roi(tuple(args.roi) if args.roi else None, left.size)
-    if args.reference is not None:
-        check_reference(args.reference)
-    if args.srtm_dir is not None and not Path(args.srtm_dir).is_dir():
-        raise InputError(f"SRTM directory {args.srtm_dir} does not exist")
     out_dir = Path(args.out).resolve().parent
     if not out_dir.is_dir():
         raise InputError(f"the folder of --out ({out_dir}) does not exist; create it first")

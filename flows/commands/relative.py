@@ -5,6 +5,8 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
+from flows.commands._pair import add_pair_arguments, add_reference_arguments, check_pair
+
 
 def add_parser(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser(
@@ -20,23 +22,9 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
             "(figures, the correction, the adjusted right model) and rel.tiepoints.json."
         ),
     )
-    p.add_argument("--left", type=Path, required=True, help="left image (its model stays fixed)")
-    p.add_argument("--right", type=Path, required=True, help="right image (its model is adjusted)")
-    p.add_argument("--left-model", type=Path, default=None,
-                   help="model of the left image (.DIM, gcpfree .json, .geom or RPC .XML); "
-                        "default: found beside the image")
-    p.add_argument("--right-model", type=Path, default=None, help="model of the right image")
-    p.add_argument("--band", type=int, default=None,
-                   help="SPOT multispectral band whose look angles to use (default the first)")
-    ref = p.add_mutually_exclusive_group()
-    ref.add_argument("--reference", type=Path, default=None,
-                     help="reference DEM in EPSG:4326 (the output of prepare-reference, or an "
-                          "SRTM .hgt)")
-    ref.add_argument("--srtm-dir", type=Path, default=None,
-                     help="folder of SRTM tiles: a reference is prepared over the pair")
-    p.add_argument("--reference-vertical", choices=("auto", "ellipsoidal", "egm96"),
-                   default="auto", help="heights of --reference (auto: .hgt and SRTM-named "
-                                        "files are EGM96, others ellipsoidal)")
+    add_pair_arguments(p, right_help="right image (its model is adjusted)")
+    add_reference_arguments(p, use="heights of the tie points' search and the along-epipolar "
+                                   "correction")
     p.add_argument("--height-range", type=float, nargs=2, metavar=("MIN", "MAX"), default=None,
                    help="ellipsoidal height range of the scene when there is no reference "
                         "(default for RPCs: their own height offset +- scale)")
@@ -52,20 +40,7 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from core.errors import InputError
-    from tasks.dem_io import check_reference
-    from tasks.sensor_io import load_model
-
-    for path in (args.left, args.right):
-        if not Path(path).exists():
-            raise InputError(f"{path} does not exist; give the two images of the pair")
-    # check the models and the reference before Prefect starts: bad input is one clean line
-    load_model(args.left, model=args.left_model, band=args.band)
-    load_model(args.right, model=args.right_model, band=args.band)
-    if args.reference is not None:
-        check_reference(args.reference)
-    if args.srtm_dir is not None and not Path(args.srtm_dir).is_dir():
-        raise InputError(f"SRTM directory {args.srtm_dir} does not exist")
+    check_pair(args)
     from flows.relative import RelativeParams, relative_flow
 
     outcome = relative_flow(RelativeParams(

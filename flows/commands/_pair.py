@@ -1,0 +1,50 @@
+"""Arguments and input checks shared by the commands that take a stereo pair."""
+
+from __future__ import annotations
+
+import argparse
+from pathlib import Path
+
+
+def add_pair_arguments(p: argparse.ArgumentParser, *, right_help: str = "right image") -> None:
+    """``--left --right --left-model --right-model --band``."""
+    p.add_argument("--left", type=Path, required=True, help="left image (its model stays fixed)")
+    p.add_argument("--right", type=Path, required=True, help=right_help)
+    p.add_argument("--left-model", type=Path, default=None,
+                   help="model of the left image (.DIM, gcpfree .json, .geom, RPC .XML or a "
+                        "GeoTIFF's RPC); default: found beside the image")
+    p.add_argument("--right-model", type=Path, default=None, help="model of the right image")
+    p.add_argument("--band", type=int, default=None,
+                   help="SPOT multispectral band whose look angles to use (default the first)")
+
+
+def add_reference_arguments(p: argparse.ArgumentParser, *, use: str) -> None:
+    """``--reference | --srtm-dir`` and ``--reference-vertical``; ``use`` says what for."""
+    ref = p.add_mutually_exclusive_group()
+    ref.add_argument("--reference", type=Path, default=None, metavar="REF",
+                     help="reference DEM in EPSG:4326 (prepare-reference output or SRTM .hgt)"
+                          f": {use}")
+    ref.add_argument("--srtm-dir", type=Path, default=None, metavar="DIR",
+                     help="folder of SRTM tiles: a reference is prepared over the pair")
+    p.add_argument("--reference-vertical", choices=("auto", "ellipsoidal", "egm96"),
+                   default="auto", help="heights of --reference (auto: .hgt and SRTM-named "
+                                        "files are EGM96, others ellipsoidal)")
+
+
+def check_pair(args: argparse.Namespace):  # -> tuple[LoadedModel, LoadedModel]
+    """Both models loaded and the reference checked before Prefect starts: bad input is one
+    clean line (InputError)."""
+    from core.errors import InputError
+    from tasks.dem_io import check_reference
+    from tasks.sensor_io import load_model
+
+    for path in (args.left, args.right):
+        if not Path(path).exists():
+            raise InputError(f"{path} does not exist; give the two images of the pair")
+    left = load_model(args.left, model=args.left_model, band=args.band)
+    right = load_model(args.right, model=args.right_model, band=args.band)
+    if args.reference is not None:
+        check_reference(args.reference)
+    if args.srtm_dir is not None and not Path(args.srtm_dir).is_dir():
+        raise InputError(f"SRTM directory {args.srtm_dir} does not exist")
+    return left, right

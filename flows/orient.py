@@ -1,0 +1,155 @@
+"""Flow of ``gcpfree orient``: steps 1-4 of the chain, a stereo pair oriented with no GCP.
+
+relative orientation (``flows.relative``) -> relative DEM (``flows.dsm.pair_dem``) -> windows of
+it around the tie points matched to the reference (SRTM) -> simulated GCPs -> relief verdict ->
+absolute orientation of both images (optionally with lens self-calibration) -> check points ->
+``OUT/report.json``, ``OUT/left.json``, ``OUT/right.json``, ``OUT/gcps.json``.
+"""
+
+from __future__ import annotations
+
+import json
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+from prefect import flow
+
+from core.orientation.absolute import AbsoluteConfig
+from core.surface_match import SurfaceMatchConfig
+
+FORMAT = "gcpfree.orient"
+
+
+@dataclass(frozen=True)
+class OrientParams:
+    """Parameters of :func:`orient_flow` (see ``gcpfree orient --help``).
+
+    ``corrections``: the terms adjusted per image (``linear``: pushbroom attitude biases and
+    rates, RPC affine; ``offset``: biases, RPC shift). ``self_calibrate``: try lens terms on
+    pushbroom images, keep the significant ones. ``spacing_m``: distance between surface
+    matching windows (default their radius). ``min_windows``: windows whose relief must
+    qualify, else InsufficientReliefError.
+    """
+
+    left: Path
+    right: Path
+    out: Path
+    left_model: Path | None = None
+    right_model: Path | None = None
+    band: int | None = None
+    reference: Path | None = None
+    reference_vertical: str = "auto"
+    srtm_dir: Path | None = None
+    checkpoints: Path | None = None
+    self_calibrate: bool = False
+    corrections: str = "linear"
+    spacing_m: float | None = None
+    min_windows: int = 8
+    workers: int | None = None
+    progress: bool = True
+    surface: SurfaceMatchConfig = field(default_factory=SurfaceMatchConfig)
+    absolute: AbsoluteConfig = field(default_factory=AbsoluteConfig)
+
+
+@dataclass(frozen=True, eq=False)
+class OrientOutcome:
+    """What :func:`orient_flow` wrote and its report."""
+
+    report_path: Path
+    report: dict[str, Any]
+
+    def lines(self) -> list[str]:
+        r = self.report
+        g = r["gcps"]
+        out = [f"report                {self.report_path}",
+               (f"GCPs from SRTM        {g['used']} used, {g['rejected']} rejected "
+                f"({r['surface_matching']['windows']} windows, "
+                f"{r['surface_matching']['qualified']} with enough relief)")]
+        for name, a in r["absolute"]["images"].items():
+            out.append(f"GCP residuals {name:<6}  P {a['rms_col_px']:.3f} px  "
+                       f"L {a['rms_row_px']:.3f} px RMS")
+        lens = r["absolute"].get("self_calibration")
+        if lens is not None:
+            out.append("lens terms            " + (
+                ", ".join(f"{n}: {', '.join(t)}" for n, t in lens["significant"].items())
+                if lens["applied"] else "none significant (not applied)"))
+        for name, c in r.get("check_points", {}).items():
+            out.append(f"check points {name:<6}  P {c['rms_col_px']:.3f} px  "
+                       f"L {c['rms_row_px']:.3f} px RMS ({c['n']} points)")
+        return out
+
+
+@flow(name="orient", log_prints=True)
+def orient_flow(params: OrientParams) -> OrientOutcome:
+    """Relative orientation -> relative DEM -> surface matching -> absolute orientation."""
+    from core.errors import InputError, InsufficientDataError, InsufficientReliefError
+    from core.surface_match import relief_sufficiency
+    from flows.dsm import OrientedPair, pair_dem
+    from flows.relative import relative_models
+    from tasks.dem_io import read_reference, resolve_vertical
+    from tasks.dense import DenseConfig, pair_box
+    from tasks.orient import check_point_report, orient_absolute, read_checkpoints, write_gcps
+    from tasks.raster_io import atomic_write_json, json_ready
+    from tasks.surface_match import TieGround, match_surfaces
+
+    out = Path(params.out)
+    if params.reference is None and params.srtm_dir is None:
+        raise InputError("GCP-free orientation needs a reference DEM: give --srtm-dir or "
+                         "--reference")
+    checkpoints = read_checkpoints(params.checkpoints) if params.checkpoints else None
+    out.mkdir(parents=True, exist_ok=True)
+    rel = relative_models(params.left, params.right, left_model=params.left_model,
+                          right_model=params.right_model, band=params.band,
+                          reference=params.reference, srtm_dir=params.srtm_dir,
+                          out_dir=out / "relative")
+    vertical = (resolve_vertical(Path(params.reference), params.reference_vertical)
+                if params.reference is not None else "ellipsoidal")
+    pair = OrientedPair(rel.left, rel.right, rel.reference, vertical)
+    dem = pair_dem(pair, out / "relative_dem.tif",
+                   DenseConfig(num_workers=params.workers, progress=params.progress))
+    for line in dem.lines():
+        print(line)
+
+    cfg = params.surface
+    margin = (cfg.shift_max_arcsec + 5.0) / 3600.0
+    box = pair_box(rel.left, rel.right, (dem.h_min_m, dem.h_max_m)).expanded(margin)
+    reference = read_reference(rel.reference, box, vertical)
+    ties = TieGround.from_tiepoints_json(rel.rel_json.with_suffix(".tiepoints.json"))
+    matched = match_surfaces(out / "relative_dem.tif", ties, reference, cfg, params.spacing_m,
+                             out=out / "windows.json")
+    verdict = relief_sufficiency(matched.matches, cfg, params.min_windows)
+    if not verdict.enough:
+        raise InsufficientReliefError(verdict.message())
+    gcps = matched.gcps
+    if len(gcps) < params.absolute.min_gcps:
+        raise InsufficientDataError(
+            f"only {len(gcps)} surface-matching windows gave a GCP "
+            f"({params.absolute.min_gcps} needed): {matched.counts()}; the relative DEM does "
+            "not correlate with the reference (clouds, voids, a wrong reference)")
+    write_gcps(out / "gcps.json", gcps)
+    absolute = orient_absolute(rel.left, rel.right, gcps, out, params.corrections,
+                               params.self_calibrate, params.absolute)
+    report: dict[str, Any] = {
+        "format": FORMAT, "version": 1,
+        "relative": json.loads(rel.rel_json.read_text()),
+        "relative_dem": dem.to_dict(),
+        "surface_matching": {"windows": len(matched.matches), "counts": matched.counts(),
+                             "qualified": verdict.n_qualified, "relief": verdict.to_dict(),
+                             "windows_file": "windows.json"},
+        "gcps": {**absolute.gcp_summary(gcps), "file": "gcps.json"},
+        "absolute": {**absolute.adjustment.to_dict(), "corrections": params.corrections,
+                     "self_calibration": (absolute.self_calibration.to_dict()
+                                          if absolute.self_calibration else None)},
+        "models": {"left": "left.json", "right": "right.json"},
+    }
+    if checkpoints is not None:
+        report["check_points"] = check_point_report(absolute.models, checkpoints)
+        report["check_points_before"] = check_point_report(
+            (rel.left.model, rel.right.model), checkpoints)
+    report = json_ready(report)
+    path = atomic_write_json(out / "report.json", report)
+    outcome = OrientOutcome(path, report)
+    for line in outcome.lines():
+        print(line)
+    return outcome

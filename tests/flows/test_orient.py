@@ -1,0 +1,183 @@
+"""``gcpfree orient`` end to end on the tiny simulated pair (lens, jitter, 10 % changed between
+the dates, 100-300 m metadata errors) against an SRTM-like degraded reference: both sensor
+families oriented to the check points with no GCP, the products readable, flat terrain and bad
+input refused in one line."""
+
+from __future__ import annotations
+
+import argparse
+import json
+from dataclasses import replace
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from core.errors import InputError, InsufficientReliefError
+from core.geodesy import geodetic_to_enu
+from core.intersection import triangulate
+from core.points import control_points_from_dict
+from core.surface_match import SurfaceMatchConfig, WindowMatch, WindowStatus, relief_sufficiency
+from flows.commands import orient as orient_command
+from tasks.orient import read_checkpoints
+from tasks.sensor_io import load_model
+
+
+def parse(*argv: str) -> argparse.Namespace:
+    parser = argparse.ArgumentParser(prog="gcpfree")
+    orient_command.add_parser(parser.add_subparsers(dest="command"))
+    return parser.parse_args(["orient", *argv])
+
+
+@pytest.fixture(scope="module")
+def oriented(tiny_scene, tmp_path_factory, prefect_harness):
+    """The rigorous (pushbroom) family oriented with lens self-calibration."""
+    from flows.orient import OrientParams, orient_flow
+
+    scene, _ = tiny_scene
+    out = tmp_path_factory.mktemp("orient")
+    outcome = orient_flow(OrientParams(
+        left=scene / "left.tif", right=scene / "right.tif", out=out,
+        reference=scene / "reference.tif", checkpoints=scene / "truth" / "checkpoints.json",
+        self_calibrate=True, progress=False))
+    return scene, out, outcome
+
+
+def test_pushbroom_pair_reaches_the_check_points_with_no_gcp(oriented):
+    _, out, outcome = oriented
+    report = json.loads((out / "report.json").read_text())
+    assert report == outcome.report
+    before, after = report["check_points_before"], report["check_points"]
+    for name in ("left", "right"):
+        # the metadata are 100-300 m (2.5-7.5 px) off; SRTM alone brings them under a pixel
+        # (jitter of 0.3 px and 40 m pixels in this scene)
+        assert max(before[name]["rms_col_px"], before[name]["rms_row_px"]) > 2.0
+        assert after[name]["n"] >= 50
+        assert after[name]["rms_col_px"] < 0.7 and after[name]["rms_row_px"] < 0.7
+        assert abs(after[name]["mean_row_px"]) < 0.4 and abs(after[name]["mean_col_px"]) < 0.4
+    g = report["gcps"]
+    assert g["used"] >= 8 and g["used"] + g["rejected"] == g["given"]
+    assert report["relative"]["format"] == "gcpfree.relative"
+    assert report["surface_matching"]["relief"]["enough"]
+    # the lens is there (--lens): self-calibration keeps a term and lowers the column RMS
+    lens = report["absolute"]["self_calibration"]
+    assert lens["applied"]
+    assert max(v["col_drop"] for v in lens["improvement"].values()) >= 0.3
+
+
+def test_products_are_what_the_report_says(oriented):
+    scene, out, outcome = oriented
+    cps = read_checkpoints(scene / "truth" / "checkpoints.json")
+    for name in ("left", "right"):
+        model = load_model(out / f"{name}.json").model  # a gcpfree model file, reloadable
+        pts = [p for p in cps.points if name in p.image_points]
+        lon, lat, h = (np.array([getattr(p, k) for p in pts]) for k in ("lon_deg", "lat_deg",
+                                                                        "h_m"))
+        c, r = model.project(lon, lat, h)
+        dc = np.array([p.image_points[name].col for p in pts]) - c
+        dr = np.array([p.image_points[name].row for p in pts]) - r
+        cp = outcome.report["check_points"][name]
+        assert np.sqrt(np.mean(dc**2)) == pytest.approx(cp["rms_col_px"], rel=1e-9)
+        assert np.sqrt(np.mean(dr**2)) == pytest.approx(cp["rms_row_px"], rel=1e-9)
+    gcps = control_points_from_dict(json.loads((out / "gcps.json").read_text()))
+    assert len(gcps) == outcome.report["gcps"]["given"]
+    assert all(p.source == "srtm_surface_match" and p.sigma_xy_m > 0 for p in gcps)
+    windows = json.loads((out / "windows.json").read_text())["windows"]
+    assert sum(w["status"] == "OK" for w in windows) == len(gcps)
+    assert (out / "relative_dem.tif").is_file() and (out / "relative" / "rel.json").is_file()
+
+
+def test_simulated_gcps_sit_where_the_true_models_put_their_image_points(oriented):
+    """The GCPs' ground against the intersection of their image points by the true models:
+    the error of the local surface matching itself (40 m pixels, 3" reference)."""
+    scene, out, _ = oriented
+    gcps = control_points_from_dict(json.loads((out / "gcps.json").read_text()))
+    truth = [load_model(scene / "truth" / f"{n}_truth.json").model for n in ("left", "right")]
+    cols = [np.array([g.image_points[n].col for g in gcps]) for n in ("left", "right")]
+    rows = [np.array([g.image_points[n].row for g in gcps]) for n in ("left", "right")]
+    t = triangulate(truth, cols, rows, (-500.0, 4000.0))
+    lon, lat, h = (np.array([getattr(g, k) for g in gcps]) for k in ("lon_deg", "lat_deg", "h_m"))
+    o = (float(np.mean(lon)), float(np.mean(lat)), float(np.mean(h)))
+    e, n, u = (a - b for a, b in zip(geodetic_to_enu(lon, lat, h, o),
+                                     geodetic_to_enu(t.lon_deg, t.lat_deg, t.h_m, o),
+                                     strict=True))
+    assert np.median(np.hypot(e, n)) < 25.0  # the metadata were 100-300 m off
+    assert abs(np.median(u)) < 15.0
+
+
+def test_rpc_family_is_oriented_too(tiny_scene, tmp_path, prefect_harness):
+    """The same pair through the RPCs inside the GeoTIFFs (affine bias per image): no lens
+    terms for RPCs, so the lens stays in the residuals (the report says so)."""
+    from flows.orient import OrientParams, orient_flow
+
+    scene, _ = tiny_scene
+    outcome = orient_flow(OrientParams(
+        left=scene / "left.tif", right=scene / "right.tif", left_model=scene / "left.tif",
+        right_model=scene / "right.tif", out=tmp_path, reference=scene / "reference.tif",
+        checkpoints=scene / "truth" / "checkpoints.json", self_calibrate=True, progress=False))
+    r = outcome.report
+    assert json.loads((tmp_path / "left.json").read_text())["type"] == "rpc"
+    assert not r["absolute"]["self_calibration"]["applied"]
+    for name in ("left", "right"):
+        assert r["check_points_before"][name]["rms_row_px"] > 2.0
+        assert r["check_points"][name]["rms_row_px"] < 0.8
+        assert r["check_points"][name]["rms_col_px"] < 1.0
+
+
+def test_too_few_windows_with_relief_is_refused_with_the_figures(tiny_scene, tmp_path,
+                                                                  prefect_harness):
+    """Asking for more qualifying windows than the scene has: InsufficientReliefError with the
+    relief found and needed, and no report (an orientation is never written on too little
+    relief)."""
+    from flows.orient import OrientParams, orient_flow
+
+    scene, _ = tiny_scene
+    with pytest.raises(InsufficientReliefError, match=r"relief found [0-9.]+ m.*needed about"):
+        orient_flow(OrientParams(left=scene / "left.tif", right=scene / "right.tif",
+                                 out=tmp_path, reference=scene / "reference.tif",
+                                 min_windows=500, progress=False))
+    assert not (tmp_path / "report.json").exists()
+
+
+def test_relief_verdict_scales_the_needed_relief():
+    cfg = SurfaceMatchConfig(max_precision_m=5.0)
+    windows = [WindowMatch(WindowStatus.LOW_RELIEF, relief_m=4.0, predicted_precision_m=20.0,
+                           n_cells=900, masked_share=0.0) for _ in range(9)]
+    windows += [WindowMatch(WindowStatus.TOO_FEW_CELLS, relief_m=50.0, n_cells=3)]
+    v = relief_sufficiency(windows, cfg, 3)
+    assert not v.enough and v.n_qualified == 0 and v.n_windows == 10
+    assert v.relief_found_m == pytest.approx(4.0)  # windows without cells do not count
+    assert v.relief_needed_m == pytest.approx(16.0)  # 4 m x 20 m / 5 m
+    good = [replace(w, predicted_precision_m=2.0, status=WindowStatus.OK) for w in windows[:9]]
+    assert relief_sufficiency(good, cfg, 3).enough
+
+
+def test_checkpoint_csv_and_bad_files(tmp_path):
+    csv = tmp_path / "cp.csv"
+    csv.write_text("id,lon_deg,lat_deg,h_m,left_col,left_row,right_col,right_row\n"
+                   "7,5.2,44.1,812.5,10.5,20.25,11,21\n")
+    s = read_checkpoints(csv)
+    assert s.points[0].id == 7 and s.points[0].image_points["right"].row == 21.0
+    csv.write_text("id,lon,lat\n1,2,3\n")
+    with pytest.raises(InputError, match="must have the columns"):
+        read_checkpoints(csv)
+    csv.write_text("id,lon_deg,lat_deg,h_m,left_col,left_row,right_col,right_row\n"
+                   "1,5.2,x,3,4,5,6,7\n")
+    with pytest.raises(InputError, match="line 2"):
+        read_checkpoints(csv)
+    with pytest.raises(InputError, match="does not exist"):
+        read_checkpoints(tmp_path / "missing.json")
+
+
+def test_cli_refuses_bad_input_before_running(tiny_scene, tmp_path):
+    scene, _ = tiny_scene
+    args = parse("--left", str(scene / "left.tif"), "--right", str(scene / "right.tif"),
+                 "--out", str(tmp_path / "o"))
+    with pytest.raises(InputError, match="needs a reference DEM"):
+        orient_command.run(args)
+    args = parse("--left", str(scene / "left.tif"), "--right", str(scene / "right.tif"),
+                 "--reference", str(scene / "reference.tif"), "--checkpoints",
+                 str(tmp_path / "nope.csv"), "--out", str(tmp_path / "o"))
+    with pytest.raises(InputError, match="check point file"):
+        orient_command.run(args)
+    assert not (tmp_path / "o").exists()
