@@ -39,7 +39,7 @@ class AbsoluteConfig:
     tol_px: float = 1e-4
     huber_k: float = 2.0
     reject_k: float = 3.5
-    max_rejection_rounds: int = 20
+    max_rejection_rounds: int = 200
     matching_sigma_px: float = 0.3
     min_gcps: int = 4
 
@@ -255,10 +255,13 @@ def absolute_orientation(models: Sequence[SensorModel], obs: Observations,
         candidates = np.flatnonzero(inlier & (worst > limit))
         if candidates.size == 0:
             break
-        k = int(candidates[np.argmax(worst[candidates])])  # one blunder at a time
-        inlier[k] = False
-        reasons[k] = (f"normalised residual {worst[k]:.1f} over {limit:.1f} "
-                      f"({config.reject_k} x sigma0 {max(s0, 1.0):.2f})")
+        # one blunder at a time (a blunder bends the fit and raises its neighbours' residuals),
+        # but those beyond three times the limit all at once: they are blunders whatever the rest
+        gross = candidates[worst[candidates] > 3.0 * limit]
+        for k in (gross if gross.size else [int(candidates[np.argmax(worst[candidates])])]):
+            inlier[k] = False
+            reasons[int(k)] = (f"normalised residual {worst[k]:.1f} over {limit:.1f} "
+                               f"({config.reject_k} x sigma0 {max(s0, 1.0):.2f})")
     s0 = _sigma0(models, obs, col, row, sigma, seen, inlier, offsets[-1])
     cov = s0**2 * np.linalg.pinv((a / scale).T @ ((a / scale) * w0[:, None])) / np.outer(scale,
                                                                                          scale)

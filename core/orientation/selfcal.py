@@ -114,16 +114,21 @@ def _wald(result: AbsoluteOrientation, name: str, terms: Sequence[str]) -> float
 
 def self_calibrate(models: Sequence[SensorModel], obs: Observations, names: Sequence[str],
                    config: AbsoluteConfig = AbsoluteConfig(), terms: Sequence[str] = LENS_TERMS,
-                   t_threshold: float = 3.0) -> SelfCalibration:
+                   t_threshold: float = 3.0, min_col_drop: float = 0.15) -> SelfCalibration:
     """Orient without lens terms, then with ``terms`` on every pushbroom image; keep an
-    image's terms when they are significant together, and orient again with those.
+    image's terms when they are significant together and worth it, and orient again with
+    those.
 
     The test is on the block of an image's terms against their covariance (Wald: chi-square
     with one degree of freedom per term, at the two-sided probability of ``t_threshold``
     sigmas, 0.27 % for 3): one term at a time would drown them, ``k1 r`` and ``k3 r^3`` being
     nearly collinear over a CCD line (simulated ``tiny``: a real ``k3`` of -35 had t = -1.8
-    next to ``k1``, t = -8.3 alone). GCPs rejected without lens terms stay rejected
-    (blunders, not distortion).
+    next to ``k1``, t = -8.3 alone). Worth it: the terms lower the image's column RMS at the
+    GCPs by ``min_col_drop`` at least. With some 200 GCPs a statistical test alone finds
+    "significant" lens terms in any small systematic error: on a simulated ``spot`` pair without
+    distortion they passed the test and lowered the column RMS by 6-7 %; real distortion
+    (``--lens``, 1.5 px at the CCD ends) lowered it by 39-58 % (``spot``, ``tiny``). GCPs
+    rejected without lens terms stay rejected (blunders, not distortion).
     """
     from scipy.stats import chi2, norm
 
@@ -140,11 +145,19 @@ def self_calibrate(models: Sequence[SensorModel], obs: Observations, names: Sequ
     limit = float(chi2.ppf(1.0 - 2.0 * norm.sf(t_threshold), len(terms)))
     chosen = [n for n, m in zip(names, trial_models, strict=True)
               if isinstance(m, PushbroomModel) and _wald(trial, n, terms) > limit]
-    if not chosen:
+    with_lens = None
+    while chosen:
+        final_models = [_with_terms(m, terms if n in chosen else ())
+                        for m, n in zip(without.models, names, strict=True)]
+        with_lens = absolute_orientation(final_models, trial_obs, names, config)
+        drops = {a.name: 1.0 - b.rms_col_px / a.rms_col_px if a.rms_col_px else 0.0
+                 for a, b in zip(without.residuals, with_lens.residuals, strict=True)}
+        weak = [n for n in chosen if drops[n] < min_col_drop]
+        if not weak:
+            break
+        chosen.remove(min(weak, key=lambda n: drops[n]))
+    if not chosen or with_lens is None:
         return SelfCalibration(without, None, {}, t_threshold)
-    final_models = [_with_terms(m, terms if n in chosen else ())
-                    for m, n in zip(without.models, names, strict=True)]
-    with_lens = absolute_orientation(final_models, trial_obs, names, config)
     significant: dict[str, dict[str, tuple[float, float]]] = {}
     for name, pn, pa, sd in zip(names, with_lens.param_names, with_lens.params_after,
                                 with_lens.sigmas(), strict=True):

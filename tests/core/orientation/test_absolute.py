@@ -96,6 +96,17 @@ def test_blunders_all_rejected_with_reasons(pair):
         assert abs(a.rms_row_px - b.rms_row_px) < 0.05 and abs(a.rms_col_px - b.rms_col_px) < 0.05
 
 
+def test_ten_percent_of_many_gcps_corrupted_all_rejected(pair):
+    """30 of 300 GCPs moved 50-200 m (more than one rejection round per blunder allows)."""
+    delivered, truth = pair
+    obs, bad = gcps(truth, n=300, blunders=30, seed=4)
+    res = absolute_orientation(delivered, obs, ("left", "right"))
+    assert set(bad.tolist()) <= set(res.rejected.tolist())
+    assert res.rejected.size <= 33  # and hardly a good one with them
+    for s in check(res.models, truth):
+        assert s.rms_col_px < 0.3 and s.rms_row_px < 0.3
+
+
 def test_rpc_pair_with_affine_bias(pair):
     delivered, truth = pair
     rpcs = tuple(fit_rpc(m, 3000, 3000, (0.0, 2500.0))[0].with_corrections("linear")
