@@ -12,8 +12,8 @@ from pathlib import Path
 
 from prefect import flow
 
-from core.matching.dense import MatchingConfig
-from tasks.dense import DemSummary, DenseConfig
+from core.matching.dense import MatchingConfig, TileStats
+from tasks.dense import DemSummary, DenseConfig, DensePlan
 from tasks.sensor_io import LoadedModel
 
 VERTICALS = ("ellipsoidal", "egm96")
@@ -100,19 +100,38 @@ def oriented_pair(params: DsmParams) -> OrientedPair:
     return OrientedPair(left, right, Path(ref.path), "ellipsoidal")
 
 
-def pair_dem(pair: OrientedPair, out: Path, cfg: DenseConfig,
-             roi: tuple[int, int, int, int] | None = None,
-             height_range_m: tuple[float, float] | None = None) -> DemSummary:
-    """Plan the tiles -> match and triangulate them -> grid the DEM into ``out``."""
-    from tasks.dense import grid_dem_cog, match_tiles, plan_dense, scene_height_range
+@dataclass(frozen=True, eq=False)
+class MatchedPair:
+    """A pair matched tile by tile: the plan, each tile's figures and the folder of their
+    point files (which also hold the matches, for :func:`tasks.dense.retriangulate_tiles`)."""
+
+    plan: DensePlan
+    stats: tuple[TileStats, ...]
+    work: Path
+
+
+def match_pair(pair: OrientedPair, out: Path, cfg: DenseConfig,
+               roi: tuple[int, int, int, int] | None = None,
+               height_range_m: tuple[float, float] | None = None) -> MatchedPair:
+    """Plan the tiles -> match and triangulate them into ``.<out>.work``."""
+    from tasks.dense import match_tiles, plan_dense, scene_height_range
 
     out = Path(out)
     h_range = scene_height_range(pair.left, pair.right, height_range_m, pair.reference)
     plan = plan_dense(pair.left, pair.right, roi, pair.reference, h_range,
                       pair.reference_vertical, cfg)
     work = out.parent / f".{out.name}.work"
-    stats = match_tiles(plan, pair.left, pair.right, work, cfg)
-    return grid_dem_cog(plan, stats, work, out, cfg)
+    return MatchedPair(plan, match_tiles(plan, pair.left, pair.right, work, cfg), work)
+
+
+def pair_dem(pair: OrientedPair, out: Path, cfg: DenseConfig,
+             roi: tuple[int, int, int, int] | None = None,
+             height_range_m: tuple[float, float] | None = None) -> DemSummary:
+    """Plan the tiles -> match and triangulate them -> grid the DEM into ``out``."""
+    from tasks.dense import grid_dem_cog
+
+    m = match_pair(pair, out, cfg, roi, height_range_m)
+    return grid_dem_cog(m.plan, m.stats, m.work, Path(out), cfg)
 
 
 @flow(name="dsm", log_prints=True)

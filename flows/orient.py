@@ -2,14 +2,17 @@
 
 relative orientation (``flows.relative``) -> relative DEM (``flows.dsm.pair_dem``) -> windows of
 it around the tie points matched to the reference (SRTM) -> simulated GCPs -> relief verdict ->
-absolute orientation of both images (optionally with lens self-calibration) -> check points ->
-``OUT/report.json``, ``OUT/left.json``, ``OUT/right.json``, ``OUT/gcps.json``.
+absolute orientation of both images (optionally with lens self-calibration) -> final DSM (the
+relative DEM's matches intersected again with the oriented models, ellipsoidal and EGM96) ->
+check points -> ``OUT/report.json``, ``OUT/left.json``, ``OUT/right.json``, ``OUT/gcps.json``,
+``OUT/dsm.tif``, ``OUT/dsm_egm96.tif``.
 """
 
 from __future__ import annotations
 
 import json
-from dataclasses import dataclass, field
+import shutil
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any
 
@@ -77,6 +80,10 @@ class OrientOutcome:
         for name, c in r.get("check_points", {}).items():
             out.append(f"check points {name:<6}  P {c['rms_col_px']:.3f} px  "
                        f"L {c['rms_row_px']:.3f} px RMS ({c['n']} points)")
+        d = r["dsm"]["summary"]
+        out.append(f"final DSM             {d['dem_path']} ({d['resolution_m']:g} m, "
+                   f"EPSG:{d['epsg']}, {d['completeness_pct']:.1f} % complete) and "
+                   f"{r['dsm']['egm96']} (EGM96)")
         return out
 
 
@@ -85,10 +92,10 @@ def orient_flow(params: OrientParams) -> OrientOutcome:
     """Relative orientation -> relative DEM -> surface matching -> absolute orientation."""
     from core.errors import InputError, InsufficientDataError, InsufficientReliefError
     from core.surface_match import relief_sufficiency
-    from flows.dsm import OrientedPair, pair_dem
+    from flows.dsm import OrientedPair, match_pair
     from flows.relative import relative_models
     from tasks.dem_io import read_reference, resolve_vertical
-    from tasks.dense import DenseConfig, pair_box
+    from tasks.dense import DenseConfig, grid_dem_cog, pair_box, retriangulate_tiles
     from tasks.orient import check_point_report, orient_absolute, read_checkpoints, write_gcps
     from tasks.raster_io import atomic_write_json, json_ready
     from tasks.surface_match import TieGround, match_surfaces
@@ -106,8 +113,10 @@ def orient_flow(params: OrientParams) -> OrientOutcome:
     vertical = (resolve_vertical(Path(params.reference), params.reference_vertical)
                 if params.reference is not None else "ellipsoidal")
     pair = OrientedPair(rel.left, rel.right, rel.reference, vertical)
-    dem = pair_dem(pair, out / "relative_dem.tif",
-                   DenseConfig(num_workers=params.workers, progress=params.progress))
+    dense_cfg = DenseConfig(num_workers=params.workers, progress=params.progress)
+    matched = match_pair(pair, out / "relative_dem.tif", dense_cfg)
+    dem = grid_dem_cog(matched.plan, matched.stats, matched.work, out / "relative_dem.tif",
+                       dense_cfg, keep_work=True)
     for line in dem.lines():
         print(line)
 
@@ -116,16 +125,16 @@ def orient_flow(params: OrientParams) -> OrientOutcome:
     box = pair_box(rel.left, rel.right, (dem.h_min_m, dem.h_max_m)).expanded(margin)
     reference = read_reference(rel.reference, box, vertical)
     ties = TieGround.from_tiepoints_json(rel.rel_json.with_suffix(".tiepoints.json"))
-    matched = match_surfaces(out / "relative_dem.tif", ties, reference, cfg, params.spacing_m,
+    windows = match_surfaces(out / "relative_dem.tif", ties, reference, cfg, params.spacing_m,
                              out=out / "windows.json")
-    verdict = relief_sufficiency(matched.matches, cfg, params.min_windows)
+    verdict = relief_sufficiency(windows.matches, cfg, params.min_windows)
     if not verdict.enough:
         raise InsufficientReliefError(verdict.message())
-    gcps = matched.gcps
+    gcps = windows.gcps
     if len(gcps) < params.absolute.min_gcps:
         raise InsufficientDataError(
             f"only {len(gcps)} surface-matching windows gave a GCP "
-            f"({params.absolute.min_gcps} needed): {matched.counts()}; the relative DEM does "
+            f"({params.absolute.min_gcps} needed): {windows.counts()}; the relative DEM does "
             "not correlate with the reference (clouds, voids, a wrong reference)")
     write_gcps(out / "gcps.json", gcps)
     absolute = orient_absolute(rel.left, rel.right, gcps, out, params.corrections,
@@ -134,7 +143,7 @@ def orient_flow(params: OrientParams) -> OrientOutcome:
         "format": FORMAT, "version": 1,
         "relative": json.loads(rel.rel_json.read_text()),
         "relative_dem": dem.to_dict(),
-        "surface_matching": {"windows": len(matched.matches), "counts": matched.counts(),
+        "surface_matching": {"windows": len(windows.matches), "counts": windows.counts(),
                              "qualified": verdict.n_qualified, "relief": verdict.to_dict(),
                              "windows_file": "windows.json"},
         "gcps": {**absolute.gcp_summary(gcps), "file": "gcps.json"},
@@ -143,6 +152,16 @@ def orient_flow(params: OrientParams) -> OrientOutcome:
                                           if absolute.self_calibration else None)},
         "models": {"left": "left.json", "right": "right.json"},
     }
+    final = {}
+    for vert, name in (("ellipsoidal", "dsm.tif"), ("egm96", "dsm_egm96.tif")):
+        vcfg = replace(dense_cfg, vertical=vert)
+        work = out / f".{name}.work"
+        stats = retriangulate_tiles(matched.plan, matched.stats, matched.work, work,
+                                    absolute.models[0], absolute.models[1], vcfg)
+        final[vert] = grid_dem_cog(matched.plan, stats, work, out / name, vcfg).to_dict()
+    shutil.rmtree(matched.work, ignore_errors=True)
+    report["dsm"] = {"ellipsoidal": "dsm.tif", "egm96": "dsm_egm96.tif",
+                     "summary": final["ellipsoidal"]}
     if checkpoints is not None:
         report["check_points"] = check_point_report(absolute.models, checkpoints)
         report["check_points_before"] = check_point_report(

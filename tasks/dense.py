@@ -60,7 +60,14 @@ from core.sensors.rpc import RPCModel
 from core.sensors.viewing import point_geometry
 from tasks.crs import Projection
 from tasks.dem_io import read_reference, resolve_vertical
-from tasks.dense_blocks import check_roi, dense_block, grid_block, tile_boxes, tile_points_path
+from tasks.dense_blocks import (
+    check_roi,
+    dense_block,
+    grid_block,
+    retriangulate_block,
+    tile_boxes,
+    tile_points_path,
+)
 from tasks.geoid import load_geoid
 from tasks.raster_io import CogItem, CogOptions, atomic_write_text, write_arrays_cog
 from tasks.sensor_io import LoadedModel
@@ -315,6 +322,22 @@ def match_tiles(plan: DensePlan, left: LoadedModel, right: LoadedModel, work: Pa
     stats = tuple(_compute(parts, cfg, "dense matching"))
     check_match_rate(stats, cfg.min_match_rate)
     return stats
+
+
+@task(name="retriangulate-tiles", cache_policy=NO_CACHE)
+def retriangulate_tiles(plan: DensePlan, stats: tuple[TileStats, ...], work_in: Path,
+                        work_out: Path, left: SensorModel, right: SensorModel,
+                        cfg: DenseConfig = DenseConfig()) -> tuple[TileStats, ...]:
+    """The matches :func:`match_tiles` saved in ``work_in`` intersected again with other
+    models (the absolutely oriented ones) into ``work_out``: the final DSM without matching
+    again."""
+    work_out = Path(work_out)
+    shutil.rmtree(work_out, ignore_errors=True)
+    work_out.mkdir(parents=True)
+    geoid = load_geoid() if cfg.vertical == "egm96" else None
+    parts = [dask.delayed(retriangulate_block)(s, str(work_in), str(work_out), left, right,
+                                               plan.epsg, plan.origin_m, geoid) for s in stats]
+    return tuple(_compute(parts, cfg, "triangulation"))
 
 
 def check_match_rate(stats: tuple[TileStats, ...], min_rate: float) -> None:

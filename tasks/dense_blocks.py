@@ -10,8 +10,10 @@ only read, slice and call one core function, and hand freed memory back when don
 from __future__ import annotations
 
 import ctypes
+import json
 import math
 import warnings
+from dataclasses import replace
 from pathlib import Path
 
 import cv2
@@ -22,9 +24,16 @@ from rasterio.windows import Window
 
 from core.errors import InputError
 from core.geoid import GeoidGrid
-from core.matching.dense import MatchingConfig, TileStats, dense_tile
+from core.matching.dense import (
+    MatchingConfig,
+    PixelStatus,
+    TileMatches,
+    TileStats,
+    dense_tile,
+    retriangulate,
+)
 from core.matching.grid import GridSpec, grid_dem
-from core.matching.rectify import Box, TilePlan
+from core.matching.rectify import Box, TilePlan, TileRectification
 from core.sensors.base import SensorModel
 from tasks.crs import Projection
 
@@ -116,12 +125,41 @@ def dense_block(plan: TilePlan, left_path: str, right_path: str, left: SensorMod
     res = dense_tile(plan, lw, plan.left_read[:2], rw, plan.right_read[:2], left, right,
                      left_size, right_size, Projection(epsg).to_xy, left_nodata=l_nodata,
                      right_nodata=r_nodata, geoid=geoid, cfg=cfg)
+    m = res.matches
     np.savez(out, dx=(res.x_m - origin_m[0]).astype(np.float32),
-             dy=(res.y_m - origin_m[1]).astype(np.float32), h=res.h_m, status=res.status)
+             dy=(res.y_m - origin_m[1]).astype(np.float32), h=res.h_m, status=res.status,
+             d=m.d_px, rect=json.dumps(m.rect.to_dict()), window=np.array(m.window),
+             core=np.array(m.core), d_range=np.array(m.d_range_px))
     stats = res.stats
     del res, lw, rw
     _trim_heap()
     return stats
+
+
+def retriangulate_block(stats: TileStats, work_in: str, work_out: str, left: SensorModel,
+                        right: SensorModel, epsg: int, origin_m: tuple[float, float],
+                        geoid: GeoidGrid | None) -> TileStats:
+    """One tile's saved matches intersected with other models (:func:`retriangulate`) into
+    a point file of the same layout in ``work_out``; the tile's figures with its new ground
+    bounds and miss distance."""
+    with np.load(tile_points_path(Path(work_in), stats.index)) as f:
+        matches = TileMatches(f["d"], TileRectification.from_dict(json.loads(str(f["rect"]))),
+                              tuple(int(v) for v in f["window"]),
+                              tuple(int(v) for v in f["core"]),
+                              (float(f["d_range"][0]), float(f["d_range"][1])))
+        status = f["status"]
+    pts = retriangulate(matches, left, right, Projection(epsg).to_xy, geoid)
+    valid = status == PixelStatus.VALID
+    np.savez(tile_points_path(Path(work_out), stats.index),
+             dx=(pts.x_m - origin_m[0]).astype(np.float32),
+             dy=(pts.y_m - origin_m[1]).astype(np.float32),
+             h=np.where(valid, pts.h_m, np.nan).astype(np.float32), status=status)
+    bounds = (None if not pts.x_m.size else
+              (float(pts.x_m.min()), float(pts.y_m.min()), float(pts.x_m.max()),
+               float(pts.y_m.max())))
+    miss = float(np.median(pts.miss_m[valid])) if valid.any() else math.nan
+    _trim_heap()
+    return replace(stats, bounds_m=bounds, miss_median_m=miss)
 
 
 def grid_block(block: np.ndarray, spec: GridSpec, stats: tuple[TileStats, ...], work: str,

@@ -64,8 +64,8 @@ from scipy import ndimage
 
 from core.errors import InputError
 from core.geoid import GeoidGrid
-from core.matching.rectify import TilePlan, warp_to_window
-from core.matching.triangulate import ToXY, fit_disparity_to_ground
+from core.matching.rectify import Box, TilePlan, TileRectification, warp_to_window
+from core.matching.triangulate import GroundPoints, ToXY, fit_disparity_to_ground
 from core.sensors.base import SensorModel
 
 FloatArray = NDArray[np.float64]
@@ -511,15 +511,53 @@ class TileStats:
 
 
 @dataclass(frozen=True, eq=False)
+class TileMatches:
+    """What a tile's matching found, enough to triangulate it again with other models: the
+    (filled) disparity of each core pixel in the order of :func:`core_pixels`, the final
+    rectification (pointing correction included), the rectified window and the disparities
+    the ground fit must span."""
+
+    d_px: NDArray[np.float32]
+    rect: TileRectification
+    window: tuple[int, int, int, int]
+    core: Box
+    d_range_px: tuple[float, float]
+
+
+@dataclass(frozen=True, eq=False)
 class TileResult:
     """Ground points of a tile's core pixels: projected ``x_m``, ``y_m``, height ``h_m``
-    (NaN unless matched) and the :class:`PixelStatus` of each, with the tile's figures."""
+    (NaN unless matched) and the :class:`PixelStatus` of each, with the tile's figures and
+    its matches."""
 
     x_m: FloatArray
     y_m: FloatArray
     h_m: NDArray[np.float32]
     status: NDArray[np.uint8]
     stats: TileStats
+    matches: TileMatches | None = None
+
+
+def core_pixels(rect: TileRectification, window: tuple[int, int, int, int],
+                core: Box) -> tuple[FloatArray, FloatArray, BoolArray]:
+    """Rectified coordinates ``(u, v)`` of the window's pixels and which of them fall in the
+    left tile's core (rounded to the nearest sensor pixel)."""
+    u0, v0, w, h = window
+    uu, vv = np.meshgrid(np.arange(w, dtype=np.float64) + u0, np.arange(h, dtype=np.float64) + v0)
+    col, row = rect.rect_to_left(uu, vv)
+    c0, r0, c1, r1 = core
+    ci, ri = np.floor(col + 0.5), np.floor(row + 0.5)
+    return uu, vv, (ci >= c0) & (ci < c1) & (ri >= r0) & (ri < r1)
+
+
+def retriangulate(matches: TileMatches, left: SensorModel, right: SensorModel, to_xy: ToXY,
+                  geoid: GeoidGrid | None = None) -> GroundPoints:
+    """The tile's matches intersected again with (e.g. absolutely oriented) models: the same
+    image correspondences, new rays. Points in the order of the tile's core pixels."""
+    uu, vv, core = core_pixels(matches.rect, matches.window, matches.core)
+    g2g = fit_disparity_to_ground(matches.rect, left, right, matches.window, matches.d_range_px,
+                                  to_xy, geoid=geoid)
+    return g2g(uu[core], vv[core], matches.d_px.astype(np.float64))
 
 
 def dense_tile(
@@ -576,12 +614,8 @@ def dense_tile(
                                 upside_down=cfg.second_upside_down)
         disp = average_half_pixel(disp, second, cfg.lr_max_diff_px)
     disp = outside_prior(disp, plan.d_pred_px)
-    u0, v0, w, h = plan.window
-    uu, vv = np.meshgrid(np.arange(w, dtype=np.float64) + u0, np.arange(h, dtype=np.float64) + v0)
-    col, row = rect.rect_to_left(uu, vv)
-    c0, r0, c1, r1 = plan.core
-    ci, ri = np.floor(col + 0.5), np.floor(row + 0.5)
-    core = (ci >= c0) & (ci < c1) & (ri >= r0) & (ri < r1)
+    u0, v0, w, _ = plan.window
+    uu, vv, core = core_pixels(rect, plan.window, plan.core)
     status = disp.status[core]
     d = disp.filled_px[core].astype(np.float64)
     u, v = uu[core], vv[core]
@@ -613,4 +647,6 @@ def dense_tile(
         fit_degree=g2g.degree, fit_max_m=g2g.fit_max_m,
         miss_median_m=float(np.median(pts.miss_m[valid])) if valid.any() else math.nan,
         bounds_m=bounds)
-    return TileResult(pts.x_m, pts.y_m, h_m, status, stats)
+    return TileResult(pts.x_m, pts.y_m, h_m, status, stats,
+                      TileMatches(d.astype(np.float32), rect, plan.window, plan.core,
+                                  (d_lo, d_hi)))

@@ -129,6 +129,16 @@ class TileRectification:
         a[1, 2] += dv_px
         return replace(self, right_affine=a, d_ref_px=self.d_ref_px - du_px)
 
+    @classmethod
+    def from_dict(cls, d: dict[str, Any]) -> TileRectification:
+        try:
+            return cls(np.asarray(d["left_affine"], float), np.asarray(d["right_affine"], float),
+                       float(d["h_ref_m"]), tuple(d["h_range_m"]), float(d["disparity_per_m"]),
+                       float(d["d_ref_px"]), float(d["y_residual_max_px"]),
+                       float(d["y_residual_rms_px"]))
+        except (KeyError, TypeError, ValueError) as exc:
+            raise InputError(f"tile rectification record lacks or mistypes {exc}") from None
+
     def to_dict(self) -> dict[str, Any]:
         return {
             "left_affine": self.left_affine.tolist(), "right_affine": self.right_affine.tolist(),

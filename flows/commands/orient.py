@@ -18,9 +18,10 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
             "that DEM around the tie points matched to the reference DEM (SRTM) into simulated "
             "GCPs, and the absolute orientation of both images on them (robust least squares, "
             "blunders rejected, optional lens self-calibration). Refuses terrain too flat to "
-            "fix the position. Writes OUT/report.json, the oriented models OUT/left.json and "
-            "OUT/right.json, OUT/gcps.json, OUT/windows.json, OUT/relative_dem.tif and "
-            "OUT/relative/."),
+            "fix the position. The final DSM is the relative DEM's matches intersected again "
+            "with the oriented models. Writes OUT/report.json, the oriented models OUT/left.json "
+            "and OUT/right.json, OUT/gcps.json, OUT/windows.json, OUT/dsm.tif (ellipsoidal) "
+            "and OUT/dsm_egm96.tif, OUT/relative_dem.tif and OUT/relative/."),
     )
     add_pair_arguments(p)
     add_reference_arguments(p, use="the ground the pair is oriented to (required, or "

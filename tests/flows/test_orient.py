@@ -181,3 +181,48 @@ def test_cli_refuses_bad_input_before_running(tiny_scene, tmp_path):
     with pytest.raises(InputError, match="check point file"):
         orient_command.run(args)
     assert not (tmp_path / "o").exists()
+
+
+def _against_truth(dsm, truth_dsm):
+    """Median and NMAD of a DSM minus the truth DSM at the DSM's valid cells."""
+    import rasterio
+
+    from core.dem import sample_bilinear
+
+    with rasterio.open(dsm) as src:
+        z, t = src.read(1).astype(np.float64), src.transform
+    with rasterio.open(truth_dsm) as src:
+        truth, tt = src.read(1).astype(np.float64), src.transform
+    rows, cols = np.nonzero(np.isfinite(z))
+    x, y = t.c + (cols + 0.5) * t.a, t.f + (rows + 0.5) * t.e
+    d = z[rows, cols] - sample_bilinear(truth, (tt.f - y) / -tt.e - 0.5, (x - tt.c) / tt.a - 0.5)
+    d = d[np.isfinite(d)]
+    return float(np.median(d)), float(1.4826 * np.median(np.abs(d - np.median(d))))
+
+
+def test_final_dsm_is_the_relative_one_put_in_place(oriented):
+    """The matches intersected again with the oriented models: the relative DEM sits where
+    the metadata put it (100-300 m off: tens of metres of height error on slopes), the final
+    DSM on the truth; the EGM96 twin is the same surface minus the geoid."""
+    import rasterio
+
+    from tasks.geoid import load_geoid
+
+    scene, out, outcome = oriented
+    truth = scene / "truth" / "dsm.tif"
+    rel_med, rel_nmad = _against_truth(out / "relative_dem.tif", truth)
+    fin_med, fin_nmad = _against_truth(out / "dsm.tif", truth)
+    assert abs(fin_med) < 5.0 and fin_nmad < 0.6 * rel_nmad and fin_nmad < 40.0  # 1 GSD
+    with rasterio.open(out / "dsm.tif") as a, rasterio.open(out / "dsm_egm96.tif") as b:
+        assert "ellipsoid" in a.tags()["vertical_datum"].lower()
+        assert "egm96" in b.tags()["vertical_datum"].lower()
+        za, zb, t, epsg = a.read(1), b.read(1), a.transform, a.crs.to_epsg()
+    from tasks.crs import Projection
+
+    rows, cols = np.nonzero(np.isfinite(za) & np.isfinite(zb))
+    pick = slice(None, None, max(1, rows.size // 500))
+    lon, lat = Projection(epsg).to_lonlat(t.c + (cols[pick] + 0.5) * t.a,
+                                          t.f + (rows[pick] + 0.5) * t.e)
+    n = load_geoid().undulation_m(lon, lat)
+    assert np.allclose(za[rows[pick], cols[pick]] - zb[rows[pick], cols[pick]], n, atol=0.05)
+    assert not any(p.name.endswith(".work") for p in out.iterdir())
