@@ -507,3 +507,27 @@ def relief_sufficiency(matches: Sequence[WindowMatch], cfg: SurfaceMatchConfig,
     needed = float(np.median(need)) if need else float("nan")
     return ReliefVerdict(len(matches), len(qualified), n_needed, found, needed,
                          cfg.max_precision_m)
+
+
+# ------------------------------------------------------------------------- report figure
+
+
+def correlation_surface(lon_deg: ArrayLike, lat_deg: ArrayLike, h_m: ArrayLike,
+                        centre: tuple[float, float], reference: GeoDEM,
+                        cfg: SurfaceMatchConfig = SurfaceMatchConfig()
+                        ) -> tuple[FloatArray, FloatArray]:
+    """The correlation of one window over the whole grid of shifts (Goncalves's Fig. 5).
+
+    Same inputs as :func:`match_window`. Returns the shifts ``(n,)`` in arcseconds (the same
+    for dlon and dlat: ``-cfg.shift_max_arcsec .. +cfg.shift_max_arcsec`` every
+    ``cfg.shift_step_arcsec``) and the correlation ``(n, n)`` indexed ``[dlat, dlon]``, NaN
+    where fewer than ``cfg.min_cells`` pairs are valid (all NaN for an empty window).
+    """
+    cell = cfg.cell_m if cfg.cell_m is not None else reference.cell_size_m()
+    cells = window_cells(lon_deg, lat_deg, h_m, centre, cfg.radius_m, cell)
+    grid = _grid(cfg.shift_max_arcsec, cfg.shift_step_arcsec)
+    if np.count_nonzero(np.isfinite(cells.h_m)) < cfg.min_cells:
+        return grid, np.full((grid.size, grid.size), np.nan)
+    gx, gy = np.meshgrid(grid, grid)
+    rho = _valid_rho(cells, reference, gx.ravel(), gy.ravel(), cfg.min_cells, cfg.detrend)
+    return grid, rho.reshape(gx.shape)

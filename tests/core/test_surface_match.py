@@ -15,6 +15,7 @@ from core.surface_match import (
     SurfaceMatchConfig,
     WindowMatch,
     WindowStatus,
+    correlation_surface,
     match_window,
     quadratic_peak,
 )
@@ -139,3 +140,30 @@ def test_quadratic_peak_of_an_exact_paraboloid():
     dx, dy, hess = quadratic_peak(z)
     assert dx == pytest.approx(0.3, abs=1e-12) and dy == pytest.approx(-0.2, abs=1e-12)
     np.testing.assert_allclose(hess, [[-2.0, 0.1], [0.1, -3.0]], atol=1e-12)
+
+
+def test_correlation_surface_peaks_at_the_known_shift(ref):
+    """The report's figure (Goncalves's Fig. 5): terrain seen shifted by (6.3", -4.2") against
+    the noisy reference. The surface's maximum is the grid node nearest the true shift, with
+    the correlation match_window reports there; a quadratic through its 3x3 neighbourhood
+    lands on the true shift; an empty window gives no correlation at all."""
+    shift = (6.3, -4.2, 10.0)
+    lon, lat, h = relative_dem(shift)
+    cfg = SurfaceMatchConfig()
+    shifts, rho = correlation_surface(lon, lat, h, (LON0, LAT0), ref, cfg)
+    np.testing.assert_array_equal(shifts, np.arange(-20.0, 21.0))
+    assert rho.shape == (41, 41) and np.isfinite(rho).all() and np.all(np.abs(rho) <= 1.0)
+    iy, ix = np.unravel_index(np.argmax(rho), rho.shape)
+    assert (shifts[ix], shifts[iy]) == (6.0, -4.0)  # rows are dlat, columns dlon
+    w = match_window(lon, lat, h, (LON0, LAT0), ref, cfg)
+    assert w.ok
+    assert (round(w.shift_lon_arcsec), round(w.shift_lat_arcsec)) == (6, -4)
+    assert rho[iy, ix] == pytest.approx(w.correlation, abs=1e-12)  # the same correlation
+    dx, dy, _ = quadratic_peak(rho[iy - 1:iy + 2, ix - 1:ix + 2])
+    assert abs(shifts[ix] + dx - shift[0]) < 0.15 and abs(shifts[iy] + dy - shift[1]) < 0.15
+    # a single peak: every shift 5" or more from it correlates less (smooth terrain: slowly)
+    gx, gy = np.meshgrid(shifts, shifts)
+    far = np.hypot(gx - shifts[ix], gy - shifts[iy]) >= 5.0
+    assert rho[far].max() < rho[iy, ix] - 0.005
+    empty = correlation_surface(lon, lat, np.full_like(h, np.nan), (LON0, LAT0), ref, cfg)
+    assert empty[1].shape == (41, 41) and np.isnan(empty[1]).all()
