@@ -11,6 +11,7 @@ from flows import evaluate as evaluate_command
 from flows._env import configure_environment, one_line_errors
 from flows.commands import coregister as coregister_command
 from flows.commands import dsm as dsm_command
+from flows.commands import fill_voids as fill_voids_command
 from flows.commands import orient as orient_command
 from flows.commands import relative as relative_command
 
@@ -196,7 +197,7 @@ def build_parser() -> argparse.ArgumentParser:
 
 COMMAND_MODULES = {"relative": relative_command, "evaluate": evaluate_command,
                    "coregister": coregister_command, "dsm": dsm_command,
-                   "orient": orient_command}
+                   "orient": orient_command, "fill-voids": fill_voids_command}
 COMMANDS = {"prepare-reference": _run_prepare_reference, "simulate": _run_simulate,
             "info": _run_info, **{name: m.run for name, m in COMMAND_MODULES.items()}}
 

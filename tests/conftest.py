@@ -47,3 +47,19 @@ def tiny_clean_scene(tmp_path_factory):
 
     out = tmp_path_factory.mktemp("tiny_clean")
     return out, run_scene(out, seed=12, jitter=False, lidar=False)
+
+
+@pytest.fixture(scope="session")
+def tiny_oriented(tiny_scene, tmp_path_factory, prefect_harness):
+    """``gcpfree orient`` run once on the tiny pair (rigorous family, lens self-calibration,
+    check points): (scene_dir, out_dir, OrientOutcome). Tests only read its products; a test
+    that writes copies the folder first."""
+    from flows.orient import OrientParams, orient_flow
+
+    scene, _ = tiny_scene
+    out = tmp_path_factory.mktemp("orient")
+    outcome = orient_flow(OrientParams(
+        left=scene / "left.tif", right=scene / "right.tif", out=out,
+        reference=scene / "reference.tif", checkpoints=scene / "truth" / "checkpoints.json",
+        self_calibrate=True, progress=False))
+    return scene, out, outcome

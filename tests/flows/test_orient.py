@@ -30,17 +30,9 @@ def parse(*argv: str) -> argparse.Namespace:
 
 
 @pytest.fixture(scope="module")
-def oriented(tiny_scene, tmp_path_factory, prefect_harness):
-    """The rigorous (pushbroom) family oriented with lens self-calibration."""
-    from flows.orient import OrientParams, orient_flow
-
-    scene, _ = tiny_scene
-    out = tmp_path_factory.mktemp("orient")
-    outcome = orient_flow(OrientParams(
-        left=scene / "left.tif", right=scene / "right.tif", out=out,
-        reference=scene / "reference.tif", checkpoints=scene / "truth" / "checkpoints.json",
-        self_calibrate=True, progress=False))
-    return scene, out, outcome
+def oriented(tiny_oriented):
+    """The rigorous (pushbroom) family oriented with lens self-calibration (session run)."""
+    return tiny_oriented
 
 
 def test_pushbroom_pair_reaches_the_check_points_with_no_gcp(oriented):
