@@ -1,0 +1,113 @@
+"""Flow and command ``gcpfree ortho``: an image orthorectified on a DEM through its sensor model.
+
+image + model + DEM -> the output grid (local UTM zone or ``--crs``, cells of the image's GSD or
+``--resolution``, cut to the DEM) -> each 1024-cell tile: heights from the DEM, image positions
+from the model on a checked sparse lattice (< 0.01 px), the image resampled -> ``OUT`` (COG with
+nodata and overviews), ``OUT.json`` and the optional occlusion mask.
+
+Importing this module is light (no Prefect, rasterio or pyproj): :func:`run` checks the inputs,
+then builds and runs the Prefect flow (:func:`ortho_flow`).
+"""
+
+from __future__ import annotations
+
+import argparse
+import functools
+from collections.abc import Callable
+from pathlib import Path
+from typing import TYPE_CHECKING
+
+from flows._env import one_line_errors
+
+if TYPE_CHECKING:
+    from tasks.ortho import OrthoOptions, OrthoSummary
+
+RESAMPLINGS = ("nearest", "bilinear", "cubic")  # core.ortho.RESAMPLINGS, without importing it
+VERTICALS = ("auto", "egm96", "ellipsoidal")
+
+
+@functools.cache
+def ortho_flow() -> Callable[[OrthoOptions], OrthoSummary]:
+    """The Prefect flow ``ortho``, built on first use so importing this module stays light:
+    read the model and the DEM, plan the grid, write the tiles."""
+    from prefect import flow
+
+    from tasks.ortho import OrthoOptions, OrthoSummary, orthorectify, plan_ortho
+    from tasks.ortho_io import describe_dem
+    from tasks.sensor_io import load_model
+
+    def ortho(options: OrthoOptions) -> OrthoSummary:
+        loaded = load_model(options.image, model=options.model, band=options.band)
+        dem = describe_dem(options.dem, options.dem_vertical)
+        plan = plan_ortho(loaded, dem, options.resolution_m, options.epsg,
+                          options.occlusion_mask is not None)
+        return orthorectify(plan, options.out, options.config, options.workers,
+                            options.occlusion_mask)
+
+    ortho.__annotations__ = {"options": OrthoOptions, "return": OrthoSummary}
+    return flow(name="ortho", log_prints=True)(ortho)
+
+
+def add_parser(sub: argparse._SubParsersAction) -> None:
+    p = sub.add_parser(
+        "ortho",
+        help="orthorectify an image on a DEM (SRTM reference or the final DSM)",
+        description=(
+            "Orthorectify IMG by inverse mapping: each cell of the output grid takes its "
+            "height from the DEM (EGM96 heights converted with h = H + N), goes through the "
+            "sensor model into the image and is resampled there. The model is evaluated on a "
+            "sparse lattice per 1024-cell tile and interpolated, the lattice refined until "
+            "the interpolation error found on check points is below 0.01 px. The grid is in "
+            "the local UTM zone (or --crs), cells of the image's GSD (or --resolution) "
+            "aligned on multiples of the cell size, so two orthos of a pair share a lattice "
+            "(see ortho-compare). Writes OUT (COG in the image's type with nodata and "
+            "overviews), OUT.json and, when asked, the occlusion mask (0 seen, 1 hidden by "
+            "relief, 255 no data)."),
+    )
+    p.add_argument("--image", type=Path, required=True, metavar="IMG",
+                   help="the image (GeoTIFF, SPOT IMAGERY.TIF...)")
+    p.add_argument("--model", type=Path, default=None, metavar="M",
+                   help="its sensor model: .DIM (SPOT), gcpfree .json (pushbroom or RPC, e.g. "
+                        "OUT/left.json of gcpfree orient), .geom, RPC .XML, or a GeoTIFF's RPC "
+                        "tags; default: found beside the image")
+    p.add_argument("--band", type=int, default=None,
+                   help="SPOT multispectral band whose look angles to use (default the first)")
+    p.add_argument("--dem", type=Path, required=True, metavar="DEM",
+                   help="heights: a lon/lat DEM (SRTM .hgt, prepare-reference output) or a "
+                        "projected DSM (gcpfree dsm/orient output)")
+    p.add_argument("--dem-vertical", choices=VERTICALS, default="auto",
+                   help="heights of DEM: auto (default) reads the vertical_datum tag, then a "
+                        "compound CRS; an untagged lon/lat DEM is EGM96 when it is an SRTM "
+                        "tile (.hgt, SRTM name), else ellipsoidal")
+    p.add_argument("--resolution", type=float, default=None, metavar="M",
+                   help="cell size in metres (default the image's GSD, 2 digits)")
+    p.add_argument("--crs", type=int, default=None, metavar="EPSG",
+                   help="projected output CRS as an EPSG code (default the local UTM zone)")
+    p.add_argument("--resampling", choices=RESAMPLINGS, default="bilinear",
+                   help="image resampling (default bilinear; cubic: cubic convolution)")
+    p.add_argument("--occlusion-mask", type=Path, default=None, metavar="MASK",
+                   help="also write the cells hidden from the sensor by relief here (COG)")
+    p.add_argument("--workers", type=int, default=None,
+                   help="parallel tiles (default: one per core)")
+    p.add_argument("--out", type=Path, required=True, metavar="ORTHO",
+                   help="output ortho (GeoTIFF, COG)")
+
+
+def options_from(args: argparse.Namespace) -> OrthoOptions:
+    from tasks.ortho import OrthoOptions
+
+    return OrthoOptions(
+        image=args.image, dem=args.dem, out=args.out, model=args.model, band=args.band,
+        dem_vertical=args.dem_vertical, resolution_m=args.resolution, epsg=args.crs,
+        resampling=args.resampling, occlusion_mask=args.occlusion_mask, workers=args.workers)
+
+
+def run(args: argparse.Namespace) -> int:
+    from tasks.ortho import check_ortho_options
+
+    options = options_from(args)
+    check_ortho_options(options)  # bad input is one line, before Prefect starts
+    with one_line_errors():
+        summary = ortho_flow()(options)
+    print("\n".join(summary.lines()))
+    return 0
