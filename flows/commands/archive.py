@@ -1,0 +1,96 @@
+"""``gcpfree archive``: every pair of a catalog oriented, in parallel on Dask, resumable."""
+
+from __future__ import annotations
+
+import argparse
+from pathlib import Path
+
+CATALOG_HELP = ("a folder of pair folders (each with left.tif + right.tif and their models, or "
+                "left/ and right/ folders with IMAGERY.TIF + METADATA.DIM; optional lidar.laz, "
+                "landcover.tif, checkpoints.json), or a CSV/JSON list with the columns "
+                "id,left,right[,left_model,right_model,lidar,landcover,checkpoints]")
+
+
+def add_archive_arguments(p: argparse.ArgumentParser) -> None:
+    """The arguments ``archive`` and ``serve`` share."""
+    p.add_argument("--catalog", type=Path, required=True, metavar="CATALOG", help=CATALOG_HELP)
+    p.add_argument("--out", type=Path, required=True, metavar="ROOT",
+                   help="output folder: ROOT/<pair id>/ per pair, ROOT/summary.csv and "
+                        "ROOT/summary.json")
+    ref = p.add_mutually_exclusive_group(required=True)
+    ref.add_argument("--srtm-dir", type=Path, default=None, metavar="DIR",
+                     help="folder of SRTM tiles: a reference is prepared over each pair")
+    ref.add_argument("--reference", type=Path, default=None, metavar="REF",
+                     help="one reference DEM in EPSG:4326 for every pair (prepare-reference "
+                          "output or SRTM .hgt)")
+    p.add_argument("--dask-address", default=None, metavar="tcp://HOST:PORT",
+                   help="scheduler of an existing Dask cluster (its workers must see the same "
+                        "paths and have gcpfree installed); default: a LocalCluster")
+    p.add_argument("--workers", type=int, default=None, metavar="N",
+                   help="LocalCluster workers, one pair each at a time (default: one per core, "
+                        "at most one per pair to do)")
+    p.add_argument("--threads", action="store_true",
+                   help="LocalCluster workers as threads of this process instead of processes "
+                        "(lighter for small pairs)")
+    p.add_argument("--dashboard-address", default=":8787", metavar="[HOST]:PORT",
+                   help="where the LocalCluster serves its Dask dashboard (default :8787; :0 "
+                        "for any free port)")
+    p.add_argument("--self-calibrate", action="store_true",
+                   help="estimate lens distortion of pushbroom images (see gcpfree orient)")
+
+
+def add_parser(sub: argparse._SubParsersAction) -> None:
+    p = sub.add_parser(
+        "archive",
+        help="orient every stereo pair of a catalog on Dask (resumable, summary.csv)",
+        description=(
+            "Run the whole chain (orientation without GCP, DSM, orthos, evaluation when lidar is "
+            "given, report) on every pair of CATALOG, pairs in parallel on a Dask cluster (a "
+            "LocalCluster, or an existing one with --dask-address; the dashboard link is "
+            "printed). A pair that fails is recorded with its reason and never stops the "
+            "others. ROOT/summary.csv and ROOT/summary.json list every pair: status (done, "
+            "skipped, failed), reason, GCP count, check-point and GCP residual RMS per image, "
+            "LE68. A rerun processes only the pairs missing or failed. Exit code 1 when a pair "
+            "failed."),
+    )
+    add_archive_arguments(p)
+    p.add_argument("--no-progress", action="store_true", help="no progress bar")
+
+
+def check_archive_args(args: argparse.Namespace) -> None:
+    """Bad arguments refused in one line before Prefect starts."""
+    from core.errors import InputError
+    from tasks.catalog import read_catalog
+    from tasks.dem_io import check_reference
+
+    read_catalog(args.catalog)
+    if args.reference is not None:
+        check_reference(args.reference)
+    if args.srtm_dir is not None and not Path(args.srtm_dir).is_dir():
+        raise InputError(f"SRTM directory {args.srtm_dir} does not exist")
+    if args.workers is not None and args.workers < 1:
+        raise InputError(f"--workers must be at least 1 (got {args.workers})")
+    if args.dask_address is not None and "://" not in args.dask_address:
+        raise InputError(f"--dask-address {args.dask_address}: give the scheduler as "
+                         "tcp://HOST:PORT")
+
+
+def flow_parameters(args: argparse.Namespace) -> dict:
+    """The flow's parameters from the command line (absolute paths, JSON values)."""
+    def path(p: Path | None) -> str | None:
+        return None if p is None else str(Path(p).expanduser().resolve())
+
+    return {"catalog": path(args.catalog), "out": path(args.out),
+            "srtm_dir": path(args.srtm_dir), "reference": path(args.reference),
+            "dask_address": args.dask_address, "workers": args.workers,
+            "processes": not args.threads, "dashboard_address": args.dashboard_address,
+            "self_calibrate": args.self_calibrate}
+
+
+def run(args: argparse.Namespace) -> int:
+    check_archive_args(args)
+    from flows.reprocess_archive import reprocess_archive
+
+    outcome = reprocess_archive(**flow_parameters(args), progress=not args.no_progress)
+    print("\n".join(outcome.lines()))
+    return 1 if outcome.count("failed") else 0

@@ -1,0 +1,240 @@
+"""Flow ``reprocess-archive``: every stereo pair of a catalog through ``orient-pair``, pairs in
+parallel on Dask, resumable.
+
+catalog (``tasks.catalog``) -> pairs whose ``ROOT/<id>`` is already complete are skipped
+(:func:`flows.orient_pair.pair_complete`) -> the others run concurrently, one ``orient-pair``
+flow per pair inside a Dask task (prefect-dask's ``DaskTaskRunner``: a LocalCluster, or an
+existing cluster given its scheduler address) -> ``ROOT/summary.csv`` and ``ROOT/summary.json``
+-> Prefect artifacts (the summary table, a markdown account).
+
+A pair that fails (bad input, terrain too flat, any exception) is recorded with its one-line
+reason and never stops the others; a rerun processes only the pairs missing or failed. Only I/O
+tasks retry (catalog reading, summary writing); the orientation never does, since it would fail
+the same way again.
+
+The flow takes flat, JSON-friendly parameters (not one parameter object) so that a deployment
+(``gcpfree serve``, ``prefect.yaml``) can state them and the UI can edit them.
+"""
+
+from __future__ import annotations
+
+import os
+import sys
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Self
+
+from prefect import flow, task
+from prefect.cache_policies import NO_CACHE
+
+from tasks.catalog import (
+    PairEntry,
+    PairRow,
+    load_catalog,
+    one_line,
+    pair_row,
+    publish_summary,
+    write_summary,
+)
+
+DEFAULT_DASHBOARD = ":8787"
+
+
+@dataclass(frozen=True)
+class PairResult:
+    """What happened to one pair processed in this run: ``done`` or ``failed`` (with why)."""
+
+    id: str
+    status: str
+    reason: str = ""
+
+
+@dataclass(frozen=True, eq=False)
+class ArchiveOutcome:
+    """The summary rows (catalog order), where they were written, the Dask dashboard used."""
+
+    rows: tuple[PairRow, ...]
+    summary_csv: Path
+    summary_json: Path
+    dashboard: str | None = None
+
+    def count(self, status: str) -> int:
+        return sum(r.status == status for r in self.rows)
+
+    def lines(self) -> list[str]:
+        out = [(f"pairs                 {len(self.rows)}: {self.count('done')} done, "
+                f"{self.count('skipped')} skipped (already complete), "
+                f"{self.count('failed')} failed")]
+        out += [f"failed {r.id:<15} {r.reason}" for r in self.rows if r.status == "failed"]
+        out += [f"summary               {self.summary_csv}",
+                f"                      {self.summary_json}"]
+        return out
+
+
+def _reason(exc: BaseException) -> str:
+    from core.errors import GcpFreeError
+
+    text = one_line(str(exc))
+    return text if isinstance(exc, GcpFreeError) and text else f"{type(exc).__name__}: {text}"
+
+
+@task(name="orient-pair-of-archive", cache_policy=NO_CACHE)  # no retries: deterministic
+def process_pair(entry: PairEntry, out: Path, srtm_dir: Path | None, reference: Path | None,
+                 self_calibrate: bool = False) -> PairResult:
+    """One pair through ``orient-pair`` (single-threaded: the archive's parallelism is over
+    pairs). Any failure becomes the pair's reason instead of an exception."""
+    from flows._env import one_line_errors
+    from flows.orient_pair import PairParams, orient_pair_flow
+    from tasks.catalog import check_pair_inputs
+
+    try:
+        check_pair_inputs(entry)
+        with one_line_errors():
+            orient_pair_flow(PairParams(
+                left=entry.left, right=entry.right, out=Path(out), left_model=entry.left_model,
+                right_model=entry.right_model, srtm_dir=srtm_dir, reference=reference,
+                lidar=entry.lidar, landcover=entry.landcover, checkpoints=entry.checkpoints,
+                self_calibrate=self_calibrate, workers=1, progress=False, pair_id=entry.id))
+    except Exception as exc:  # noqa: BLE001 - a failing pair never stops the others
+        return PairResult(entry.id, "failed", _reason(exc))
+    return PairResult(entry.id, "done")
+
+
+def dask_task_runner(address: str | None, workers: int, processes: bool = True,
+                     dashboard_address: str = DEFAULT_DASHBOARD):
+    """prefect-dask's runner: the cluster at ``address``, or a LocalCluster of ``workers``
+    single-threaded workers (processes, or threads of this process)."""
+    from prefect_dask import DaskTaskRunner
+
+    if address:
+        return DaskTaskRunner(address=address)
+    return DaskTaskRunner(cluster_kwargs={
+        "n_workers": workers, "threads_per_worker": 1, "processes": processes,
+        "dashboard_address": dashboard_address})
+
+
+def _dashboard_link() -> str | None:
+    from prefect.context import FlowRunContext
+
+    ctx = FlowRunContext.get()
+    client = getattr(ctx.task_runner, "client", None) if ctx else None
+    return getattr(client, "dashboard_link", None)
+
+
+@flow(name="archive-pairs")
+def run_pairs(entries: list[PairEntry], root: Path, srtm_dir: Path | None = None,
+              reference: Path | None = None, self_calibrate: bool = False,
+              progress: bool = False) -> tuple[list[PairResult], str | None]:
+    """The pairs submitted to the flow's Dask task runner; (results in entry order, the Dask
+    dashboard link)."""
+    from prefect.futures import as_completed
+
+    link = _dashboard_link()
+    if link:
+        from prefect.artifacts import create_link_artifact
+
+        print(f"Dask dashboard        {link}", flush=True)
+        create_link_artifact(link, link_text="Dask dashboard", key="dask-dashboard",
+                             description="the Dask cluster running the pairs")
+    futures = {process_pair.submit(e, Path(root) / e.id, srtm_dir, reference, self_calibrate): e
+               for e in entries}
+    results: dict[str, PairResult] = {}
+    with _PairProgress(len(entries), progress) as bar:
+        for future in as_completed(list(futures)):
+            entry = futures[future]
+            try:
+                result = future.result()
+            except Exception as exc:  # noqa: BLE001 - the task was lost (e.g. its workers died)
+                result = PairResult(entry.id, "failed", _reason(exc))
+            results[entry.id] = result
+            bar.advance(result)
+    return [results[e.id] for e in entries], link
+
+
+class _PairProgress:
+    """A progress bar over pairs on stderr (rich, Prefect's own console library)."""
+
+    def __init__(self, total: int, enabled: bool) -> None:
+        self.total, self.enabled, self.failed = total, enabled, 0
+        self._bar = None
+
+    def __enter__(self) -> Self:
+        if self.enabled:
+            from rich.console import Console
+            from rich.progress import (
+                BarColumn,
+                MofNCompleteColumn,
+                Progress,
+                TextColumn,
+                TimeElapsedColumn,
+            )
+
+            self._bar = Progress(TextColumn("pairs"), BarColumn(), MofNCompleteColumn(),
+                                 TextColumn("{task.description}"), TimeElapsedColumn(),
+                                 console=Console(file=sys.stderr))
+            self._bar.__enter__()
+            self._task = self._bar.add_task("", total=self.total)
+        return self
+
+    def advance(self, result: PairResult) -> None:
+        self.failed += result.status == "failed"
+        if self._bar is not None:
+            self._bar.update(self._task, advance=1,
+                             description=f"last {result.id} {result.status}, "
+                                         f"{self.failed} failed")
+
+    def __exit__(self, *exc: object) -> None:
+        if self._bar is not None:
+            self._bar.__exit__(*exc)
+
+
+@task(name="find-complete-pairs", cache_policy=NO_CACHE)
+def complete_pairs(entries: tuple[PairEntry, ...], root: Path) -> frozenset[str]:
+    """Ids of the pairs whose ``ROOT/<id>`` already holds valid finished products."""
+    from flows.orient_pair import pair_complete
+
+    return frozenset(e.id for e in entries if pair_complete(Path(root) / e.id))
+
+
+@flow(name="reprocess-archive")
+def reprocess_archive(catalog: Path, out: Path, srtm_dir: Path | None = None,
+                      reference: Path | None = None, dask_address: str | None = None,
+                      workers: int | None = None, processes: bool = True,
+                      dashboard_address: str = DEFAULT_DASHBOARD, self_calibrate: bool = False,
+                      progress: bool = False) -> ArchiveOutcome:
+    """Catalog -> skip complete pairs -> the rest on Dask -> summary.csv/json + artifacts.
+
+    ``catalog``: a folder of pair folders or a CSV/JSON list (``tasks.catalog``); ``out``: ROOT,
+    one folder per pair id. ``srtm_dir`` or ``reference``: the ground every pair is oriented to.
+    ``dask_address``: an existing scheduler (``tcp://HOST:PORT``), else a LocalCluster of
+    ``workers`` (default: one per core, at most one per pair) single-threaded workers, in
+    processes unless ``processes`` is False.
+    """
+    from core.errors import InputError
+
+    if (srtm_dir is None) == (reference is None):
+        raise InputError("gcpfree archive needs the ground to orient every pair to: give "
+                         "--srtm-dir or --reference (one of them)")
+    if workers is not None and workers < 1:
+        raise InputError(f"--workers must be at least 1 (got {workers})")
+    cat = load_catalog(Path(catalog))
+    root = Path(out)
+    root.mkdir(parents=True, exist_ok=True)
+    done_before = complete_pairs(cat.pairs, root)
+    todo = [e for e in cat.pairs if e.id not in done_before]
+    results: dict[str, PairResult] = {}
+    link = None
+    if todo:
+        n = min(workers or os.cpu_count() or 1, len(todo))
+        runner = dask_task_runner(dask_address, n, processes, dashboard_address)
+        found, link = run_pairs.with_options(task_runner=runner)(
+            todo, root, srtm_dir, reference, self_calibrate, progress)
+        results = {r.id: r for r in found}
+    rows = tuple(
+        pair_row(e.id, "skipped", root / e.id) if e.id in done_before
+        else pair_row(e.id, results[e.id].status, root / e.id, results[e.id].reason)
+        for e in cat.pairs)
+    csv_path, json_path = write_summary(rows, root, cat.source)
+    publish_summary(rows, root)
+    outcome = ArchiveOutcome(rows, csv_path, json_path, link)
+    return outcome

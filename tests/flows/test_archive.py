@@ -1,0 +1,225 @@
+"""``gcpfree archive`` on a catalog of three pairs: a real tiny pair oriented for real, a pair
+whose products are already complete (skipped), a pair without images (failed with its reason,
+the others unaffected); the summary files agree with the products; a rerun processes only the
+failed pair."""
+
+from __future__ import annotations
+
+import argparse
+import csv
+import io
+import json
+import os
+from pathlib import Path
+
+import pytest
+
+from core.errors import InputError
+from flows.commands import archive as archive_command
+
+
+def complete_pair(out: Path, report: dict, evaluation: dict | None = None) -> None:
+    """The minimal finished products :func:`flows.orient_pair.pair_complete` accepts: the
+    manifest ``pair.json`` listing products that read back with their recorded sizes."""
+    out.mkdir(parents=True)
+    products = {"report": "report.json"}
+    (out / "report.json").write_text(json.dumps(report))
+    if evaluation is not None:
+        (out / "eval.json").write_text(json.dumps(evaluation))
+        products["evaluation"] = "eval.json"
+    (out / "pair.json").write_text(json.dumps({
+        "format": "gcpfree.pair", "version": 1, "pair_id": out.name, "products": products,
+        "sizes": {rel: (out / rel).stat().st_size for rel in products.values()}}))
+
+
+FINISHED_REPORT = {
+    "format": "gcpfree.orient", "gcps": {"used": 41},
+    "absolute": {"images": {"left": {"rms_col_px": 0.25, "rms_row_px": 0.5},
+                            "right": {"rms_col_px": 0.75, "rms_row_px": 0.125}}},
+    "check_points": {"left": {"rms_col_px": 0.375, "rms_row_px": 0.625},
+                     "right": {"rms_col_px": 0.875, "rms_row_px": 0.0625}}}
+FINISHED_EVAL = {"all": {"le68": 3.5}, "classes": {}}
+
+
+def parse(*argv: str) -> argparse.Namespace:
+    parser = argparse.ArgumentParser(prog="gcpfree")
+    archive_command.add_parser(parser.add_subparsers(dest="command"))
+    return parser.parse_args(["archive", *argv])
+
+
+def snapshot(folder: Path) -> dict[str, tuple[bytes, int]]:
+    return {str(p.relative_to(folder)): (p.read_bytes(), p.stat().st_mtime_ns)
+            for p in sorted(folder.rglob("*")) if p.is_file()}
+
+
+@pytest.fixture(scope="module")
+def archive(tiny_clean_scene, tmp_path_factory, prefect_harness):
+    """The first run, on a LocalCluster of one thread worker: (scene, catalog, root, outcome,
+    summary.csv text, summary.json document, the finished pair's files before the run)."""
+    from flows.reprocess_archive import reprocess_archive
+
+    scene, _ = tiny_clean_scene
+    base = tmp_path_factory.mktemp("archive")
+    cat, root = base / "catalog", base / "root"
+    cat.mkdir()
+    (cat / "real").symlink_to(scene)  # the simulator's folder: left.tif, right.tif, truth/
+    (cat / "finished").mkdir()  # no images: processing it would fail
+    (cat / "broken").mkdir()
+    (cat / "broken" / "notes.txt").write_text("images lost")
+    complete_pair(root / "finished", FINISHED_REPORT, FINISHED_EVAL)
+    before = snapshot(root / "finished")
+    outcome = reprocess_archive(catalog=cat, out=root, reference=scene / "reference.tif",
+                                workers=1, processes=False, dashboard_address=":0")
+    return (scene, cat, root, outcome, (root / "summary.csv").read_text(),
+            json.loads((root / "summary.json").read_text()), before)
+
+
+def test_each_pair_ends_done_skipped_or_failed_with_its_reason(archive):
+    from flows.orient_pair import pair_complete
+
+    _, _, root, outcome, _, _, before = archive
+    status = {r.id: r.status for r in outcome.rows}
+    assert status == {"broken": "failed", "finished": "skipped", "real": "done"}
+    reason = {r.id: r.reason for r in outcome.rows}
+    assert reason["broken"].startswith(f"left image {root.parent}/catalog/broken/left.tif "
+                                       "does not exist")
+    assert reason["real"] == reason["finished"] == ""
+    assert pair_complete(root / "real")  # the failing pair did not stop it
+    assert snapshot(root / "finished") == before  # skipped: not a byte or a time changed
+    assert not (root / "broken" / "pair.json").exists()
+    assert outcome.dashboard and outcome.dashboard.startswith("http")
+    # the link is also on the server, as an artifact of the run that used the cluster
+    from prefect.client.orchestration import get_client
+    from prefect.client.schemas.filters import ArtifactFilter, ArtifactFilterKey
+
+    with get_client(sync_client=True) as client:
+        links = client.read_artifacts(artifact_filter=ArtifactFilter(
+            key=ArtifactFilterKey(any_=["dask-dashboard"])))
+    assert any(outcome.dashboard in (a.data or "") for a in links)
+
+
+def test_summary_files_agree_with_the_products(archive):
+    _, _, root, _, csv_text, doc, _ = archive
+    rows = {r["id"]: r for r in csv.DictReader(io.StringIO(csv_text))}
+    assert list(rows) == ["broken", "finished", "real"]  # catalog order
+    report = json.loads((root / "real" / "report.json").read_text())
+    real = rows["real"]
+    assert int(real["gcps"]) == report["gcps"]["used"] >= 8
+    for side in ("left", "right"):
+        for axis in ("col", "row"):
+            cp = report["check_points"][side][f"rms_{axis}_px"]
+            assert float(real[f"cp_{side}_rms_{axis}_px"]) == pytest.approx(cp, rel=1e-5)
+            assert cp < 1.0  # oriented to the check points with no GCP (40 m pixels)
+            g = report["absolute"]["images"][side][f"rms_{axis}_px"]
+            assert float(real[f"gcp_{side}_rms_{axis}_px"]) == pytest.approx(g, rel=1e-5)
+    assert real["le68_m"] == ""  # no lidar in this scene
+    fin = rows["finished"]
+    assert (fin["gcps"], fin["cp_right_rms_row_px"], fin["gcp_left_rms_row_px"],
+            fin["le68_m"]) == ("41", "0.0625", "0.5", "3.5")
+    assert rows["broken"]["gcps"] == "" and "does not exist" in rows["broken"]["reason"]
+    assert doc["counts"] == {"done": 1, "skipped": 1, "failed": 1}
+    assert [(p["id"], p["status"], p["reason"]) for p in doc["pairs"]] == [
+        (r["id"], r["status"], r["reason"]) for r in rows.values()]
+    assert doc["pairs"][2]["cp_left_rms_col_px"] == report["check_points"]["left"]["rms_col_px"]
+    assert not [p.name for p in root.iterdir() if p.name.startswith(".")]  # no temp file left
+
+
+def test_rerun_processes_only_the_failed_pair(archive, capsys):
+    scene, cat, root, _, _, _, _ = archive
+    real_before = snapshot(root / "real")
+    # the lost images come back, but corrupt: the pair is attempted again and fails otherwise
+    for side in ("left", "right"):
+        (cat / "broken" / f"{side}.tif").write_bytes(b"II*\x00truncated")
+    rc = archive_command.run(parse(
+        "--catalog", str(cat), "--out", str(root), "--reference", str(scene / "reference.tif"),
+        "--workers", "1", "--threads", "--dashboard-address", ":0", "--no-progress"))
+    assert rc == 1  # a pair failed
+    printed = capsys.readouterr().out
+    assert "Dask dashboard" in printed and "1 failed" in printed
+    rows = {r["id"]: r for r in csv.DictReader(io.StringIO((root / "summary.csv").read_text()))}
+    assert {k: r["status"] for k, r in rows.items()} == {
+        "broken": "failed", "finished": "skipped", "real": "skipped"}
+    assert rows["broken"]["reason"] and "does not exist" not in rows["broken"]["reason"]
+    assert "\n" not in rows["broken"]["reason"]
+    assert snapshot(root / "real") == real_before  # not processed again
+    assert float(rows["real"]["cp_left_rms_col_px"]) > 0  # figures still read from products
+
+
+def test_bad_arguments_are_one_line_before_prefect(tmp_path: Path):
+    (tmp_path / "cat.csv").write_text("id,left,right\n")
+    with pytest.raises(InputError, match="lists no pair"):
+        archive_command.run(parse("--catalog", str(tmp_path / "cat.csv"), "--out",
+                                  str(tmp_path / "o"), "--srtm-dir", str(tmp_path)))
+    (tmp_path / "cat.csv").write_text("id,left,right\np,l.tif,r.tif\n")
+    for extra, message in ((["--workers", "0"], "--workers must be at least 1"),
+                           (["--dask-address", "localhost"], "tcp://HOST:PORT")):
+        with pytest.raises(InputError, match=message):
+            archive_command.run(parse("--catalog", str(tmp_path / "cat.csv"), "--out",
+                                      str(tmp_path / "o"), "--srtm-dir", str(tmp_path), *extra))
+    with pytest.raises(InputError, match="SRTM directory .* does not exist"):
+        archive_command.run(parse("--catalog", str(tmp_path / "cat.csv"), "--out",
+                                  str(tmp_path / "o"), "--srtm-dir", str(tmp_path / "none")))
+    with pytest.raises(SystemExit):  # the ground is required: --srtm-dir or --reference
+        parse("--catalog", str(tmp_path / "cat.csv"), "--out", str(tmp_path / "o"))
+
+
+@pytest.fixture()
+def dask_cluster(tmp_path: Path, prefect_harness):
+    """A separately started ``dask scheduler`` and one ``dask worker`` process on 127.0.0.1,
+    the worker pointed at the test's Prefect API; yields the scheduler's address."""
+    import subprocess
+    import sys
+    import time
+
+    from prefect.settings import PREFECT_API_URL
+
+    dask = Path(sys.executable).parent / "dask"
+    info = tmp_path / "scheduler.json"
+    env = {**os.environ, "PREFECT_API_URL": PREFECT_API_URL.value()}
+    log = (tmp_path / "dask.log").open("w")
+    procs = [subprocess.Popen([str(dask), "scheduler", "--host", "127.0.0.1", "--port", "0",
+                               "--dashboard-address", "127.0.0.1:0", "--scheduler-file",
+                               str(info)], env=env, stdout=log, stderr=subprocess.STDOUT)]
+    try:
+        end = time.monotonic() + 120
+        while not info.exists() and time.monotonic() < end and procs[0].poll() is None:
+            time.sleep(0.2)
+        assert info.exists(), (tmp_path / "dask.log").read_text()
+        procs.append(subprocess.Popen(
+            [str(dask), "worker", "--scheduler-file", str(info), "--nthreads", "1",
+             "--nworkers", "1", "--no-dashboard", "--host", "127.0.0.1"],
+            env=env, stdout=log, stderr=subprocess.STDOUT))
+        address = json.loads(info.read_text())["address"]
+        from distributed import Client
+
+        with Client(address, timeout=60) as client:
+            client.wait_for_workers(1, timeout=120)
+        yield address
+    finally:
+        for p in reversed(procs):
+            p.terminate()
+            try:
+                p.wait(timeout=30)
+            except subprocess.TimeoutExpired:
+                p.kill()
+                p.wait()
+        log.close()
+
+
+def test_archive_on_a_separately_started_dask_cluster(tiny_clean_scene, dask_cluster,
+                                                      tmp_path: Path):
+    from flows.orient_pair import pair_complete
+    from flows.reprocess_archive import reprocess_archive
+
+    scene, _ = tiny_clean_scene
+    cat, root = tmp_path / "catalog", tmp_path / "root"
+    cat.mkdir()
+    (cat / "real").symlink_to(scene)
+    (cat / "broken").mkdir()
+    outcome = reprocess_archive(catalog=cat, out=root, reference=scene / "reference.tif",
+                                dask_address=dask_cluster)
+    assert {r.id: r.status for r in outcome.rows} == {"broken": "failed", "real": "done"}
+    assert pair_complete(root / "real")  # written by the external worker process
+    assert outcome.dashboard and "127.0.0.1" in outcome.dashboard
+    report = json.loads((root / "real" / "report.json").read_text())
+    assert outcome.rows[1].gcps == report["gcps"]["used"] >= 8
