@@ -9,11 +9,17 @@ from pathlib import Path
 
 from flows import evaluate as evaluate_command
 from flows._env import configure_environment, one_line_errors
+from flows.commands import archive as archive_command
 from flows.commands import coregister as coregister_command
 from flows.commands import dsm as dsm_command
 from flows.commands import fill_voids as fill_voids_command
 from flows.commands import orient as orient_command
+from flows.commands import ortho as ortho_command
+from flows.commands import ortho_compare as ortho_compare_command
+from flows.commands import pair as pair_command
 from flows.commands import relative as relative_command
+from flows.commands import report as report_command
+from flows.commands import serve as serve_command
 
 
 def _add_prepare_reference(sub: argparse._SubParsersAction) -> None:
@@ -197,7 +203,10 @@ def build_parser() -> argparse.ArgumentParser:
 
 COMMAND_MODULES = {"relative": relative_command, "evaluate": evaluate_command,
                    "coregister": coregister_command, "dsm": dsm_command,
-                   "orient": orient_command, "fill-voids": fill_voids_command}
+                   "orient": orient_command, "pair": pair_command,
+                   "report": report_command, "ortho": ortho_command,
+                   "ortho-compare": ortho_compare_command, "fill-voids": fill_voids_command,
+                   "archive": archive_command, "serve": serve_command}
 COMMANDS = {"prepare-reference": _run_prepare_reference, "simulate": _run_simulate,
             "info": _run_info, **{name: m.run for name, m in COMMAND_MODULES.items()}}
 

@@ -4,7 +4,7 @@ relative orientation (``flows.relative``) -> relative DEM (``flows.dsm.pair_dem`
 it around the tie points matched to the reference (SRTM) -> simulated GCPs -> relief verdict ->
 absolute orientation of both images (optionally with lens self-calibration) -> final DSM (the
 relative DEM's matches intersected again with the oriented models, ellipsoidal and EGM96) ->
-check points -> ``OUT/report.json``, ``OUT/left.json``, ``OUT/right.json``, ``OUT/gcps.json``,
+check points -> ``OUT/report.json`` (+ ``report.html``, ``report.md``), ``OUT/left.json``, ``OUT/right.json``, ``OUT/gcps.json``,
 ``OUT/dsm.tif``, ``OUT/dsm_egm96.tif``.
 """
 
@@ -168,7 +168,12 @@ def orient_flow(params: OrientParams) -> OrientOutcome:
             (rel.left.model, rel.right.model), checkpoints)
     report = json_ready(report)
     path = atomic_write_json(out / "report.json", report)
-    outcome = OrientOutcome(path, report)
+    from tasks.report import write_report
+
+    # report.html/.md and their figures; it adds its own "report" key to report.json
+    write_report(out, reference=params.reference, checkpoints=params.checkpoints,
+                 reference_vertical=params.reference_vertical, surface=params.surface)
+    outcome = OrientOutcome(path, json.loads(path.read_text()))
     for line in outcome.lines():
         print(line)
     return outcome

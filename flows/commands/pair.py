@@ -1,0 +1,72 @@
+"""``gcpfree pair``: the whole chain for one stereo pair (flow ``orient-pair``), resumable."""
+
+from __future__ import annotations
+
+import argparse
+from pathlib import Path
+
+from flows.commands._pair import add_pair_arguments, add_reference_arguments, check_pair
+
+
+def add_parser(sub: argparse._SubParsersAction) -> None:
+    p = sub.add_parser(
+        "pair",
+        help="the whole chain for one pair: orient, orthos, lidar evaluation, report, STAC",
+        description=(
+            "Everything gcpfree does for one stereo pair, as the Prefect flow orient-pair: "
+            "orientation without GCP (as gcpfree orient), the orthos of both images and their "
+            "discrepancy, the final DSM against lidar per class (with --lidar), the report "
+            "(report.html, report.md), a STAC catalog of the rasters (OUT/stac/catalog.json) "
+            "and OUT/pair.json, the manifest written last. A rerun keeps every step whose "
+            "products read back and redoes the rest, so an interrupted pair resumes."),
+    )
+    add_pair_arguments(p)
+    add_reference_arguments(p, use="the ground the pair is oriented to (required, or "
+                                   "--srtm-dir)")
+    p.add_argument("--checkpoints", type=Path, default=None, metavar="FILE",
+                   help="independent check points (see gcpfree orient --help)")
+    p.add_argument("--lidar", type=Path, default=None, metavar="LAS",
+                   help="lidar LAS/LAZ to evaluate the final DSM against (any CRS)")
+    p.add_argument("--landcover", type=Path, default=None, metavar="TIF",
+                   help="land-cover raster classifying the evaluation (needs --lidar)")
+    p.add_argument("--lidar-vertical", choices=("auto", "ellipsoidal", "egm96"),
+                   default="auto", help="heights of the lidar (auto: from its CRS)")
+    p.add_argument("--self-calibrate", action="store_true",
+                   help="estimate lens distortion of pushbroom images, kept where significant")
+    p.add_argument("--corrections", choices=("offset", "linear"), default="linear",
+                   help="terms adjusted per image (see gcpfree orient --help)")
+    p.add_argument("--id", dest="pair_id", default=None,
+                   help="name of the pair in the STAC items (default: OUT's folder name)")
+    p.add_argument("--workers", type=int, default=None,
+                   help="parallel tiles of the dense matching (default: one per core)")
+    p.add_argument("--no-progress", action="store_true", help="no progress bar")
+    p.add_argument("--out", type=Path, required=True, help="output folder")
+
+
+def run(args: argparse.Namespace) -> int:
+    from core.errors import InputError
+    from tasks.orient import read_checkpoints
+
+    check_pair(args)
+    if args.reference is None and args.srtm_dir is None:
+        raise InputError("gcpfree pair needs a reference DEM: give --srtm-dir or --reference")
+    if args.checkpoints is not None:
+        read_checkpoints(args.checkpoints)
+    for name in ("lidar", "landcover"):
+        path = getattr(args, name)
+        if path is not None and not path.is_file():
+            raise InputError(f"--{name} {path} does not exist; give an existing file")
+    if args.landcover is not None and args.lidar is None:
+        raise InputError("--landcover classifies the lidar evaluation: give --lidar too")
+    from flows.orient_pair import PairParams, orient_pair_flow
+
+    outcome = orient_pair_flow(PairParams(
+        left=args.left, right=args.right, out=args.out, left_model=args.left_model,
+        right_model=args.right_model, band=args.band, reference=args.reference,
+        reference_vertical=args.reference_vertical, srtm_dir=args.srtm_dir,
+        lidar=args.lidar, landcover=args.landcover, lidar_vertical=args.lidar_vertical,
+        checkpoints=args.checkpoints, self_calibrate=args.self_calibrate,
+        corrections=args.corrections, workers=args.workers, progress=not args.no_progress,
+        pair_id=args.pair_id))
+    print("\n".join(outcome.lines()))
+    return 0
