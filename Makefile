@@ -25,7 +25,16 @@ demo: $(STAMP)
 	    --out $(OUT)/reference.tif --hillshade $(OUT)/reference.png
 	$(VENV)/bin/gcpfree simulate --preset tiny --seed 1 --center 5.25 44.2 \
 	    --lens --jitter --date-change 0.1 --out $(OUT)/scene_tiny
-	@echo "demo products in $(OUT)/"
+	$(VENV)/bin/gcpfree pair --left $(OUT)/scene_tiny/left.tif \
+	    --right $(OUT)/scene_tiny/right.tif --reference $(OUT)/scene_tiny/reference.tif \
+	    --checkpoints $(OUT)/scene_tiny/truth/checkpoints.json \
+	    --lidar $(OUT)/scene_tiny/truth/lidar.laz \
+	    --landcover $(OUT)/scene_tiny/truth/landcover.tif --self-calibrate \
+	    --out $(OUT)/pair_tiny
+	mkdir -p $(OUT)/filled
+	$(VENV)/bin/gcpfree fill-voids --srtm tasks/data/N44E005.hgt \
+	    --dem $(OUT)/pair_tiny/dsm.tif --out $(OUT)/filled/N44E005.hgt
+	@echo "demo products in $(OUT)/ (the pair's report: $(OUT)/pair_tiny/report.html)"
 
 test: $(STAMP)
 	$(PY) -m pytest -q

@@ -135,7 +135,8 @@ def orient_flow(params: OrientParams) -> OrientOutcome:
         raise InsufficientDataError(
             f"only {len(gcps)} surface-matching windows gave a GCP "
             f"({params.absolute.min_gcps} needed): {windows.counts()}; the relative DEM does "
-            "not correlate with the reference (clouds, voids, a wrong reference)")
+            f"not correlate with the reference: terrain too flat for its noise (median relief "
+            f"{verdict.relief_found_m:.1f} m per window), clouds, voids or a wrong reference")
     write_gcps(out / "gcps.json", gcps)
     absolute = orient_absolute(rel.left, rel.right, gcps, out, params.corrections,
                                params.self_calibrate, params.absolute)

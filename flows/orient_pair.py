@@ -67,9 +67,35 @@ class PairOutcome:
         out = [f"pair                  {m['pair_id']}: {self.manifest_path}"]
         if self.skipped:
             out.append(f"resumed               kept {', '.join(self.skipped)}")
-        for key, rel in m["products"].items():
-            out.append(f"{key:<21} {rel}")
+        out += self.figures()
+        out.append("products              " + ", ".join(m["products"].values()))
         return out
+
+    def figures(self) -> list[str]:
+        """The headline figures, read back from the products."""
+        out_dir = self.manifest_path.parent
+        lines: list[str] = []
+        try:
+            from flows.orient import OrientOutcome
+
+            report = json.loads((out_dir / "report.json").read_text())
+            lines += OrientOutcome(out_dir / "report.json", report).lines()[1:]
+        except (OSError, ValueError, KeyError):
+            pass
+        try:
+            c = json.loads((out_dir / "ortho_compare.json").read_text())["px"]
+            lines.append(f"ortho discrepancy     median {c['median_norm']:.2f} px, "
+                         f"95th percentile {c['p95_norm']:.2f} px (left vs right ortho)")
+        except (OSError, ValueError, KeyError, TypeError):
+            pass
+        try:
+            a = json.loads((out_dir / "eval.json").read_text())["all"]
+            lines.append(f"DSM vs lidar          LE68 {a['le68']:.2f} m, NMAD {a['nmad']:.2f} m, "
+                         f"bias {a['mean']:+.2f} m ({a['count']} points; per class in "
+                         "eval.json)")
+        except (OSError, ValueError, KeyError, TypeError):
+            pass
+        return lines
 
 
 # ----------------------------------------------------------------------------- validity

@@ -21,7 +21,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from core.errors import ConvergenceError, InputError, InsufficientDataError
+from core.errors import ConvergenceError, GeometryError, InputError, InsufficientDataError
 from core.geodesy import geodetic_to_ecef
 from core.points import ControlPoint
 from core.sensors.base import SensorModel
@@ -182,6 +182,26 @@ def observation_sigmas_px(models: Sequence[SensorModel], obs: Observations,
     return out
 
 
+def _damped_step(models: list[SensorModel], dp: FloatArray, offsets: NDArray[np.intp],
+                 obs: Observations, use: NDArray[np.bool_], max_halvings: int = 10
+                 ) -> list[SensorModel]:
+    """The models moved by ``dp``, halved while the step sends GCPs behind a camera (a
+    Gauss-Newton step far from the solution, e.g. lens terms tried on a poor start). ``use``:
+    (n_gcp, n_model), the GCPs each model must still project."""
+    for _ in range(max_halvings + 1):
+        moved = [model.with_params(model.params + dp[offsets[m]:offsets[m + 1]])
+                 for m, model in enumerate(models)]
+        try:
+            for m, model in enumerate(moved):
+                u = use[:, m]
+                model.project(obs.lon_deg[u], obs.lat_deg[u], obs.h_m[u])
+            return moved
+        except GeometryError:
+            dp = 0.5 * dp
+    raise ConvergenceError("absolute orientation diverged: every step sends GCPs outside the "
+                           "images' geometry; the GCPs or the starting models are wrong")
+
+
 def absolute_orientation(models: Sequence[SensorModel], obs: Observations,
                          names: Sequence[str] | None = None,
                          config: AbsoluteConfig = AbsoluteConfig()) -> AbsoluteOrientation:
@@ -234,8 +254,7 @@ def absolute_orientation(models: Sequence[SensorModel], obs: Observations,
             scale = np.where(scale > 0, scale, 1.0)
             normal = (a / scale).T @ ((a / scale) * w[:, None])
             dp = np.linalg.lstsq(normal, (a / scale).T @ (w * r), rcond=1e-12)[0] / scale
-            for m, model in enumerate(models):
-                models[m] = model.with_params(model.params + dp[offsets[m]:offsets[m + 1]])
+            models[:] = _damped_step(models, dp, offsets, obs, inlier[:, None] & seen)
             if np.max(np.abs(a @ dp)) < config.tol_px:
                 converged = True
                 break

@@ -22,6 +22,7 @@ from core.orientation.absolute import (
     Observations,
     absolute_orientation,
 )
+from core.errors import ConvergenceError, GeometryError
 from core.sensors.base import SensorModel
 from core.sensors.pushbroom import PushbroomModel
 
@@ -141,7 +142,10 @@ def self_calibrate(models: Sequence[SensorModel], obs: Observations, names: Sequ
     trial_obs = Observations(obs.lon_deg[keep], obs.lat_deg[keep], obs.h_m[keep],
                              np.asarray(obs.col)[keep], np.asarray(obs.row)[keep],
                              obs.sigma_xy_m[keep], obs.sigma_h_m[keep])
-    trial = absolute_orientation(trial_models, trial_obs, names, config)
+    try:
+        trial = absolute_orientation(trial_models, trial_obs, names, config)
+    except (ConvergenceError, GeometryError):  # lens terms the GCPs cannot carry: none kept
+        return SelfCalibration(without, None, {}, t_threshold)
     limit = float(chi2.ppf(1.0 - 2.0 * norm.sf(t_threshold), len(terms)))
     chosen = [n for n, m in zip(names, trial_models, strict=True)
               if isinstance(m, PushbroomModel) and _wald(trial, n, terms) > limit]
