@@ -16,13 +16,13 @@ from typing import Any
 
 import numpy as np
 
+from core.errors import ConvergenceError, GeometryError
 from core.orientation.absolute import (
     AbsoluteConfig,
     AbsoluteOrientation,
     Observations,
     absolute_orientation,
 )
-from core.errors import ConvergenceError, GeometryError
 from core.sensors.base import SensorModel
 from core.sensors.pushbroom import PushbroomModel
 
