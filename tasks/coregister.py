@@ -4,11 +4,12 @@ the translation. The maths is :func:`core.coregister.nuth_kaab`."""
 from __future__ import annotations
 
 import json
+import warnings
 from pathlib import Path
 
 import numpy as np
 import rasterio
-from rasterio.errors import RasterioIOError
+from rasterio.errors import NotGeoreferencedWarning, RasterioIOError
 from rasterio.warp import Resampling, reproject
 
 from core.coregister import CoregConfig, CoregResult, Grid, nuth_kaab
@@ -17,19 +18,31 @@ from tasks.raster_io import atomic_write_text
 from tasks.srtm import SRTM_VOID
 
 
+def _open(path: Path) -> rasterio.io.DatasetReader:
+    """The raster opened; InputError when it cannot be (a raster with no georeferencing opens,
+    quietly: the caller refuses it in one line)."""
+    try:
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore", NotGeoreferencedWarning)
+            return rasterio.open(path)
+    except RasterioIOError as exc:
+        raise InputError(f"cannot read DEM {path}: {exc}; give a GeoTIFF or .hgt") from None
+
+
 def read_grid(path: str | Path, crs: object | None = None,
               like: rasterio.io.DatasetReader | None = None) -> tuple[Grid, object]:
     """A DEM raster as a :class:`Grid` (NaN voids), reprojected onto ``like``'s CRS and grid
     when given and different."""
     path = Path(path)
-    try:
-        src = rasterio.open(path)
-    except RasterioIOError as exc:
-        raise InputError(f"cannot read DEM {path}: {exc}; give a GeoTIFF or .hgt") from exc
+    src = _open(path)
     with src:
         if src.crs is None:
             raise InputError(f"DEM {path} has no CRS; give a georeferenced DEM")
-        z = src.read(1, masked=True).astype(np.float64).filled(np.nan)
+        try:
+            z = src.read(1, masked=True).astype(np.float64).filled(np.nan)
+        except RasterioIOError as exc:
+            raise InputError(f"cannot read the heights of DEM {path}: {exc}; the file is "
+                             "damaged, give a whole GeoTIFF or .hgt") from None
         z[z <= SRTM_VOID + 0.5] = np.nan
         transform, src_crs = src.transform, src.crs
     if like is not None and (src_crs != like.crs):
@@ -49,8 +62,8 @@ def coregister(reference: str | Path, dem: str | Path, out: str | Path | None = 
                config: CoregConfig = CoregConfig()) -> CoregResult:
     """The translation that, added to ``dem``'s coordinates, aligns it with ``reference``;
     written as JSON to ``out`` when given."""
-    with rasterio.open(reference) as like:
-        ref, crs = read_grid(reference)
+    ref, crs = read_grid(reference)
+    with _open(Path(reference)) as like:
         grid, _ = read_grid(dem, like=like)
     result = nuth_kaab(ref, grid, config)
     if out is not None:

@@ -7,11 +7,12 @@ functions (no Prefect): the CLI checks inputs with them before any flow starts.
 
 from __future__ import annotations
 
+import warnings
 from pathlib import Path
 
 import numpy as np
 import rasterio
-from rasterio.errors import RasterioIOError, WindowError
+from rasterio.errors import NotGeoreferencedWarning, RasterioIOError, WindowError
 from rasterio.windows import Window, from_bounds
 
 from core.dem import GeoDEM
@@ -42,8 +43,10 @@ def check_reference(path: str | Path) -> None:
         raise InputError(f"reference DEM {path} does not exist; give a GeoTIFF or .hgt file "
                          "in EPSG:4326")
     try:
-        with rasterio.open(path) as src:
-            crs = src.crs
+        with warnings.catch_warnings():  # no georeferencing: refused below, in one line
+            warnings.simplefilter("ignore", NotGeoreferencedWarning)
+            with rasterio.open(path) as src:
+                crs = src.crs
     except RasterioIOError as exc:
         raise InputError(f"cannot read reference DEM {path}: {exc}; give a GeoTIFF or .hgt "
                          "file") from exc
@@ -79,7 +82,11 @@ def read_reference(path: str | Path, box: BBox, vertical: str) -> GeoDEM:
                 f"{b.top:.3f}) does not cover the image footprint (lon {box.lon_min:.3f}.."
                 f"{box.lon_max:.3f}, lat {box.lat_min:.3f}..{box.lat_max:.3f}); give a DEM "
                 "covering the scene")
-        heights = src.read(1, window=win, masked=True).astype(np.float64).filled(np.nan)
+        try:
+            heights = src.read(1, window=win, masked=True).astype(np.float64).filled(np.nan)
+        except RasterioIOError as exc:
+            raise InputError(f"cannot read the heights of reference DEM {path}: {exc}; the "
+                             "file is damaged, give a whole GeoTIFF or .hgt") from None
         tr = src.window_transform(win)
     heights[heights <= SRTM_VOID + 0.5] = np.nan  # SRTM voids when no nodata is declared
     if vertical == "egm96":

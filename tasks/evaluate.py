@@ -125,7 +125,7 @@ def read_gcps(path: Path) -> tuple[GeoPoint, ...]:
     """Ground points with ellipsoidal heights: a JSON list of ``[lon, lat, h]`` or of
     ``{"lon_deg", "lat_deg", "h_m"}`` objects, or ``{"points": [...]}`` (checkpoints.json)."""
     path = existing_file(path, "GCP file", "give a JSON list of [lon_deg, lat_deg, h_m]")
-    doc = parse_json(path.read_text(), str(path))
+    doc = parse_json(path.read_text(encoding="utf-8", errors="replace"), str(path))
     items = doc.get("points") if isinstance(doc, dict) else doc
     if not isinstance(items, list) or not items:
         raise InputError(f"GCP file {path} holds no list of points; give [[lon, lat, h], ...]")
@@ -136,7 +136,14 @@ def read_gcps(path: Path) -> tuple[GeoPoint, ...]:
                 p = [p["lon_deg"], p["lat_deg"], p["h_m"]]
             except KeyError as exc:
                 raise InputError(f"GCP record {p!r:.80} in {path} lacks {exc}") from exc
-        out.append(GeoPoint.from_list(p))
+        try:
+            g = GeoPoint.from_list(p)
+        except InputError as exc:
+            raise InputError(f"GCP file {path}: {exc}") from None
+        if not (np.isfinite([g.lon_deg, g.lat_deg, g.h_m]).all() and abs(g.lat_deg) <= 90.0):
+            raise InputError(f"GCP file {path}: {g.to_list()} is not a point on Earth; give "
+                             "[lon_deg, lat_deg, h_m] with finite numbers")
+        out.append(g)
     return tuple(out)
 
 

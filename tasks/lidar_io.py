@@ -62,6 +62,33 @@ def _laspy_quiet() -> Iterator[None]:
         log.setLevel(level)
 
 
+def _check_header(path: Path) -> None:
+    """The record counts of the LAS public header against the file's size, before laspy reads
+    the header: a damaged count makes laspy loop over billions of empty records (minutes, then
+    a MemoryError) instead of failing."""
+    size = path.stat().st_size
+    with path.open("rb") as f:
+        head = f.read(247)
+    if len(head) < 227 or head[:4] != b"LASF":
+        raise InputError(f"lidar file {path} is not a LAS/LAZ file (no LASF header of 227 bytes); "
+                         "give an intact LAS or LAZ file")
+    minor = head[25]
+    header_size = int.from_bytes(head[94:96], "little")
+    to_points = int.from_bytes(head[96:100], "little")
+    n_vlrs = int.from_bytes(head[100:104], "little")
+    if not header_size + 54 * n_vlrs <= to_points <= size:
+        raise InputError(f"lidar file {path} has a corrupt header: {n_vlrs} records and point "
+                         f"data at byte {to_points} do not fit a header of {header_size} bytes "
+                         f"and a file of {size}; give an intact LAS/LAZ file")
+    if minor >= 4 and len(head) >= 247:
+        first_evlr = int.from_bytes(head[235:243], "little")
+        n_evlrs = int.from_bytes(head[243:247], "little")
+        if n_evlrs and first_evlr + 60 * n_evlrs > size:
+            raise InputError(f"lidar file {path} has a corrupt header: {n_evlrs} extended "
+                             f"records from byte {first_evlr} do not fit a file of {size} "
+                             "bytes; give an intact LAS/LAZ file")
+
+
 def _check_complete(f: laspy.LasReader, path: Path) -> None:
     """A cheap check for a truncated file: the size of a LAS, the chunk table of a LAZ (lazrs
     reads it when decompression starts)."""
@@ -84,6 +111,7 @@ def inspect_lidar(path: Path, crs: str | None = None, vertical: str = "auto",
     """Read a LAS/LAZ header: CRS, units, vertical datum (rules in :mod:`tasks.evaluate`),
     point count."""
     path = existing_file(path, "lidar file", "give a LAS or LAZ file")
+    _check_header(path)
     try:
         with _laspy_quiet(), laspy.open(path) as f:
             header = f.header
@@ -158,6 +186,7 @@ def inspect_lidar(path: Path, crs: str | None = None, vertical: str = "auto",
 def lidar_chunks(path: Path, n: int, expected: int) -> Iterator[laspy.ScaleAwarePointRecord]:
     """The file's points, ``n`` at a time; a truncated or corrupt file raises InputError."""
     read = 0
+    _check_header(path)
     try:
         with _laspy_quiet(), laspy.open(path) as f:
             for pts in f.chunk_iterator(n):

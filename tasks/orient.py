@@ -9,7 +9,6 @@ its products written atomically.
 from __future__ import annotations
 
 import csv
-import json
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -19,6 +18,7 @@ from prefect import task
 from prefect.cache_policies import NO_CACHE
 
 from core.errors import InputError
+from core.jsonio import parse_json
 from core.orientation.absolute import (
     AbsoluteConfig,
     AbsoluteOrientation,
@@ -44,8 +44,12 @@ CSV_COLUMNS = ("id", "lon_deg", "lat_deg", "h_m", "left_col", "left_row", "right
 
 
 def _checkpoints_csv(path: Path) -> CheckPointSet:
-    with path.open(newline="") as f:
-        rows = list(csv.DictReader(f))
+    try:
+        with path.open(newline="", encoding="utf-8", errors="replace") as f:
+            rows = list(csv.DictReader(f))
+    except csv.Error as exc:
+        raise InputError(f"check point CSV {path} is not a readable CSV ({exc}); give "
+                         f"the columns {','.join(CSV_COLUMNS)}") from None
     if not rows or any(c not in rows[0] for c in CSV_COLUMNS):
         raise InputError(f"check point CSV {path} must have the columns {','.join(CSV_COLUMNS)}")
     points = []
@@ -57,7 +61,7 @@ def _checkpoints_csv(path: Path) -> CheckPointSet:
                 y_m=float("nan"), land_cover=r.get("land_cover", "") or "",
                 image_points={n: ImagePoint(float(r[f"{n}_col"]), float(r[f"{n}_row"]))
                               for n in NAMES}))
-        except (TypeError, ValueError) as exc:
+        except (TypeError, ValueError, OverflowError) as exc:
             raise InputError(f"check point CSV {path} line {k}: {exc}; every column must be a "
                              "number (h_m WGS84 ellipsoidal, 0-based pixel centres)") from None
     return CheckPointSet("EPSG:4326", NAMES, tuple(points))
@@ -73,11 +77,23 @@ def read_checkpoints(path: str | Path) -> CheckPointSet:
     if path.suffix.lower() == ".csv":
         points = _checkpoints_csv(path)
     else:
+        text = path.read_text(encoding="utf-8", errors="replace")
+        doc = parse_json(text, f"check point file {path}")
         try:
-            points = CheckPointSet.from_dict(json.loads(path.read_text()))
-        except json.JSONDecodeError as exc:
-            raise InputError(f"check point file {path} is not JSON ({exc}); give the "
-                             "simulator's checkpoints.json or a CSV") from None
+            if not isinstance(doc, dict):
+                raise InputError("it is not a JSON object")
+            points = CheckPointSet.from_dict(doc)
+        except InputError as exc:
+            raise InputError(f"check point file {path}: {exc}") from None
+        except (KeyError, TypeError, ValueError, AttributeError, OverflowError) as exc:
+            raise InputError(f"check point file {path} is malformed ({type(exc).__name__}: "
+                             f"{exc}); give the simulator's checkpoints.json or a CSV") from None
+    bad = [p.id for p in points.points if not np.isfinite(
+        [p.lon_deg, p.lat_deg, p.h_m, *(v for ip in p.image_points.values()
+                                          for v in (ip.col, ip.row))]).all()]
+    if bad:
+        raise InputError(f"check point file {path}: point {bad[0]} has a coordinate that is not a "
+                         "finite number")
     missing = [n for n in NAMES if n not in points.images]
     if missing or not points.points:
         raise InputError(f"check point file {path} has no points measured in images "

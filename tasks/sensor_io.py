@@ -189,15 +189,19 @@ def _from_dimap(path: Path, image: Path | None, band: int | None) -> LoadedModel
 
 def _from_json(path: Path, image: Path | None) -> LoadedModel:
     d = parse_json(_read_text(path, "model JSON file"), str(path))
-    if isinstance(d, dict) and d.get("type") == "rpc":
-        rpc = RPCModel.from_dict(d)
-        size = _raster_size(image) if image else _rpc_size(rpc)
-        return LoadedModel(rpc, "rpc", path, image, size)
+    rpc = isinstance(d, dict) and d.get("type") == "rpc"
     try:
-        model = PushbroomModel.from_dict(d)
+        model = RPCModel.from_dict(d) if rpc else PushbroomModel.from_dict(d)
+        size = ((_raster_size(image) if image else _rpc_size(model)) if rpc
+                else (model.n_cols, model.n_rows))
     except InputError as exc:
-        raise InputError(f"{path}: {exc}") from exc
-    return LoadedModel(model, "pushbroom", path, image, (model.n_cols, model.n_rows))
+        raise InputError(f"{path}: {exc}") from None
+    except (KeyError, IndexError, TypeError, ValueError, AttributeError, OverflowError) as exc:
+        # the model classes check the keys they expect, not every damaged value
+        raise InputError(f"{path} is not a valid gcpfree {'RPC' if rpc else 'pushbroom'} model "
+                         f"({type(exc).__name__}: {str(exc).splitlines()[0] if str(exc) else ''})"
+                         "; give the model file gcpfree wrote") from None
+    return LoadedModel(model, "rpc" if rpc else "pushbroom", path, image, size)
 
 
 def _rpc_size(rpc: RPCModel) -> tuple[int, int]:

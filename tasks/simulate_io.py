@@ -16,12 +16,12 @@ from pathlib import Path
 
 import numpy as np
 import rasterio
-from rasterio.errors import NotGeoreferencedWarning
+from rasterio.errors import NotGeoreferencedWarning, WindowError
 from rasterio.fill import fillnodata
 from rasterio.windows import Window, from_bounds
 
 from core.dem import GeoDEM
-from core.errors import InputError
+from core.errors import CoverageError, InputError
 from core.geodesy import BBox
 from core.simulation.landcover import LandCoverConfig
 from core.simulation.scene import SceneDef, scale_relief
@@ -114,9 +114,21 @@ def read_dem_window(path: Path, window: BBox | None) -> tuple[np.ndarray, tuple,
         win = None
         if window is not None:
             win = from_bounds(*window.as_tuple(), transform=src.transform)
-            win = win.round_offsets().round_lengths().intersection(
-                Window(0, 0, src.width, src.height))
-        H = src.read(1, window=win, masked=True).astype(np.float64).filled(np.nan)
+            try:
+                win = win.round_offsets().round_lengths().intersection(
+                    Window(0, 0, src.width, src.height))
+            except WindowError:
+                b = src.bounds
+                raise CoverageError(
+                    f"DEM {path} (lon {b.left:.3f}..{b.right:.3f}, lat {b.bottom:.3f}.."
+                    f"{b.top:.3f}) does not cover the scene (lon {window.lon_min:.3f}.."
+                    f"{window.lon_max:.3f}, lat {window.lat_min:.3f}..{window.lat_max:.3f}); "
+                    "give a --center inside the DEM or a DEM around it") from None
+        try:
+            H = src.read(1, window=win, masked=True).astype(np.float64).filled(np.nan)
+        except rasterio.errors.RasterioIOError as exc:
+            raise InputError(f"cannot read the heights of DEM {path}: {exc}; the file is "
+                             "damaged, give a whole GeoTIFF or .hgt") from None
         tr = src.window_transform(win) if win is not None else src.transform
     H[H <= -1000] = np.nan  # SRTM voids (-32768) when no nodata is declared
     voids = np.isnan(H)

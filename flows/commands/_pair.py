@@ -47,4 +47,36 @@ def check_pair(args: argparse.Namespace):  # -> tuple[LoadedModel, LoadedModel]
         check_reference(args.reference)
     if args.srtm_dir is not None and not Path(args.srtm_dir).is_dir():
         raise InputError(f"SRTM directory {args.srtm_dir} does not exist")
+    h_range = getattr(args, "height_range", None) or OVERLAP_HEIGHTS_M
+    _check_overlap(left, right, h_range)
+    if args.reference is not None:  # CoverageError when it misses the pair altogether
+        from tasks.dem_io import read_reference
+        from tasks.relative import pair_box
+
+        read_reference(args.reference, pair_box(left, right, h_range), "ellipsoidal")
     return left, right
+
+
+OVERLAP_HEIGHTS_M = (-500.0, 9000.0)  # any terrain on Earth
+
+
+def _check_overlap(left, right, h_range: tuple[float, float]) -> None:  # LoadedModel x 2
+    """GeometryError when the footprints meet at none of a few heights over ``h_range``: two
+    images of different places (a reference or SRTM mosaic over both would be the size of a
+    continent)."""
+    import numpy as np
+
+    from core.errors import GeometryError
+    from tasks.relative import check_overlap
+
+    lo, hi = sorted(map(float, h_range))
+    for h in np.linspace(lo, hi, 8):
+        try:
+            check_overlap(left, right, float(h))
+            return
+        except GeometryError:
+            pass
+    raise GeometryError(
+        f"{left.image or left.source} and {right.image or right.source} do not overlap under "
+        f"their sensor models at any height in {lo:.0f}..{hi:.0f} m; give two images of the "
+        "same area, and check that each model belongs to its image")
