@@ -86,7 +86,8 @@ def relative_flow(params: RelativeParams) -> RelativeOutcome:
         h_range = reference_box_heights(dem)
     else:
         h_range = scene_height_range(left, right, params.height_range_m, None)
-    check_overlap(left, right, scene_height_m(left, dem, h_range))
+    check_overlap(left, right, scene_height_m(left, dem, h_range),
+                  None if dem is not None else h_range)
     radius = params.search_radius_m
     if radius is None:
         c, r = 0.5 * (left.size[0] - 1), 0.5 * (left.size[1] - 1)

@@ -68,17 +68,35 @@ def scene_height_m(left: LoadedModel, dem: GeoDEM | None, h_range: tuple[float, 
                                    h0_m=0.5 * (h_range[0] + h_range[1])).mean_h_m
 
 
-def check_overlap(left: LoadedModel, right: LoadedModel, h_m: float) -> float:
+def check_overlap(left: LoadedModel, right: LoadedModel, h_m: float,
+                  h_range: tuple[float, float] | None = None) -> float:
     """The overlap (% of the left footprint) at the terrain height ``h_m``; GeometryError when
-    there is none (the images do not overlap, or a model does not belong to its image)."""
-    try:
-        pg = pair_geometry(left.model, left.size, right.model, right.size, h_m)
-    except GeometryError:
+    there is none (the images do not overlap, or a model does not belong to its image).
+
+    ``h_range``: when the terrain height is only known to lie in a range (no reference DEM),
+    the pair overlaps if it does at some height of the range: small crops of a wide-baseline
+    pair (Pleiades) can miss each other at mid-range and overlap at the true height.
+    """
+    levels = [h_m]
+    if h_range is not None:
+        levels += [float(h) for h in np.linspace(h_range[0], h_range[1], 17)]
+    best = None
+    for h in levels:
+        try:
+            pct = float(pair_geometry(left.model, left.size, right.model, right.size,
+                                      h).overlap_pct)
+        except GeometryError:
+            continue
+        best = pct if best is None else max(best, pct)
+        if h == h_m:
+            return pct
+    if best is None:
+        where = (f"at any terrain height in {h_range[0]:.0f}..{h_range[1]:.0f} m"
+                 if h_range is not None else f"at the terrain height ({h_m:.0f} m)")
         raise GeometryError(
             f"{left.image or left.source} and {right.image or right.source} do not overlap under "
-            f"their sensor models at the terrain height ({h_m:.0f} m); check that each model "
-            "belongs to its image") from None
-    return float(pg.overlap_pct)
+            f"their sensor models {where}; check that each model belongs to its image")
+    return best
 
 
 def read_reference_dem(path: Path, vertical: str, box: BBox) -> GeoDEM:
@@ -98,6 +116,7 @@ class RelativeProducts:
     parallax_rms_before_px: float
     parallax_rms_after_px: float
     along_epipolar: AlongEpipolar
+    cell_m: float | None = None  # the tie points' ground cell (smaller than asked on crops)
 
     def lines(self) -> list[str]:
         ae = self.along_epipolar
@@ -106,8 +125,9 @@ class RelativeProducts:
                  if ae.sigma_px is not None else "observable")
         return [
             f"relative orientation  {self.rel_json}",
-            (f"tie points            {self.n_points} used, {self.n_rejected} rejected "
-             f"({self.tie_points_json.name})"),
+            (f"tie points            {self.n_points} used, {self.n_rejected} rejected"
+             + (f", one per {self.cell_m:.4g} m cell" if self.cell_m is not None else "")
+             + f" ({self.tie_points_json.name})"),
             (f"y-parallax RMS        {self.parallax_rms_before_px:.3f} px before, "
              f"{self.parallax_rms_after_px:.3f} px after"),
             f"along epipolar        {along}",
@@ -196,7 +216,7 @@ def orient_relative(
     atomic_write_text(out, json.dumps(doc, indent=1))
     return RelativeProducts(Path(out), tie_json, model, int(rel.inlier.sum()),
                             int((~rel.inlier).sum()), rel.parallax_rms_before_px,
-                            rel.parallax_rms_after_px, along)
+                            rel.parallax_rms_after_px, along, ties.report.cell_m)
 
 
 def reference_box_heights(reference: GeoDEM) -> tuple[float, float]:

@@ -12,7 +12,7 @@ from __future__ import annotations
 
 import json
 import warnings
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 
 import cv2
@@ -26,6 +26,7 @@ from rasterio.windows import Window, from_bounds
 
 from core.dem import GeoDEM
 from core.errors import CoverageError, GeometryError, InputError
+from core.matching.overlap import overlap_cell_m, overlap_cells
 from core.matching.tiepoint_results import TiePointResult, tiepoint_report
 from core.matching.tiepoints import (
     HeightPrior,
@@ -37,7 +38,6 @@ from core.matching.tiepoints import (
     ground_sampling_m,
     ground_xy_m,
     match_points,
-    overlap_cells,
     predict_search,
     search_windows,
     select_tie_points,
@@ -191,6 +191,10 @@ def find_tie_points(
 ) -> TiePointResult:
     """Tie points of a stereo pair, one per ``cfg.cell_m`` ground cell, and their report.
 
+    A pair whose overlap holds fewer than ``cfg.min_cells_per_side`` squared cells of
+    ``cfg.cell_m`` (crops smaller than the cell) gets smaller cells, that many over the
+    overlap; the report states the cell used.
+
     ``reference`` is the ellipsoidal reference DEM (the COG of ``gcpfree prepare-reference``,
     or a :class:`GeoDEM`); without one, ``h_range_m`` (ellipsoidal metres) bounds the scene's
     heights. The left image is processed in ``cfg.tile_px`` blocks by Dask threads
@@ -212,6 +216,10 @@ def find_tie_points(
     h0 = float(np.nan_to_num(heights.heights(left_model, [c_mid], [r_mid])[0][0]))
     lon0, lat0 = left_model.localize(c_mid, r_mid, h0)
     origin = (float(lon0), float(lat0), h0)
+    cell_m = overlap_cell_m(left_model, right_model, left_size, right_size, heights, cfg.cell_m,
+                            cfg.min_cells_per_side)
+    if cell_m < cfg.cell_m:  # a crop smaller than the cell: cells cut to fit the overlap
+        cfg = replace(cfg, cell_m=cell_m)
     overlap = overlap_cells(left_model, right_model, left_size, right_size, heights, origin,
                             cfg.cell_m)
     if overlap.size == 0:

@@ -68,7 +68,9 @@ class TiePointConfig:
     are still wrong. Those are caught by the neighbourhood check (``consistency_*``, see
     :func:`check_consistency`) rather than by a higher threshold, which costs coverage (0.8:
     63 -> 51 % of the cells of a changed tiny scene) and ``best_per_cell`` keeps the best
-    correlation of each ``cell_m`` cell anyway.
+    correlation of each ``cell_m`` cell anyway. An overlap holding fewer than
+    ``min_cells_per_side`` squared cells of ``cell_m`` (a crop smaller than the cell) gets
+    smaller cells, that many over it (:func:`core.matching.overlap.overlap_cell_m`; 0: never).
     """
 
     template_half_px: int = 7
@@ -81,6 +83,7 @@ class TiePointConfig:
     min_correlation: float = 0.7
     back_match_tol_px: float = 0.5
     cell_m: float = 2000.0
+    min_cells_per_side: int = 8
     height_margin_m: float = 50.0
     refine_iterations: int = 4
     consistency_radius_m: float = 3000.0
@@ -91,7 +94,7 @@ class TiePointConfig:
         positive = ("candidates_per_cell", "points_per_tile", "min_spacing_px",
                     "back_match_tol_px", "cell_m", "consistency_radius_m", "consistency_tol_px")
         nonneg = ("search_radius_m", "height_margin_m", "refine_iterations",
-                  "consistency_height_m")
+                  "consistency_height_m", "min_cells_per_side")
         bad = [f"{k} must be > 0, got {getattr(self, k)}" for k in positive
                if not getattr(self, k) > 0]
         bad += [f"{k} must be >= 0, got {getattr(self, k)}" for k in nonneg
@@ -733,33 +736,6 @@ def best_per_cell(x_m: ArrayLike, y_m: ArrayLike, score: ArrayLike, cell_m: floa
     first = np.ones(order.size, bool)
     first[1:] = ids[order[1:]] != ids[order[:-1]]
     return np.sort(order[first]).astype(np.intp)
-
-
-def overlap_cells(left_model: SensorModel, right_model: SensorModel,
-                  left_size: tuple[int, int], right_size: tuple[int, int],
-                  heights: HeightPrior, origin: tuple[float, float, float], cell_m: float,
-                  ) -> NDArray[np.int64]:
-    """Ids of the ground cells of the overlap: left pixels are sampled about four times per
-    cell side, at their heights; a cell belongs to the overlap when at least half of its samples
-    project inside the right image (slivers on the border do not count)."""
-    n_cols, n_rows = left_size
-    gsd = ground_sampling_m(left_model, (n_cols - 1) / 2.0, (n_rows - 1) / 2.0,
-                            heights.typical_h_m)
-    step = max(1.0, cell_m / 4.0 / gsd)
-    cc, rr = np.meshgrid(np.arange(0.0, n_cols, step), np.arange(0.0, n_rows, step))
-    cc, rr = cc.ravel(), rr.ravel()
-    h, h_lo, h_hi = heights.heights(left_model, cc, rr)
-    ok = np.isfinite(h)
-    cc, rr, h, h_lo, h_hi = cc[ok], rr[ok], h[ok], h_lo[ok], h_hi[ok]
-    inside = np.zeros(cc.size, bool)
-    for hh in (h, h_lo, h_hi):  # inside the right image at some height of the point's range
-        pc, pr = right_model.project(*left_model.localize(cc, rr, hh), hh)
-        inside |= (pc >= 0) & (pc <= right_size[0] - 1) & (pr >= 0) & (pr <= right_size[1] - 1)
-    lon, lat = left_model.localize(cc[inside], rr[inside], h[inside])
-    e, n, _ = geodetic_to_enu(lon, lat, h[inside], origin)
-    ids, counts = np.unique(cell_ids(e, n, cell_m), return_counts=True)
-    full = (cell_m / (step * gsd)) ** 2
-    return ids[(ids >= 0) & (counts >= 0.5 * full)]
 
 
 def check_consistency(matches: Matches, x_m: ArrayLike, y_m: ArrayLike, cfg: TiePointConfig,

@@ -195,7 +195,9 @@ def test_ventoux_pair_gives_well_correlated_tie_points():
     crops overlap on ~120 m only), all with correlation > 0.8 (median 0.97)."""
     v = DATA / "pleiades_ventoux"
     left, right = load_model(v / "left_image.tif"), load_model(v / "right_image.tif")
-    cfg = TiePointConfig(search_radius_m=15.0, cell_m=25.0)
+    # the 25 m cells as given: the overlap holds 42 of them, fewer than the 8 x 8 cells the
+    # default (min_cells_per_side) would cut it into
+    cfg = TiePointConfig(search_radius_m=15.0, cell_m=25.0, min_cells_per_side=0)
     res = find_tie_points.fn(v / "left_image.tif", v / "right_image.tif", left.model,
                              right.model, _ellipsoidal_srtm(), cfg)
     tp = res.tie_points
@@ -209,14 +211,18 @@ def _rpc_height_range(*models) -> tuple[float, float]:
 
 
 def test_reunion_pair_with_the_rpc_height_range():
-    """No reference DEM here: the heights span the RPCs' validity range (-20..2610 m).
-    Measured: 36 tie points, 100 % of 32 cells of 100 m, median correlation 0.95."""
+    """No reference DEM here: the heights span the RPCs' validity range (-20..2610 m). The
+    default 2 km cell is larger than the 1024 px crop (0.5 m Pleiades, so ~512 m): the overlap
+    is cut into 8 x 8 cells of ~64 m. Measured: 64 tie points, 100 % of 64 cells of 64.7 m,
+    median correlation 0.95."""
     v = DATA / "pleiades_reunion"
     left, right = load_model(v / "img_01.tif"), load_model(v / "img_02.tif")
-    cfg = TiePointConfig(search_radius_m=15.0, cell_m=100.0)  # 100 m: the search is long
+    cfg = TiePointConfig(search_radius_m=15.0)
     res = find_tie_points.fn(v / "img_01.tif", v / "img_02.tif", left.model, right.model, None,
                              cfg, h_range_m=_rpc_height_range(left.model, right.model))
-    assert len(res.tie_points) >= 25 and res.report.coverage >= 0.8
+    assert res.report.cell_m == pytest.approx(1024 * 0.5 / 8, rel=0.03)
+    assert 49 <= res.report.n_cells <= 81
+    assert len(res.tie_points) >= 40 and res.report.coverage >= 0.8
     assert res.report.correlation_p50 > 0.8
 
 
