@@ -62,10 +62,11 @@ def _laspy_quiet() -> Iterator[None]:
         log.setLevel(level)
 
 
-def _check_header(path: Path) -> None:
+def _check_header(path: str | Path) -> None:
     """The record counts of the LAS public header against the file's size, before laspy reads
     the header: a damaged count makes laspy loop over billions of empty records (minutes, then
     a MemoryError) instead of failing."""
+    path = Path(path)
     size = path.stat().st_size
     with path.open("rb") as f:
         head = f.read(247)
