@@ -196,7 +196,7 @@ def _damped_step(models: list[SensorModel], dp: FloatArray, offsets: NDArray[np.
                 u = use[:, m]
                 model.project(obs.lon_deg[u], obs.lat_deg[u], obs.h_m[u])
             return moved
-        except GeometryError:
+        except (GeometryError, ConvergenceError):  # behind a camera, or no image position
             dp = 0.5 * dp
     raise ConvergenceError("absolute orientation diverged: every step sends GCPs outside the "
                            "images' geometry; the GCPs or the starting models are wrong")
