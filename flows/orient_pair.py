@@ -21,6 +21,8 @@ from typing import Any
 from prefect import flow, task
 from prefect.cache_policies import NO_CACHE
 
+from core.surface_match import SurfaceMatchConfig
+
 FORMAT = "gcpfree.pair"
 MANIFEST = "pair.json"
 
@@ -52,6 +54,9 @@ class PairParams:
     lidar_vertical: str = "auto"
     corrections: str = "linear"
     pair_id: str | None = None
+    surface: SurfaceMatchConfig | None = None
+    spacing_m: float | None = None
+    min_windows: int = 8
 
 
 @dataclass(frozen=True, eq=False)
@@ -316,7 +321,8 @@ def orient_pair_flow(params: PairParams) -> PairOutcome:
             reference=params.reference, reference_vertical=params.reference_vertical,
             srtm_dir=params.srtm_dir, checkpoints=params.checkpoints,
             self_calibrate=params.self_calibrate, corrections=params.corrections,
-            workers=params.workers, progress=params.progress))
+            workers=params.workers, progress=params.progress, spacing_m=params.spacing_m,
+            min_windows=params.min_windows, surface=params.surface or SurfaceMatchConfig()))
     done("orient")
 
     products = {"report": "report.json", "left_model": "left.json",
@@ -339,7 +345,7 @@ def orient_pair_flow(params: PairParams) -> PairOutcome:
 
     write_report(out, reference=params.reference, checkpoints=params.checkpoints,
                  evaluation=out / "eval.json" if params.lidar is not None else None,
-                 reference_vertical=params.reference_vertical)
+                 reference_vertical=params.reference_vertical, surface=params.surface)
     for name in ("report.html", "report.md"):
         if (out / name).exists():
             products[name.replace(".", "_")] = name

@@ -3,9 +3,15 @@
 from __future__ import annotations
 
 import argparse
-from pathlib import Path
 
-from flows.commands._pair import add_pair_arguments, add_reference_arguments, check_pair
+from flows.commands._pair import (
+    add_orientation_arguments,
+    add_pair_arguments,
+    add_reference_arguments,
+    add_run_arguments,
+    check_orientation_arguments,
+    check_pair,
+)
 
 
 def add_parser(sub: argparse._SubParsersAction) -> None:
@@ -26,47 +32,13 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     add_pair_arguments(p)
     add_reference_arguments(p, use="the ground the pair is oriented to (required, or "
                                    "--srtm-dir)")
-    p.add_argument("--checkpoints", type=Path, default=None, metavar="FILE",
-                   help="independent check points: the simulator's truth/checkpoints.json or a "
-                        "CSV id,lon_deg,lat_deg,h_m,left_col,left_row,right_col,right_row "
-                        "(ellipsoidal heights, 0-based pixels)")
-    p.add_argument("--self-calibrate", action="store_true",
-                   help="estimate lens distortion (k1, k3, p1, p2) of pushbroom images, kept "
-                        "only where significant")
-    p.add_argument("--corrections", choices=("offset", "linear"), default="linear",
-                   help="terms adjusted per image: linear (default, attitude biases and rates / "
-                        "RPC affine) or offset (biases / RPC shift)")
-    p.add_argument("--window-radius", type=float, default=4000.0, metavar="M",
-                   help="radius of the surface-matching windows, metres (default 4000)")
-    p.add_argument("--window-spacing", type=float, default=None, metavar="M",
-                   help="distance between window centres (default: the radius)")
-    p.add_argument("--max-shift", type=float, default=20.0, metavar="ARCSEC",
-                   help="largest horizontal shift searched, arcseconds (default 20)")
-    p.add_argument("--min-windows", type=int, default=8,
-                   help="windows with enough relief needed, else the terrain is refused as too "
-                        "flat (default 8)")
-    p.add_argument("--workers", type=int, default=None,
-                   help="parallel tiles of the dense matching (default: one per core)")
-    p.add_argument("--no-progress", action="store_true", help="no progress bar")
-    p.add_argument("--out", type=Path, required=True, help="output folder")
+    add_orientation_arguments(p)
+    add_run_arguments(p)
 
 
 def run(args: argparse.Namespace) -> int:
-    from dataclasses import replace
-
-    from core.errors import InputError
-    from core.surface_match import SurfaceMatchConfig
-    from tasks.orient import read_checkpoints
-
     check_pair(args)
-    if args.reference is None and args.srtm_dir is None:
-        raise InputError("gcpfree orient needs a reference DEM: give --srtm-dir or --reference")
-    if args.checkpoints is not None:
-        read_checkpoints(args.checkpoints)
-    if args.min_windows < 1:
-        raise InputError("--min-windows must be at least 1")
-    surface = replace(SurfaceMatchConfig(), radius_m=args.window_radius,
-                      shift_max_arcsec=args.max_shift)
+    surface = check_orientation_arguments(args, "orient")
     from flows.orient import OrientParams, orient_flow
 
     outcome = orient_flow(OrientParams(

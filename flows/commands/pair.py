@@ -5,7 +5,14 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
-from flows.commands._pair import add_pair_arguments, add_reference_arguments, check_pair
+from flows.commands._pair import (
+    add_orientation_arguments,
+    add_pair_arguments,
+    add_reference_arguments,
+    add_run_arguments,
+    check_orientation_arguments,
+    check_pair,
+)
 
 
 def add_parser(sub: argparse._SubParsersAction) -> None:
@@ -23,35 +30,23 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     add_pair_arguments(p)
     add_reference_arguments(p, use="the ground the pair is oriented to (required, or "
                                    "--srtm-dir)")
-    p.add_argument("--checkpoints", type=Path, default=None, metavar="FILE",
-                   help="independent check points (see gcpfree orient --help)")
+    add_orientation_arguments(p)
     p.add_argument("--lidar", type=Path, default=None, metavar="LAS",
                    help="lidar LAS/LAZ to evaluate the final DSM against (any CRS)")
     p.add_argument("--landcover", type=Path, default=None, metavar="TIF",
                    help="land-cover raster classifying the evaluation (needs --lidar)")
     p.add_argument("--lidar-vertical", choices=("auto", "ellipsoidal", "egm96"),
                    default="auto", help="heights of the lidar (auto: from its CRS)")
-    p.add_argument("--self-calibrate", action="store_true",
-                   help="estimate lens distortion of pushbroom images, kept where significant")
-    p.add_argument("--corrections", choices=("offset", "linear"), default="linear",
-                   help="terms adjusted per image (see gcpfree orient --help)")
     p.add_argument("--id", dest="pair_id", default=None,
                    help="name of the pair in the STAC items (default: OUT's folder name)")
-    p.add_argument("--workers", type=int, default=None,
-                   help="parallel tiles of the dense matching (default: one per core)")
-    p.add_argument("--no-progress", action="store_true", help="no progress bar")
-    p.add_argument("--out", type=Path, required=True, help="output folder")
+    add_run_arguments(p)
 
 
 def run(args: argparse.Namespace) -> int:
     from core.errors import InputError
-    from tasks.orient import read_checkpoints
 
     check_pair(args)
-    if args.reference is None and args.srtm_dir is None:
-        raise InputError("gcpfree pair needs a reference DEM: give --srtm-dir or --reference")
-    if args.checkpoints is not None:
-        read_checkpoints(args.checkpoints)
+    surface = check_orientation_arguments(args, "pair")
     for name in ("lidar", "landcover"):
         path = getattr(args, name)
         if path is not None and not path.is_file():
@@ -67,6 +62,7 @@ def run(args: argparse.Namespace) -> int:
         lidar=args.lidar, landcover=args.landcover, lidar_vertical=args.lidar_vertical,
         checkpoints=args.checkpoints, self_calibrate=args.self_calibrate,
         corrections=args.corrections, workers=args.workers, progress=not args.no_progress,
-        pair_id=args.pair_id))
+        pair_id=args.pair_id, surface=surface, spacing_m=args.window_spacing,
+        min_windows=args.min_windows))
     print("\n".join(outcome.lines()))
     return 0

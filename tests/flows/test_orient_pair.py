@@ -100,3 +100,22 @@ def test_a_damaged_product_is_redone_on_rerun(pair_run):
     assert json.loads((out / "eval.json").read_text())["all"]["count"] > 1000
     assert (out / "dsm.tif").stat().st_mtime_ns == mtime
     assert pair_complete(out)
+
+
+@pytest.mark.parametrize("extra, says", [
+    ([], "needs a reference DEM"),
+    (["--reference", "{ref}", "--landcover", "{lc}"], "give --lidar too"),
+    (["--reference", "{ref}", "--lidar", "{missing}"], "does not exist"),
+])
+def test_pair_command_refuses_bad_input_in_one_line(tiny_scene, tmp_path, capsys, extra, says):
+    from flows.cli import main
+
+    scene, _ = tiny_scene
+    subs = {"ref": scene / "reference.tif", "lc": scene / "truth" / "landcover.tif",
+            "missing": tmp_path / "none.laz"}
+    argv = ["pair", "--left", str(scene / "left.tif"), "--right", str(scene / "right.tif"),
+            *[a.format(**subs) for a in extra], "--out", str(tmp_path / "out")]
+    assert main(argv) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and says in err[0] and err[0].startswith("gcpfree pair: error:")
+    assert not (tmp_path / "out").exists()
