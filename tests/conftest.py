@@ -2,12 +2,17 @@
 
 from __future__ import annotations
 
+import atexit
+import shutil
 import tempfile
 from pathlib import Path
 
 from flows._env import configure_environment
 
-configure_environment(prefect_home=tempfile.mkdtemp(prefix="gcpfree-tests-prefect-"))
+_PREFECT_HOME = tempfile.mkdtemp(prefix="gcpfree-tests-prefect-")
+configure_environment(prefect_home=_PREFECT_HOME)
+# the session's Prefect database and logs go with it
+atexit.register(shutil.rmtree, _PREFECT_HOME, ignore_errors=True)
 
 import pytest
 

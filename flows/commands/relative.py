@@ -32,7 +32,8 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
                    help="linear (default): attitude biases and rates / an RPC affine; offset: "
                         "biases / an RPC shift only")
     p.add_argument("--cell-m", type=float, default=2000.0,
-                   help="keep the best tie point per ground cell of this size (default 2000 m)")
+                   help="keep the best tie point per ground cell of this size (default 2000 m; "
+                        "reduced so that the overlap holds at least 8 x 8 cells)")
     p.add_argument("--search-radius-m", type=float, default=None,
                    help="ground uncertainty of each image's metadata to search over (default: "
                         "30 pixels, between 10 and 300 m)")
