@@ -100,7 +100,9 @@ class WindowMatch:
     ``shift_east_m``/``shift_north_m`` are the same horizontal shift in metres;
     ``precision_m`` the horizontal precision from the peak's sharpness, ``precision_h_m`` the
     vertical one (the differences' robust spread over the root of the independent patches);
-    ``predicted_precision_m`` the precision the relief promised before matching.
+    ``predicted_precision_m`` the precision the relief promised before matching (with the
+    reference's nominal noise ``cfg.height_noise_m``); ``spread_m`` the robust spread of the
+    height differences about their dominant mode after the shift (NaN when not matched).
     """
 
     status: WindowStatus
@@ -117,6 +119,7 @@ class WindowMatch:
     rms_slope: float = float("nan")
     n_cells: int = 0
     masked_share: float = 1.0
+    spread_m: float = float("nan")
 
     @property
     def ok(self) -> bool:
@@ -401,7 +404,7 @@ def match_window(lon_deg: ArrayLike, lat_deg: ArrayLike, h_m: ArrayLike,
         WindowStatus.OK, shift_lon_arcsec=float(sx), shift_lat_arcsec=float(sy),
         shift_h_m=dz, shift_east_m=float(sx * ARCSEC * m_lon),
         shift_north_m=float(sy * ARCSEC * m_lat), correlation=peak, precision_m=precision,
-        precision_h_m=float(spread / np.sqrt(max(n_eff, 1))), **base)
+        precision_h_m=float(spread / np.sqrt(max(n_eff, 1))), spread_m=float(spread), **base)
     if peak < cfg.min_correlation:
         return WindowMatch(**{**vars(result), "status": WindowStatus.LOW_CORRELATION})
     if not precision <= cfg.max_precision_m:
@@ -466,7 +469,7 @@ class ReliefVerdict:
     """Whether the terrain has the relief surface matching needs, judged before orienting.
 
     ``n_qualified``: windows whose relief promises ``max_precision_m`` (the precision predicted
-    from the relief, see :func:`predicted_precision_m`); ``relief_found_m``: the median relief
+    from the relief and the measured noise, see :func:`realistic_precision_m`); ``relief_found_m``: the median relief
     (std of heights) of the windows with enough cells; ``relief_needed_m``: the median over
     those windows of the relief that would have made them qualify (the predicted precision
     goes as one over the slopes, so as one over the relief of a terrain of the same shape).
@@ -494,16 +497,37 @@ class ReliefVerdict:
         return {**vars(self), "enough": self.enough}
 
 
+def realistic_precision_m(m: WindowMatch, cfg: SurfaceMatchConfig) -> float:
+    """The precision a window's relief promises with the noise its correlation reveals, when
+    that exceeds the reference's nominal noise (``cfg.height_noise_m``).
+
+    A surface of relief ``r`` (std) seen through independent noise ``n`` correlates with the
+    noise-free one at ``rho = r^2 / (r^2 + n^2)``, so the peak correlation measures the noise
+    between the two surfaces, ``n = r sqrt(1 / rho - 1)``: the relative DEM's own noise, canopy,
+    the reference's errors. On terrain of a few tens of metres of relief that noise, not SRTM's,
+    decides (simulated tiny at 40 m pixels, relief scaled by 0.05: windows promising 10 m with
+    the nominal noise, none of them correlating). A window refused before matching keeps the
+    nominal prediction.
+    """
+    rho = m.correlation
+    if not (np.isfinite(rho) and 0.0 < rho < 1.0 and np.isfinite(m.relief_m)):
+        return m.predicted_precision_m
+    noise = m.relief_m * float(np.sqrt(1.0 / rho - 1.0))
+    return m.predicted_precision_m * max(noise / cfg.height_noise_m, 1.0)
+
+
 def relief_sufficiency(matches: Sequence[WindowMatch], cfg: SurfaceMatchConfig,
                        n_needed: int) -> ReliefVerdict:
-    """The verdict on ``matches`` (windows matched or refused by :func:`match_window`)."""
+    """The verdict on ``matches`` (windows matched or refused by :func:`match_window`), each
+    judged by :func:`realistic_precision_m`."""
     sized = [m for m in matches if m.status not in (WindowStatus.TOO_FEW_CELLS,
                                                     WindowStatus.MASKED)
              and np.isfinite(m.relief_m)]
-    qualified = [m for m in sized if m.predicted_precision_m <= cfg.max_precision_m]
+    precision = [realistic_precision_m(m, cfg) for m in sized]
+    qualified = [m for m, p in zip(sized, precision, strict=True) if p <= cfg.max_precision_m]
     found = float(np.median([m.relief_m for m in sized])) if sized else 0.0
-    need = [m.relief_m * m.predicted_precision_m / cfg.max_precision_m for m in sized
-            if np.isfinite(m.predicted_precision_m) and m.relief_m > 0]
+    need = [m.relief_m * p / cfg.max_precision_m for m, p in zip(sized, precision, strict=True)
+            if np.isfinite(p) and m.relief_m > 0]
     needed = float(np.median(need)) if need else float("nan")
     return ReliefVerdict(len(matches), len(qualified), n_needed, found, needed,
                          cfg.max_precision_m)

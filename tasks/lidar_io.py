@@ -71,22 +71,22 @@ def _check_header(path: str | Path) -> None:
     with path.open("rb") as f:
         head = f.read(247)
     if len(head) < 227 or head[:4] != b"LASF":
-        raise InputError(f"lidar file {path} is not a LAS/LAZ file (no LASF header of 227 bytes); "
-                         "give an intact LAS or LAZ file")
+        raise InputError(f"cannot read lidar file {path}: not a LAS/LAZ file (no LASF header "
+                         "of 227 bytes); give an intact LAS or LAZ file")
     minor = head[25]
     header_size = int.from_bytes(head[94:96], "little")
     to_points = int.from_bytes(head[96:100], "little")
     n_vlrs = int.from_bytes(head[100:104], "little")
     if not header_size + 54 * n_vlrs <= to_points <= size:
-        raise InputError(f"lidar file {path} has a corrupt header: {n_vlrs} records and point "
-                         f"data at byte {to_points} do not fit a header of {header_size} bytes "
+        raise InputError(f"cannot read lidar file {path}: a corrupt header, {n_vlrs} records "
+                         f"and point data at byte {to_points} do not fit a header of {header_size} bytes "
                          f"and a file of {size}; give an intact LAS/LAZ file")
     if minor >= 4 and len(head) >= 247:
         first_evlr = int.from_bytes(head[235:243], "little")
         n_evlrs = int.from_bytes(head[243:247], "little")
         if n_evlrs and first_evlr + 60 * n_evlrs > size:
-            raise InputError(f"lidar file {path} has a corrupt header: {n_evlrs} extended "
-                             f"records from byte {first_evlr} do not fit a file of {size} "
+            raise InputError(f"cannot read lidar file {path}: a corrupt header, {n_evlrs} "
+                             f"extended records from byte {first_evlr} do not fit a file of {size} "
                              "bytes; give an intact LAS/LAZ file")
 
 

@@ -167,3 +167,29 @@ def test_correlation_surface_peaks_at_the_known_shift(ref):
     assert rho[far].max() < rho[iy, ix] - 0.005
     empty = correlation_surface(lon, lat, np.full_like(h, np.nan), (LON0, LAT0), ref, cfg)
     assert empty[1].shape == (41, 41) and np.isnan(empty[1]).all()
+
+
+def test_measured_noise_takes_part_in_the_relief_verdict():
+    """A window promising 4 m with SRTM's nominal 5 m of noise whose surfaces correlate at
+    only 0.5 over 25 m of relief carries 25 m of noise (rho = r^2 / (r^2 + n^2)): it
+    promises 20 m, and on terrain this flat the noise decides."""
+    from core.surface_match import (
+        WindowMatch,
+        WindowStatus,
+        realistic_precision_m,
+        relief_sufficiency,
+    )
+
+    cfg = SurfaceMatchConfig(max_precision_m=10.0, height_noise_m=5.0)
+    noisy = WindowMatch(WindowStatus.LOW_CORRELATION, relief_m=25.0, predicted_precision_m=4.0,
+                        correlation=0.5, n_cells=900, masked_share=0.0)
+    assert realistic_precision_m(noisy, cfg) == pytest.approx(20.0)
+    verdict = relief_sufficiency([noisy] * 9, cfg, 3)
+    assert not verdict.enough and verdict.n_qualified == 0
+    assert verdict.relief_needed_m == pytest.approx(25.0 * 20.0 / 10.0)
+    # rho 0.99 over 25 m: 2.5 m of noise, under the nominal 5 m: the nominal stays
+    clean = replace(noisy, correlation=0.99)
+    assert realistic_precision_m(clean, cfg) == pytest.approx(4.0)
+    assert relief_sufficiency([clean] * 9, cfg, 3).enough
+    unmatched = replace(noisy, correlation=float("nan"))  # refused before matching: nominal
+    assert realistic_precision_m(unmatched, cfg) == pytest.approx(4.0)
