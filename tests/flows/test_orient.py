@@ -131,6 +131,24 @@ def test_too_few_windows_with_relief_is_refused_with_the_figures(tiny_scene, tmp
     assert not (tmp_path / "report.json").exists()
 
 
+def test_nearly_flat_terrain_is_refused_with_the_relief_figures(tmp_path_factory,
+                                                               prefect_harness):
+    """The tiny pair with its relief scaled by 0.05 (some 20 m of relief per 4 km window,
+    40 m pixels): too flat for the relative DEM's noise. Refused with the relief found and
+    needed; never an orientation."""
+    from flows.orient import OrientParams, orient_flow
+    from tests.scenes import run_scene
+
+    scene = tmp_path_factory.mktemp("flat")
+    run_scene(scene, seed=21, jitter=False, lidar=False, relief_factor=0.05, date_change=0.1)
+    out = tmp_path_factory.mktemp("flat_out")
+    with pytest.raises(InsufficientReliefError,
+                       match=r"too flat.*relief found [0-9.]+ m.*needed about [0-9.]+ m"):
+        orient_flow(OrientParams(left=scene / "left.tif", right=scene / "right.tif", out=out,
+                                 reference=scene / "reference.tif", progress=False))
+    assert not (out / "report.json").exists() and not (out / "left.json").exists()
+
+
 def test_relief_verdict_scales_the_needed_relief():
     cfg = SurfaceMatchConfig(max_precision_m=5.0)
     windows = [WindowMatch(WindowStatus.LOW_RELIEF, relief_m=4.0, predicted_precision_m=20.0,
