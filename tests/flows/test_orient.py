@@ -8,7 +8,6 @@ from __future__ import annotations
 import argparse
 import json
 from dataclasses import replace
-from pathlib import Path
 
 import numpy as np
 import pytest
@@ -218,9 +217,9 @@ def test_final_dsm_is_the_relative_one_put_in_place(oriented):
 
     from tasks.geoid import load_geoid
 
-    scene, out, outcome = oriented
+    scene, out, _outcome = oriented
     truth = scene / "truth" / "dsm.tif"
-    rel_med, rel_nmad = _against_truth(out / "relative_dem.tif", truth)
+    _rel_med, rel_nmad = _against_truth(out / "relative_dem.tif", truth)
     fin_med, fin_nmad = _against_truth(out / "dsm.tif", truth)
     assert abs(fin_med) < 5.0 and fin_nmad < 0.6 * rel_nmad and fin_nmad < 40.0  # 1 GSD
     with rasterio.open(out / "dsm.tif") as a, rasterio.open(out / "dsm_egm96.tif") as b:
