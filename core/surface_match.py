@@ -225,7 +225,8 @@ def _correlations(cells: WindowCells, reference: GeoDEM, shifts_deg: FloatArray,
     shift (n, 2)."""
     ok = np.isfinite(cells.h_m)
     lon, lat = cells.lon_deg[ok], cells.lat_deg[ok]
-    h = cells.h_m[ok] - np.mean(cells.h_m[ok])
+    h0 = float(np.mean(cells.h_m[ok]))  # near the reference's heights: conditioning only
+    h = cells.h_m[ok] - h0
     b = _basis(cells, ok, detrend)
     bb = b[:, :, None] * b[:, None, :]  # (n, k, k)
     rho = np.full(len(shifts_deg), np.nan)
@@ -235,8 +236,8 @@ def _correlations(cells: WindowCells, reference: GeoDEM, shifts_deg: FloatArray,
         ref = reference.height_m(lon[None, :] + sh[:, :1], lat[None, :] + sh[:, 1:])
         valid = np.isfinite(ref)
         v = valid.astype(np.float64)
-        r = np.where(valid, ref - np.nanmedian(ref) if valid.any() else 0.0, 0.0)
-        gram = np.einsum("sn,nij->sij", v, bb)
+        r = np.where(valid, ref - h0, 0.0)  # the basis holds a constant: any offset does
+        gram = (v @ bb.reshape(len(h), -1)).reshape(len(sh), *bb.shape[1:])
         bh = v @ (b * h[:, None])
         br = r @ b
         with np.errstate(invalid="ignore", divide="ignore"):
@@ -326,10 +327,15 @@ def _relief_m(cells: WindowCells, detrend: bool) -> float:
 
 def match_window(lon_deg: ArrayLike, lat_deg: ArrayLike, h_m: ArrayLike,
                  centre: tuple[float, float], reference: GeoDEM,
-                 cfg: SurfaceMatchConfig = SurfaceMatchConfig()) -> WindowMatch:
+                 cfg: SurfaceMatchConfig = SurfaceMatchConfig(),
+                 prior: tuple[float, float, float] | None = None) -> WindowMatch:
     """The local 3-D shift of the relative DEM around ``centre`` (lon, lat degrees) onto the
     reference. ``lon_deg``, ``lat_deg``, ``h_m``: the relative DEM's cells (NaN heights: cells
-    the matching could not fill), at least those within ``cfg.radius_m``."""
+    the matching could not fill), at least those within ``cfg.radius_m``.
+
+    ``prior``: (dlon, dlat, half-width) in arcseconds, the shift expected from other windows:
+    only shifts within the half-width of it are searched (inside the ``cfg`` range); a peak
+    on the border of that box is ``EDGE_PEAK`` (search again without the prior)."""
     m_lon, m_lat = (float(v) for v in metres_per_degree(centre[1]))
     cell = cfg.cell_m if cfg.cell_m is not None else reference.cell_size_m()
     cells = window_cells(lon_deg, lat_deg, h_m, centre, cfg.radius_m, cell)
@@ -350,8 +356,14 @@ def match_window(lon_deg: ArrayLike, lat_deg: ArrayLike, h_m: ArrayLike,
     grid = _grid(cfg.shift_max_arcsec, cfg.shift_step_arcsec)
     gx, gy = np.meshgrid(grid, grid)
     rho = np.full(gx.shape, np.nan)
+    box = np.ones(gx.shape, dtype=bool)
+    if prior is not None:
+        box = (np.abs(gx - prior[0]) <= prior[2]) & (np.abs(gy - prior[1]) <= prior[2])
+        if not box.any():
+            return WindowMatch(WindowStatus.EDGE_PEAK, **base)
     coarse = np.zeros(gx.shape, dtype=bool)
     coarse[::2, ::2] = True
+    coarse &= box
     rho[coarse] = _valid_rho(cells, reference, gx[coarse], gy[coarse], cfg.min_cells,
                               cfg.detrend)
     if not np.isfinite(rho).any():
@@ -359,11 +371,16 @@ def match_window(lon_deg: ArrayLike, lat_deg: ArrayLike, h_m: ArrayLike,
     cy, cx = np.unravel_index(int(np.nanargmax(rho)), rho.shape)
     near = np.zeros(gx.shape, dtype=bool)
     near[max(cy - 3, 0):cy + 4, max(cx - 3, 0):cx + 4] = True
-    near &= ~coarse
+    near &= ~coarse & box
     rho[near] = _valid_rho(cells, reference, gx[near], gy[near], cfg.min_cells,
                             cfg.detrend)
     iy, ix = np.unravel_index(int(np.nanargmax(rho)), rho.shape)
-    if iy in (0, rho.shape[0] - 1) or ix in (0, rho.shape[1] - 1):
+    inner = np.zeros(gx.shape, dtype=bool)  # the searched box without its border
+    inner[1:-1, 1:-1] = True
+    if prior is not None:
+        inner &= ((np.abs(gx - prior[0]) < prior[2] - 0.5 * cfg.shift_step_arcsec)
+                  & (np.abs(gy - prior[1]) < prior[2] - 0.5 * cfg.shift_step_arcsec))
+    if not inner[iy, ix]:
         return WindowMatch(WindowStatus.EDGE_PEAK, correlation=float(rho[iy, ix]), **base)
     patch = rho[iy - 1:iy + 2, ix - 1:ix + 2]
     if not np.all(np.isfinite(patch)):
@@ -459,6 +476,38 @@ def _robust_fit(d: FloatArray, basis: FloatArray, k: float = 1.5, n_iter: int = 
     res = d - basis @ coef
     core = np.abs(res) < 3.0 * h
     return coef, mad(res[core]) if core.sum() >= basis.shape[1] else mad(res)
+
+
+# ------------------------------------------------------------------------- search prior
+
+
+def shift_prior(lon_deg: ArrayLike, lat_deg: ArrayLike, matches: Sequence[WindowMatch],
+                lon_new: ArrayLike, lat_new: ArrayLike, min_half_arcsec: float = 6.0,
+                min_windows: int = 6) -> FloatArray | None:
+    """Search priors ``(n, 3)``: (dlon, dlat, half-width) arcseconds for windows at
+    ``lon_new``/``lat_new``, from the shifts of the ``matches`` already found at
+    ``lon_deg``/``lat_deg``: the relative DEM's misplacement is smooth over the scene (an
+    offset plus a tilt and scale left by the relative orientation), so an affine fit of the
+    good windows' shifts predicts the others'. Half-width: ``min_half_arcsec`` or four times
+    the fit's robust scatter plus a step, whichever is larger. None with fewer than
+    ``min_windows`` good windows (search everywhere)."""
+    lon, lat = np.asarray(lon_deg, float), np.asarray(lat_deg, float)
+    ok = np.array([m.ok for m in matches], dtype=bool)
+    if ok.sum() < min_windows:
+        return None
+    lon0, lat0 = float(np.mean(lon[ok])), float(np.mean(lat[ok]))
+    a = np.stack([np.ones(ok.sum()), lon[ok] - lon0, lat[ok] - lat0], axis=1)
+    shifts = np.array([[m.shift_lon_arcsec, m.shift_lat_arcsec] for m, k in zip(matches, ok,
+                                                                              strict=True)
+                       if k])
+    coef, *_ = np.linalg.lstsq(a, shifts, rcond=None)
+    res = shifts - a @ coef
+    scatter = 1.4826 * float(np.median(np.abs(res - np.median(res, axis=0))))
+    half = max(min_half_arcsec, 4.0 * scatter + 1.0)
+    ln, lt = np.asarray(lon_new, float), np.asarray(lat_new, float)
+    b = np.stack([np.ones(ln.size), ln.ravel() - lon0, lt.ravel() - lat0], axis=1)
+    pred = b @ coef
+    return np.column_stack([pred, np.full(len(pred), half)])
 
 
 # ------------------------------------------------------------------------- relief sufficiency

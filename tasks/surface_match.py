@@ -21,7 +21,13 @@ from core.dem import GeoDEM
 from core.geodesy import geodetic_to_enu
 from core.matching.tiepoints import best_per_cell
 from core.points import ControlPoint, ImagePoint, control_points_to_dict
-from core.surface_match import SurfaceMatchConfig, WindowMatch, WindowStatus, match_window
+from core.surface_match import (
+    SurfaceMatchConfig,
+    WindowMatch,
+    WindowStatus,
+    match_window,
+    shift_prior,
+)
 from tasks.crs import Projection
 from tasks.raster_io import atomic_write_json
 
@@ -87,10 +93,23 @@ def read_window_cells(dem_path: str, lon: float, lat: float, radius_m: float
 
 
 def match_one(dem_path: str, lon: float, lat: float, reference: GeoDEM,
-              cfg: SurfaceMatchConfig) -> WindowMatch:
+              cfg: SurfaceMatchConfig, prior: tuple[float, float, float] | None = None
+              ) -> WindowMatch:
     """One window: read its cells, match them (per-window function of the Dask graph)."""
     clon, clat, h = read_window_cells(dem_path, lon, lat, cfg.radius_m)
-    return match_window(clon, clat, h, (lon, lat), reference, cfg)
+    return match_window(clon, clat, h, (lon, lat), reference, cfg, prior)
+
+
+def _match_all(dem_path: Path, ties: TieGround, idx: np.ndarray, reference: GeoDEM,
+               cfg: SurfaceMatchConfig, priors: np.ndarray | None = None) -> list[WindowMatch]:
+    parts = [dask.delayed(match_one)(str(dem_path), float(ties.lon_deg[i]),
+                                     float(ties.lat_deg[i]), reference, cfg,
+                                     None if priors is None else tuple(map(float, priors[k])))
+             for k, i in enumerate(idx)]
+    return list(dask.compute(*parts, scheduler="threads"))
+
+
+FIRST_PASS = 24  # windows searched over the whole shift range before the others use a prior
 
 
 @dataclass(frozen=True, eq=False)
@@ -123,9 +142,32 @@ def match_surfaces(dem_path: Path, ties: TieGround, reference: GeoDEM,
     radius) and make a GCP of each good one: the tie point's relative ground coordinates moved
     by the window's 3-D shift, with its image positions and the window's precision."""
     centres = choose_windows(ties, spacing_m or cfg.radius_m)
-    parts = [dask.delayed(match_one)(str(dem_path), float(ties.lon_deg[i]),
-                                     float(ties.lat_deg[i]), reference, cfg) for i in centres]
-    matches = tuple(dask.compute(*parts, scheduler="threads"))
+    # a first pass over the whole shift range on windows spread over the scene, then the
+    # others searched around the shift those predict (an affine fit); a peak on the border
+    # of its prior box is searched again over the whole range
+    first = np.zeros(len(centres), dtype=bool)
+    first[np.unique(np.linspace(0, len(centres) - 1, min(FIRST_PASS, len(centres)))
+                    .round().astype(int))] = True
+    found: list[WindowMatch | None] = [None] * len(centres)
+    for k, m in zip(np.flatnonzero(first), _match_all(dem_path, ties, centres[first],
+                                                        reference, cfg), strict=True):
+        found[k] = m
+    rest = np.flatnonzero(~first)
+    if rest.size:
+        fi = centres[first]
+        priors = shift_prior(ties.lon_deg[fi], ties.lat_deg[fi],
+                             [found[k] for k in np.flatnonzero(first)],
+                             ties.lon_deg[centres[rest]], ties.lat_deg[centres[rest]])
+        for k, m in zip(rest, _match_all(dem_path, ties, centres[rest], reference, cfg,
+                                         priors), strict=True):
+            found[k] = m
+        again = [k for k in rest if priors is not None
+                 and found[k].status == WindowStatus.EDGE_PEAK]
+        if again:
+            for k, m in zip(again, _match_all(dem_path, ties, centres[again], reference, cfg),
+                            strict=True):
+                found[k] = m
+    matches = tuple(found)
     gcps = []
     for i, m in zip(centres, matches, strict=True):
         if m.status != WindowStatus.OK:

@@ -193,3 +193,33 @@ def test_measured_noise_takes_part_in_the_relief_verdict():
     assert relief_sufficiency([clean] * 9, cfg, 3).enough
     unmatched = replace(noisy, correlation=float("nan"))  # refused before matching: nominal
     assert realistic_precision_m(unmatched, cfg) == pytest.approx(4.0)
+
+
+def test_search_prior_follows_the_scene_wide_misplacement(ref):
+    """Windows misplaced by an offset plus a tilt across the scene: the affine fit of some
+    windows' shifts predicts another's within a few tenths of an arcsecond, and a window
+    searched only around that prediction finds the shift a full search finds."""
+    from core.surface_match import shift_prior
+
+    rng = np.random.default_rng(3)
+    lon = LON0 + rng.uniform(-0.2, 0.2, 12)
+    lat = LAT0 + rng.uniform(-0.2, 0.2, 12)
+
+    def shift(lo, la):
+        return 4.0 + 10.0 * (lo - LON0), -3.0 + 6.0 * (la - LAT0)
+
+    found = [WindowMatch(WindowStatus.OK, *shift(a, b), 0.0) for a, b in zip(lon, lat)]
+    found[0] = WindowMatch(WindowStatus.LOW_CORRELATION, 15.0, 15.0, 0.0)  # not used
+    prior = shift_prior(lon, lat, found, [LON0 + 0.1], [LAT0 - 0.1])
+    assert prior.shape == (1, 3) and prior[0, 2] == pytest.approx(6.0)  # no scatter: minimum
+    assert prior[0, :2] == pytest.approx(shift(LON0 + 0.1, LAT0 - 0.1), abs=1e-9)
+    assert shift_prior(lon[:4], lat[:4], found[:4], [LON0], [LAT0]) is None  # too few
+    truth = (7.3, -4.6, 12.0)
+    lo, la, h = relative_dem(truth)
+    full = match_window(lo, la, h, (LON0, LAT0), ref)
+    near = match_window(lo, la, h, (LON0, LAT0), ref, prior=(6.0, -3.0, 4.0))
+    assert near.ok and near.shift_lon_arcsec == pytest.approx(full.shift_lon_arcsec, abs=1e-6)
+    assert near.shift_lat_arcsec == pytest.approx(full.shift_lat_arcsec, abs=1e-6)
+    # a prior box that misses the peak says so instead of returning its border
+    off = match_window(lo, la, h, (LON0, LAT0), ref, prior=(-6.0, 6.0, 4.0))
+    assert off.status == WindowStatus.EDGE_PEAK
