@@ -390,7 +390,7 @@ def match_window(lon_deg: ArrayLike, lat_deg: ArrayLike, h_m: ArrayLike,
     sx, sy = grid[ix] + dx * step, grid[iy] + dy * step
     hess = hess / step**2  # per arcsec squared
     if cfg.refine_step_arcsec is not None:
-        fine = _grid(1.5 * step, cfg.refine_step_arcsec)
+        fine = _grid(0.5 * step, cfg.refine_step_arcsec)  # the 1" quadratic is within 0.2"
         fx, fy = np.meshgrid(sx + fine, sy + fine)
         rf, _ = _correlations(cells, reference,
                               np.stack([fx.ravel(), fy.ravel()], 1) * ARCSEC, cfg.detrend)

@@ -1,6 +1,6 @@
-"""``gcpfree archive`` on a catalog of three pairs: a real tiny pair oriented for real, a pair
-whose products are already complete (skipped), a pair without images (failed with its reason,
-the others unaffected); the summary files agree with the products; a rerun processes only the
+"""``gcpfree archive`` on a catalog of four pairs: a real tiny pair oriented for real, a pair
+whose products are already complete (skipped), a pair without images and one with malformed
+metadata (each failed with its reason, the others unaffected); the summary files agree with the products; a rerun processes only the
 failed pair."""
 
 from __future__ import annotations
@@ -66,6 +66,11 @@ def archive(tiny_clean_scene, tmp_path_factory, prefect_harness):
     (cat / "finished").mkdir()  # no images: processing it would fail
     (cat / "broken").mkdir()
     (cat / "broken" / "notes.txt").write_text("images lost")
+    bad = cat / "badmeta"  # the real images, the left one's metadata malformed
+    bad.mkdir()
+    for name in ("left.tif", "right.tif", "right.json"):
+        (bad / name).symlink_to(scene / name)
+    (bad / "left.json").write_text('{"format": "gcpfree.pushbroom", "orbit": [1, 2')
     complete_pair(root / "finished", FINISHED_REPORT, FINISHED_EVAL)
     before = snapshot(root / "finished")
     outcome = reprocess_archive(catalog=cat, out=root, reference=scene / "reference.tif",
@@ -79,10 +84,12 @@ def test_each_pair_ends_done_skipped_or_failed_with_its_reason(archive):
 
     _, _, root, outcome, _, _, before = archive
     status = {r.id: r.status for r in outcome.rows}
-    assert status == {"broken": "failed", "finished": "skipped", "real": "done"}
+    assert status == {"badmeta": "failed", "broken": "failed", "finished": "skipped",
+                      "real": "done"}
     reason = {r.id: r.reason for r in outcome.rows}
     assert reason["broken"].startswith(f"left image {root.parent}/catalog/broken/left.tif "
                                        "does not exist")
+    assert "left.json" in reason["badmeta"] and "\n" not in reason["badmeta"]
     assert reason["real"] == reason["finished"] == ""
     assert pair_complete(root / "real")  # the failing pair did not stop it
     assert snapshot(root / "finished") == before  # skipped: not a byte or a time changed
@@ -101,7 +108,7 @@ def test_each_pair_ends_done_skipped_or_failed_with_its_reason(archive):
 def test_summary_files_agree_with_the_products(archive):
     _, _, root, _, csv_text, doc, _ = archive
     rows = {r["id"]: r for r in csv.DictReader(io.StringIO(csv_text))}
-    assert list(rows) == ["broken", "finished", "real"]  # catalog order
+    assert list(rows) == ["badmeta", "broken", "finished", "real"]  # catalog order
     report = json.loads((root / "real" / "report.json").read_text())
     real = rows["real"]
     assert int(real["gcps"]) == report["gcps"]["used"] >= 8
@@ -117,10 +124,10 @@ def test_summary_files_agree_with_the_products(archive):
     assert (fin["gcps"], fin["cp_right_rms_row_px"], fin["gcp_left_rms_row_px"],
             fin["le68_m"]) == ("41", "0.0625", "0.5", "3.5")
     assert rows["broken"]["gcps"] == "" and "does not exist" in rows["broken"]["reason"]
-    assert doc["counts"] == {"done": 1, "skipped": 1, "failed": 1}
+    assert doc["counts"] == {"done": 1, "skipped": 1, "failed": 2}
     assert [(p["id"], p["status"], p["reason"]) for p in doc["pairs"]] == [
         (r["id"], r["status"], r["reason"]) for r in rows.values()]
-    assert doc["pairs"][2]["cp_left_rms_col_px"] == report["check_points"]["left"]["rms_col_px"]
+    assert doc["pairs"][3]["cp_left_rms_col_px"] == report["check_points"]["left"]["rms_col_px"]
     assert not [p.name for p in root.iterdir() if p.name.startswith(".")]  # no temp file left
 
 
@@ -135,10 +142,10 @@ def test_rerun_processes_only_the_failed_pair(archive, capsys):
         "--workers", "1", "--threads", "--dashboard-address", ":0", "--no-progress"))
     assert rc == 1  # a pair failed
     printed = capsys.readouterr().out
-    assert "Dask dashboard" in printed and "1 failed" in printed
+    assert "Dask dashboard" in printed and "2 failed" in printed
     rows = {r["id"]: r for r in csv.DictReader(io.StringIO((root / "summary.csv").read_text()))}
     assert {k: r["status"] for k, r in rows.items()} == {
-        "broken": "failed", "finished": "skipped", "real": "skipped"}
+        "badmeta": "failed", "broken": "failed", "finished": "skipped", "real": "skipped"}
     assert rows["broken"]["reason"] and "does not exist" not in rows["broken"]["reason"]
     assert "\n" not in rows["broken"]["reason"]
     assert snapshot(root / "real") == real_before  # not processed again
