@@ -5,6 +5,7 @@ from __future__ import annotations
 import io
 import json
 import tempfile
+import warnings
 from dataclasses import asdict, dataclass
 from pathlib import Path
 
@@ -121,12 +122,15 @@ def build_reference(
         voids.attrs = {"long_name": "0 valid, 1 SRTM void, 2 no SRTM tile"}
 
         counts = [(voids.data == v).sum() for v in (VOID_VALID, VOID_SRTM, VOID_UNCOVERED)]
-        # one pass over the mosaic: both COGs and the summary statistics
-        n_valid, n_void, n_unc, hmin, hmax, Hmin, Hmax = write_arrays_cog(
-            [cog_item(voids, mask_path, resampling="nearest"), cog_item(h, out)],
-            extra=[*counts, darr.nanmin(h.data), darr.nanmax(h.data),
-                   darr.nanmin(H.data), darr.nanmax(H.data)],
-        )
+        # one pass over the mosaic: both COGs and the summary statistics; a block with no
+        # SRTM at all has a NaN minimum and maximum, which the reduction then skips
+        with warnings.catch_warnings():
+            warnings.filterwarnings("ignore", "All-NaN slice encountered", RuntimeWarning)
+            n_valid, n_void, n_unc, hmin, hmax, Hmin, Hmax = write_arrays_cog(
+                [cog_item(voids, mask_path, resampling="nearest"), cog_item(h, out)],
+                extra=[*counts, darr.nanmin(h.data), darr.nanmax(h.data),
+                       darr.nanmin(H.data), darr.nanmax(H.data)],
+            )
     n_cov = int(n_valid) + int(n_void)
     total = n_cov + int(n_unc)
     summary = ReferenceSummary(
