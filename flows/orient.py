@@ -126,7 +126,7 @@ def orient_flow(params: OrientParams) -> OrientOutcome:
     reference = read_reference(rel.reference, box, vertical)
     ties = TieGround.from_tiepoints_json(rel.rel_json.with_suffix(".tiepoints.json"))
     windows = match_surfaces(out / "relative_dem.tif", ties, reference, cfg, params.spacing_m,
-                             out=out / "windows.json")
+                             out=out / "windows.json", progress=params.progress)
     verdict = relief_sufficiency(windows.matches, cfg, params.min_windows)
     if not verdict.enough:
         raise InsufficientReliefError(verdict.message())

@@ -5,7 +5,9 @@ pyproj) and the windows run on Dask threads."""
 
 from __future__ import annotations
 
+import contextlib
 import json
+import sys
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -13,6 +15,7 @@ from typing import Any
 import dask
 import numpy as np
 import rasterio
+from dask.diagnostics import ProgressBar
 from prefect import task
 from prefect.cache_policies import NO_CACHE
 from rasterio.windows import Window
@@ -101,12 +104,14 @@ def match_one(dem_path: str, lon: float, lat: float, reference: GeoDEM,
 
 
 def _match_all(dem_path: Path, ties: TieGround, idx: np.ndarray, reference: GeoDEM,
-               cfg: SurfaceMatchConfig, priors: np.ndarray | None = None) -> list[WindowMatch]:
+               cfg: SurfaceMatchConfig, priors: np.ndarray | None = None,
+               progress: bool = False) -> list[WindowMatch]:
     parts = [dask.delayed(match_one)(str(dem_path), float(ties.lon_deg[i]),
                                      float(ties.lat_deg[i]), reference, cfg,
                                      None if priors is None else tuple(map(float, priors[k])))
              for k, i in enumerate(idx)]
-    return list(dask.compute(*parts, scheduler="threads"))
+    with ProgressBar(out=sys.stderr, dt=1.0) if progress else contextlib.nullcontext():
+        return list(dask.compute(*parts, scheduler="threads"))
 
 
 FIRST_PASS = 24  # windows searched over the whole shift range before the others use a prior
@@ -137,10 +142,11 @@ class SurfaceMatchResult:
 def match_surfaces(dem_path: Path, ties: TieGround, reference: GeoDEM,
                    cfg: SurfaceMatchConfig = SurfaceMatchConfig(), spacing_m: float | None = None,
                    names: tuple[str, str] = ("left", "right"),
-                   out: Path | None = None) -> SurfaceMatchResult:
+                   out: Path | None = None, progress: bool = False) -> SurfaceMatchResult:
     """Match a window around each chosen tie point (``spacing_m`` apart, default the window
     radius) and make a GCP of each good one: the tie point's relative ground coordinates moved
-    by the window's 3-D shift, with its image positions and the window's precision."""
+    by the window's 3-D shift, with its image positions and the window's precision.
+    ``progress``: a progress bar over the windows on stderr."""
     centres = choose_windows(ties, spacing_m or cfg.radius_m)
     # a first pass over the whole shift range on windows spread over the scene, then the
     # others searched around the shift those predict (an affine fit); a peak on the border
@@ -149,8 +155,12 @@ def match_surfaces(dem_path: Path, ties: TieGround, reference: GeoDEM,
     first[np.unique(np.linspace(0, len(centres) - 1, min(FIRST_PASS, len(centres)))
                     .round().astype(int))] = True
     found: list[WindowMatch | None] = [None] * len(centres)
+    if progress:
+        print(f"surface matching: {len(centres)} windows ({int(first.sum())} searched over "
+              "the whole range first)", file=sys.stderr, flush=True)
     for k, m in zip(np.flatnonzero(first), _match_all(dem_path, ties, centres[first],
-                                                        reference, cfg), strict=True):
+                                                        reference, cfg, progress=progress),
+                    strict=True):
         found[k] = m
     rest = np.flatnonzero(~first)
     if rest.size:
@@ -159,7 +169,7 @@ def match_surfaces(dem_path: Path, ties: TieGround, reference: GeoDEM,
                              [found[k] for k in np.flatnonzero(first)],
                              ties.lon_deg[centres[rest]], ties.lat_deg[centres[rest]])
         for k, m in zip(rest, _match_all(dem_path, ties, centres[rest], reference, cfg,
-                                         priors), strict=True):
+                                         priors, progress), strict=True):
             found[k] = m
         again = [k for k in rest if priors is not None
                  and found[k].status == WindowStatus.EDGE_PEAK]
