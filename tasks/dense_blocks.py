@@ -12,14 +12,11 @@ from __future__ import annotations
 import ctypes
 import json
 import math
-import warnings
 from dataclasses import replace
 from pathlib import Path
 
 import cv2
 import numpy as np
-import rasterio
-from rasterio.errors import NotGeoreferencedWarning, RasterioIOError
 from rasterio.windows import Window
 
 from core.errors import InputError
@@ -36,24 +33,16 @@ from core.matching.grid import GridSpec, grid_dem
 from core.matching.rectify import Box, TilePlan, TileRectification
 from core.sensors.base import SensorModel
 from tasks.crs import Projection
+from tasks.raster_io import open_image
 
 # ---------------------------------------------------------------------------- reading
-
-
-def _open(path: str | Path) -> rasterio.io.DatasetReader:
-    try:
-        with warnings.catch_warnings():
-            warnings.simplefilter("ignore", NotGeoreferencedWarning)
-            return rasterio.open(path)
-    except RasterioIOError as exc:
-        raise InputError(f"cannot read image {path}: {exc}; check the path") from exc
 
 
 def read_window(path: str | Path, box: Box) -> tuple[np.ndarray, float | None]:
     """Sensor pixels ``box`` (col0, row0, col1, row1) of band 1 as float32, zeros (or the
     nodata value) beyond the image; and the image's nodata value."""
     c0, r0, c1, r1 = box
-    with _open(path) as src:
+    with open_image(path) as src:
         nodata = src.nodata
         fill = 0.0 if nodata is None or math.isnan(nodata) else float(nodata)
         out = np.full((r1 - r0, c1 - c0), fill, dtype=np.float32)

@@ -42,11 +42,16 @@ from tasks.ortho_io import (
     bounds_in,
     dem_height_range,
     describe_dem,
-    open_image,
     read_image_window,
     read_tile_dem,
 )
-from tasks.raster_io import CogItem, CogOptions, atomic_write_json, write_arrays_cog
+from tasks.raster_io import (
+    CogItem,
+    CogOptions,
+    atomic_write_json,
+    open_image,
+    write_arrays_cog,
+)
 from tasks.sensor_io import LoadedModel, load_model
 
 CHUNK = 1024

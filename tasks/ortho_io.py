@@ -8,7 +8,6 @@ per-tile function calls them in Dask workers.
 from __future__ import annotations
 
 import math
-import warnings
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -17,7 +16,7 @@ import pyproj
 import rasterio
 import rasterio.warp
 from rasterio.enums import Resampling
-from rasterio.errors import NotGeoreferencedWarning, RasterioIOError
+from rasterio.errors import RasterioIOError
 from rasterio.windows import Window
 
 from core.dem import SurfaceGrid
@@ -27,6 +26,7 @@ from core.ortho import SourceWindow, TileDEM
 from tasks.crs import Projection
 from tasks.dem_io import read_reference, resolve_vertical
 from tasks.geoid import load_geoid
+from tasks.raster_io import open_image
 
 DEM_VERTICALS = ("auto", "ellipsoidal", "egm96")
 
@@ -186,16 +186,6 @@ def _read_projected(dem: DemSource, bounds: tuple[float, float, float, float]
     if min(z.shape) < 2 or not np.isfinite(z).any():
         return None
     return SurfaceGrid(z, t.c + (c0 + 0.5) * t.a, t.f + (r0 + 0.5) * t.e, t.a, -t.e)
-
-
-def open_image(path: str | Path) -> rasterio.io.DatasetReader:
-    """The raster at ``path`` (sensor images have no CRS: no warning for it)."""
-    try:
-        with warnings.catch_warnings():
-            warnings.simplefilter("ignore", NotGeoreferencedWarning)
-            return rasterio.open(path)
-    except RasterioIOError as exc:
-        raise InputError(f"cannot read image {path}: {exc}; check the path") from exc
 
 
 def read_image_window(path: str | Path, win: SourceWindow) -> np.ndarray:

@@ -8,6 +8,7 @@ import math
 import os
 import tempfile
 import threading
+import warnings
 from collections.abc import Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -21,6 +22,7 @@ import rasterio.io
 import rasterio.shutil
 import xarray as xr
 from affine import Affine
+from rasterio.errors import NotGeoreferencedWarning, RasterioIOError
 from rasterio.windows import Window
 
 from core.dem import SurfaceGrid
@@ -193,6 +195,17 @@ def json_ready(obj: Any) -> Any:
 def atomic_write_json(path: str | Path, doc: Any, indent: int | None = 1) -> Path:
     """``doc`` written as strict JSON (see :func:`json_ready`) through a temporary file."""
     return atomic_write_text(path, json.dumps(json_ready(doc), indent=indent, allow_nan=False))
+
+
+def open_image(path: str | Path) -> rasterio.io.DatasetReader:
+    """The raster at ``path`` (sensor images have no CRS: no warning for it); InputError when
+    it cannot be read."""
+    try:
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore", NotGeoreferencedWarning)
+            return rasterio.open(path)
+    except RasterioIOError as exc:
+        raise InputError(f"cannot read image {path}: {exc}; check the path") from exc
 
 
 def read_surface_window(path: str | Path, bounds_m: tuple[float, float, float, float],
