@@ -135,14 +135,16 @@ def product_ok(path: Path) -> bool:
     return path.stat().st_size > 0
 
 
-ORIENT_PRODUCTS = ("report.json", "left.json", "right.json", "gcps.json", "dsm.tif",
-                   "dsm_egm96.tif", "relative_dem.tif")
+# the orientation's products: manifest key -> file in OUT
+ORIENT_PRODUCTS = {"report": "report.json", "left_model": "left.json",
+                   "right_model": "right.json", "gcps": "gcps.json", "dsm": "dsm.tif",
+                   "dsm_egm96": "dsm_egm96.tif", "relative_dem": "relative_dem.tif"}
 
 
 def orientation_done(out: Path) -> bool:
     """The orientation's products are all there and read back."""
     return (_json_ok(out / "report.json", "gcpfree.orient")
-            and all(product_ok(out / p) for p in ORIENT_PRODUCTS))
+            and all(product_ok(out / p) for p in ORIENT_PRODUCTS.values()))
 
 
 def pair_complete(out: str | Path) -> bool:
@@ -190,6 +192,8 @@ def _reference_of(params: PairParams, out: Path) -> tuple[Path, str]:
 def make_orthos(params: PairParams, out: Path, skipped: list[str]) -> dict[str, str]:
     """Both images orthorectified with their oriented models over the reference DEM, on one
     grid (the left image's GSD, its UTM zone), then compared window by window."""
+    import rasterio
+
     from core.ortho_compare import CompareConfig
     from tasks.ortho import OrthoConfig, orthorectify, plan_ortho
     from tasks.ortho_compare import compare_orthos, plan_compare
@@ -205,8 +209,6 @@ def make_orthos(params: PairParams, out: Path, skipped: list[str]) -> dict[str, 
         products[f"ortho_{name}"] = path.name
         if product_ok(path):
             skipped.append(f"ortho_{name}")
-            import rasterio
-
             with rasterio.open(path) as src:
                 grid = (abs(src.transform.a), src.crs.to_epsg())
             continue
@@ -219,8 +221,6 @@ def make_orthos(params: PairParams, out: Path, skipped: list[str]) -> dict[str, 
     if product_ok(cmp_json) and product_ok(cmp_map):
         skipped.append("ortho_compare")
     else:
-        import rasterio
-
         with rasterio.open(out / "ortho_left.tif") as src:
             small = min(src.width, src.height) < 2000
         # a small ortho (a crop, coarse pixels) gets more, smaller windows, as many as fit
@@ -325,9 +325,7 @@ def orient_pair_flow(params: PairParams) -> PairOutcome:
             min_windows=params.min_windows, surface=params.surface or SurfaceMatchConfig()))
     done("orient")
 
-    products = {"report": "report.json", "left_model": "left.json",
-                "right_model": "right.json", "gcps": "gcps.json", "dsm": "dsm.tif",
-                "dsm_egm96": "dsm_egm96.tif", "relative_dem": "relative_dem.tif"}
+    products = dict(ORIENT_PRODUCTS)
     if (out / "dsm_mask.tif").exists():
         products["dsm_mask"] = "dsm_mask.tif"
     products.update(make_orthos(params, out, skipped))
