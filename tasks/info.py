@@ -83,6 +83,7 @@ class ImageInfo:
             "source": str(lm.source),
             "family": lm.family,
             "size": {"cols": lm.size[0], "rows": lm.size[1]},
+            "crop_offset_px": {"col": lm.crop[0], "row": lm.crop[1]},
             "band": lm.band,
             "mission": None if spot is None else f"SPOT {spot.mission_index}",
             "instrument": None if spot is None else f"{spot.instrument} {spot.instrument_index}",
@@ -124,7 +125,9 @@ class ImageInfo:
     def lines(self) -> list[str]:
         lm, v, spot = self.loaded, self.view, self.loaded.spot
         out = [_line("input", str(self.input)),
-               _line("model", f"{lm.family}, from {lm.source}"),
+               _line("model", f"{lm.family}, from {lm.source}"
+                     + (f", moved to the crop at pixel ({lm.crop[0]:g}, {lm.crop[1]:g}) of the "
+                        "product" if lm.crop != (0.0, 0.0) else "")),
                _line("size", f"{lm.size[0]} x {lm.size[1]} px (cols x rows)")]
         if spot is not None:
             out.append(_line("mission", (

@@ -18,7 +18,7 @@ coefficients are dimensionless because r is normalised.
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 from numpy.typing import NDArray
@@ -138,6 +138,12 @@ class ParametricCamera:
         one = np.ones(np.shape(col))
         return one * k * np.sin(self.rotation_rad), -one * k * np.cos(self.rotation_rad)
 
+    def cropped(self, col0: float, n_cols: int) -> ParametricCamera:
+        """The camera of ``n_cols`` columns whose column 0 is this camera's column ``col0``
+        (an image crop): the same detectors, numbered from the crop's first column."""
+        return replace(self, n_cols=int(n_cols),
+                       principal_col=float(self.principal_col) - float(col0))
+
     def to_dict(self) -> dict:
         return {
             "type": "parametric",
@@ -212,6 +218,19 @@ class LookAngleTable:
         _, dx = self._interp(np.tan(self.psi_y_rad), col)
         _, dy = self._interp(-np.tan(self.psi_x_rad), col)
         return dx, dy
+
+    def cropped(self, col0: float, n_cols: int) -> LookAngleTable:
+        """The table of ``n_cols`` columns whose column 0 is this table's column ``col0``
+        (an image crop; whole columns only: the table interpolates between its columns, so a
+        fractional start would move its nodes)."""
+        start = int(round(col0))
+        if start != col0 or start < 0 or start + int(n_cols) > self.n_cols:
+            raise InputError(
+                f"a crop of {n_cols} columns from column {col0} does not fit the "
+                f"{self.n_cols}-column look-angle table in whole columns; crop on whole pixels "
+                "inside the image")
+        end = start + int(n_cols)
+        return LookAngleTable(self.psi_x_rad[start:end].copy(), self.psi_y_rad[start:end].copy())
 
     def to_dict(self) -> dict:
         return {

@@ -280,6 +280,23 @@ class PushbroomModel:
         """The same model with another selection of adjustable parameters (corrections kept)."""
         return replace(self, adjust=tuple(names))
 
+    def with_image_window(self, col0: float, row0: float, n_cols: int,
+                          n_rows: int) -> PushbroomModel:
+        """The same sensor in the pixels of a crop of ``n_cols`` x ``n_rows`` whose pixel
+        (0, 0) is this model's pixel (``col0``, ``row0``): ``col_crop = col - col0``,
+        ``row_crop = row - row0``. Rows are times, so the crop starts ``row0`` line periods
+        later; columns are detectors, numbered from the crop's first one (the camera cropped).
+        The crop must lie inside this model's image.
+        """
+        col0, row0, n_cols, n_rows = float(col0), float(row0), int(n_cols), int(n_rows)
+        if not (col0 >= 0 and row0 >= 0 and col0 + n_cols <= self.n_cols
+                and row0 + n_rows <= self.n_rows and n_cols >= 2 and n_rows >= 1):
+            raise InputError(
+                f"a crop of {n_cols}x{n_rows} px at pixel ({col0:g}, {row0:g}) does not fit the "
+                f"{self.n_cols}x{self.n_rows} image of this model; give the model of this image")
+        return replace(self, camera=self.camera.cropped(col0, n_cols), n_rows=n_rows,
+                       t0_s=self.t0_s + row0 * self.line_period_s)
+
     # -- geometry -------------------------------------------------------------------------------
     def line_time_s(self, row: ArrayLike) -> FloatArray:
         """Acquisition time (s since the orbit epoch) of (fractional) rows."""

@@ -105,7 +105,7 @@ def test_reunion_rpc_tags_identity_transform():
 def test_explicit_dimap_wins_and_is_offset(tmp_path):
     data = np.zeros((4, 5), dtype=np.uint8)
     _write(tmp_path / "crop.tif", data, Affine.translation(100, 200))
-    m = read_rpc(tmp_path / "crop.tif", dimap_xml=DIMAP)
+    m = read_rpc(tmp_path / "crop.tif", model_file=DIMAP)
     full = rpc_from_dimap_file(DIMAP)
     assert m.has_inverse
     assert m.col_off == pytest.approx(full.col_off - 100)
@@ -114,12 +114,12 @@ def test_explicit_dimap_wins_and_is_offset(tmp_path):
 
 def test_no_rpc_found(tmp_path):
     _write(tmp_path / "plain.tif", np.zeros((4, 5), dtype=np.uint8))
-    with pytest.raises(InputError, match="no RPC found.*plain.geom"):
+    with pytest.raises(InputError, match="no sensor model found.*plain.tif"):
         read_rpc(tmp_path / "plain.tif")
 
 
 def test_missing_image(tmp_path):
-    with pytest.raises(InputError, match="cannot open raster"):
+    with pytest.raises(InputError, match="nope.tif does not exist"):
         read_rpc(tmp_path / "nope.tif")
 
 
@@ -205,7 +205,7 @@ def test_same_name_dim_json_then_rpc_and_errors(spot_scene_files, tmp_path):
     assert load_model(img).source.name == "left.DIM"  # SPOT metadata win
     assert load_model(VENTOUX / "left_image.tif").family == "rpc"
     small = _blank(tmp_path / "small.tif", 10, 10)
-    with pytest.raises(InputError, match="not the same scene"):
+    with pytest.raises(InputError, match="not the same image"):
         load_model(small, model=tmp_path / "left.DIM")
     with pytest.raises(InputError, match="does not exist"):
         load_model(tmp_path / "none.tif")
