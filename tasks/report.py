@@ -6,9 +6,11 @@ Built from the products of an orient output folder (``report.json``, ``windows.j
 ``gcps.json``, the oriented models, the relative orientation's tie points, the relative DEM),
 plus what the caller may add: the reference DEM the orientation used (profile and correlation
 surface), the check points (their residual vectors) and an ``eval.json`` of ``gcpfree
-evaluate`` (LE68 per class). Every number of ``report.json`` is in a table; the figures are the
-papers' (tie points on the image, a correlation surface, a profile of the relative DEM against
-the reference, residual vectors, LE68 per class, histograms, the relief verdict).
+evaluate`` (LE68 per class). Every number of ``report.json`` is in a table, but the relative
+orientation's: a curated table of what a photogrammetrist checks (its full record is
+``relative/rel.json``). The figures are the papers' (tie points on the image, a correlation
+surface, a profile of the relative DEM against the reference, residual vectors, LE68 per class,
+histograms, the relief verdict).
 
 ``report.json`` stays the orientation's: its keys are kept as they are and only ``report`` is
 added (replaced on every report), holding what the report shows beyond them (the lidar

@@ -133,10 +133,12 @@ CSS = """
 body { font-family: system-ui, sans-serif; max-width: 1100px; margin: 2em auto; padding: 0 1em;
        color: #222; line-height: 1.45; }
 h1 { border-bottom: 2px solid #446; } h2 { border-bottom: 1px solid #ccd; margin-top: 2em; }
+div.table { overflow-x: auto; }  /* a wide table scrolls, not the page */
 table { border-collapse: collapse; margin: 0.8em 0; font-size: 0.9em; }
 th, td { border: 1px solid #ccd; padding: 0.2em 0.6em; text-align: left; vertical-align: top; }
 th { background: #eef; } td { font-variant-numeric: tabular-nums; }
-caption { caption-side: top; text-align: left; font-weight: 600; padding: 0.3em 0; }
+caption { caption-side: top; text-align: left; font-weight: 600; padding: 0.3em 0;
+          white-space: nowrap; }
 figure { margin: 1em 0; } figure img { max-width: 100%; border: 1px solid #ddd; }
 figcaption { font-size: 0.9em; color: #444; }
 p.good { background: #e7f6e7; border-left: 4px solid #3a3; padding: 0.4em 0.8em; }
@@ -161,8 +163,8 @@ def to_html(title: str, blocks: Sequence[Block]) -> str:
             head = "".join(f"<th>{e(h)}</th>" for h in b.header)
             body = "".join("<tr>" + "".join(f"<td>{e(c)}</td>" for c in r) + "</tr>"
                            for r in b.rows)
-            out.append(f"<table>{cap}<thead><tr>{head}</tr></thead><tbody>{body}</tbody>"
-                       "</table>")
+            out.append(f'<div class="table"><table>{cap}<thead><tr>{head}</tr></thead>'
+                       f"<tbody>{body}</tbody></table></div>")
     out.append("</body></html>")
     return "\n".join(out) + "\n"
 

@@ -1,9 +1,11 @@
-"""The tables of the run report: every number of ``report.json`` (and of ``windows.json`` and
-``eval.json``) as blocks of :mod:`tasks.report_doc`. Plain functions of the JSON documents: no
-I/O, no figures (those are :mod:`tasks.report`)."""
+"""The tables of the run report: the numbers of ``report.json`` (and of ``windows.json`` and
+``eval.json``) as blocks of :mod:`tasks.report_doc`, every one of them but the relative
+orientation's, which is curated (its full record is rel.json). Plain functions of the JSON
+documents: no I/O, no figures (those are :mod:`tasks.report`)."""
 
 from __future__ import annotations
 
+import math
 from collections.abc import Mapping, Sequence
 from typing import Any
 
@@ -30,20 +32,104 @@ def _cell(v: Any) -> str:
 
 
 def relative_tables(rel: Doc) -> list[Block]:
-    """rel.json: its figures, the right model's adjustment and the right model after it."""
-    adj = rel.get("adjustment", {})
-    out: list[Block] = [Table.flat(rel, "Relative orientation (rel.json)",
-                                   skip=("adjustment", "right_model"))]
+    """rel.json as a photogrammetrist reads it: the tie points (how many, how spread, how well
+    matched), the y-parallax before and after, how far the right image moved across and along
+    the epipolar lines and what fixed each part, the rays' miss distance, the main angle solved
+    point by point (Goncalves's Table 1); then the right image's parameters with their sigmas.
+    The rest of rel.json (every count of the search, the covariance, the unobservable
+    directions, the adjusted right model) stays in the file, as the report says."""
+    adj, search = rel.get("adjustment", {}), rel.get("tie_point_search", {})
+    corr, miss = rel.get("right_correction", {}), rel.get("miss_distance_m", {})
+    rejected = search.get("rejected")
+    rows = [
+        ["sensor models left / right",
+         _slash(rel.get("left", {}).get("family"), rel.get("right", {}).get("family"))],
+        ["tie points used / rejected",
+         _slash(rel.get("tie_points"), rel.get("tie_points_rejected"))],
+        ["tie-point grid: one point per ground cell of (m)", fmt(search.get("cell_m"))],
+        ["ground cells with a tie point / with texture / in all",
+         _slash(search.get("n_cells_with_point"), search.get("n_cells_textured"),
+                search.get("n_cells"))],
+        ["interest points searched / matched",
+         _slash(search.get("n_candidates"), search.get("n_matched"))],
+        ["interest points rejected, by reason",
+         ", ".join(f"{k.lower().replace('_', ' ')} {fmt(v)}" for k, v in rejected.items())
+         if isinstance(rejected, Mapping) and rejected else "(none)"],
+        ["tie-point correlation: median (5 % .. 95 %)",
+         (f"{fmt(search.get('correlation_p50'))} ({fmt(search.get('correlation_p05'))} .. "
+          f"{fmt(search.get('correlation_p95'))})")],
+        ["y-parallax RMS before / after (px)",
+         _slash(rel.get("parallax_rms_before_px"), rel.get("parallax_rms_after_px"))],
+        ["robust sigma of the y-parallaxes after (px)", fmt(adj.get("sigma_px"))],
+        ["iterations / converged", _slash(adj.get("n_iterations"), adj.get("converged"))],
+        ["right image moved at its centre: across / along the epipolar line (px)",
+         _slash(corr.get("across_epipolar_px"), corr.get("along_epipolar_px"))],
+        *_along_epipolar_rows(rel),
+        ["rays' miss distance at the tie points: median / 95 % (m)",
+         _slash(miss.get("median"), miss.get("p95"))],
+    ]
+    ref = rel.get("reference")
+    if isinstance(ref, Mapping):  # the reference DEM the orientation read, and its datum
+        rows.append(["reference DEM: vertical datum (decided by)",
+                     f"{ref.get('path')}: {ref.get('vertical')} ({ref.get('vertical_source')})"])
+    pa = adj.get("point_angle")
+    if isinstance(pa, Mapping):
+        rows.append(["main parameter solved point by point (Goncalves's Table 1)",
+                     (f"{pa.get('name')}: {fmt(pa.get('mean'))} ± {fmt(pa.get('std'))} "
+                      f"{pa.get('unit')}, {fmt(pa.get('min'))} .. {fmt(pa.get('max'))} "
+                      f"({fmt(pa.get('count'))} points)")])
+    out: list[Block] = [Table(("", "value"), tuple(tuple(r) for r in rows),
+                              "Tie points and the right image adjusted to the left")]
     if "param_names" in adj:
-        units = adj.get("param_units") or [""] * len(adj["param_names"])
-        out.append(Table.of(("parameter", "unit", "before", "after"),
-                            zip(adj["param_names"], units, adj["params_before"],
-                                adj["params_after"], strict=True),
-                            "Right image adjusted to the left (relative orientation)"))
-    out.append(Table.flat(adj, "Relative adjustment", skip=PARAMS))
-    if "right_model" in rel:
-        out.append(Table.flat(rel["right_model"], "Right model after the relative orientation"))
+        names = adj["param_names"]
+        units = adj.get("param_units") or [""] * len(names)
+        out.append(Table.of(("parameter", "unit", "before", "after", "sigma"),
+                            zip(names, units, adj["params_before"], adj["params_after"],
+                                _sigmas(adj.get("covariance"), len(names)), strict=True),
+                            "Right-image parameters from the tie points (sigma: the "
+                            "adjustment's, within the directions the tie points see)"))
+    out.append(Para("Every count of the tie-point search, the covariance, the unobservable "
+                    "directions and the adjusted right model are in relative/rel.json."))
     return out
+
+
+def _slash(*values: Any) -> str:
+    return " / ".join(fmt(v) for v in values)
+
+
+def _sigmas(covariance: Any, n: int) -> list[float | None]:
+    """The square roots of a covariance matrix's diagonal (None when there is none)."""
+    if not isinstance(covariance, Sequence) or len(covariance) != n or not all(
+            isinstance(row, Sequence) and len(row) == n for row in covariance):
+        return [None] * n
+    return [math.sqrt(v) if isinstance(v := row[i], (int, float)) and v >= 0 else None
+            for i, row in enumerate(covariance)]
+
+
+def _along_epipolar_rows(rel: Doc) -> list[list[str]]:
+    """What fixed the right image along the epipolar lines: the tie points when they see it;
+    otherwise the reference DEM (the shift it set with its sigma, from the tie points' heights
+    against it), or nothing (held at the metadata)."""
+    unobservable = rel.get("adjustment", {}).get("unobservable") or []
+    along = rel.get("along_epipolar") or {}
+    if not unobservable:
+        return [["along the epipolar line", "seen by the tie points"]]
+    mostly = ", ".join(dict.fromkeys(
+        max(u["direction"], key=lambda k: abs(u["direction"][k])) for u in unobservable
+        if u.get("direction")))
+    n = len(unobservable)
+    rows = [["along the epipolar line: seen by the tie points",
+             f"no: {n} direction{'s' if n != 1 else ''} held (mostly {mostly})"]]
+    if along.get("sigma_px") is None:
+        return [*rows, ["along the epipolar line: set from the reference DEM",
+                        ("no: held at the metadata (no reference DEM heights at 3 tie points "
+                         "or more)")]]
+    return [*rows,
+            ["along the epipolar line: set from the reference DEM (px)",
+             f"{fmt(along.get('shift_px'))} ± {fmt(along.get('sigma_px'))}"],
+            ["tie-point heights - reference before, median (m) / reference sigma (m) / points",
+             _slash(along.get("height_offset_m"), along.get("reference_sigma_m"),
+                    along.get("n_points"))]]
 
 
 def dem_tables(dem: Doc) -> list[Block]:

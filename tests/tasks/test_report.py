@@ -20,8 +20,14 @@ import pytest
 from PIL import Image
 
 from tasks.report import FIGURES_DIR, JSON_KEY, ReportOutcome, make_report, write_report
-from tasks.report_doc import MAX_INLINE
-from tasks.report_tables import EVAL_KEYS, STATS, WINDOW_KEYS
+from tasks.report_doc import MAX_INLINE, Table
+from tasks.report_tables import (
+    EVAL_KEYS,
+    SECTIONS,
+    STATS,
+    WINDOW_KEYS,
+    relative_tables,
+)
 
 PNG_MAGIC = b"\x89PNG\r\n\x1a\n"
 FIGURES = {"tie_points", "profile", "relief", "correlation_surface", "gcp_residuals",
@@ -202,6 +208,84 @@ def check_rows(table: tuple[list[str], list[list[str]]], keys: list[str],
     assert not bad, bad[:5]
 
 
+# the relative orientation's curated table: each row's cell as a pattern, and the rel.json
+# values (key paths) its groups show, in order
+REL_TABLE = "Tie points and the right image adjusted to the left"
+REL_ROWS = {
+    "sensor models left / right": (r"(\S+) / (\S+)", ("left.family", "right.family")),
+    "tie points used / rejected": (r"(\S+) / (\S+)", ("tie_points", "tie_points_rejected")),
+    "tie-point grid: one point per ground cell of (m)": (r"(\S+)",
+                                                         ("tie_point_search.cell_m",)),
+    "ground cells with a tie point / with texture / in all": (
+        r"(\S+) / (\S+) / (\S+)", ("tie_point_search.n_cells_with_point",
+                                   "tie_point_search.n_cells_textured",
+                                   "tie_point_search.n_cells")),
+    "interest points searched / matched": (
+        r"(\S+) / (\S+)", ("tie_point_search.n_candidates", "tie_point_search.n_matched")),
+    "tie-point correlation: median (5 % .. 95 %)": (
+        r"(\S+) \((\S+) \.\. (\S+)\)", ("tie_point_search.correlation_p50",
+                                         "tie_point_search.correlation_p05",
+                                         "tie_point_search.correlation_p95")),
+    "y-parallax RMS before / after (px)": (
+        r"(\S+) / (\S+)", ("parallax_rms_before_px", "parallax_rms_after_px")),
+    "robust sigma of the y-parallaxes after (px)": (r"(\S+)", ("adjustment.sigma_px",)),
+    "iterations / converged": (r"(\S+) / (\S+)",
+                               ("adjustment.n_iterations", "adjustment.converged")),
+    "right image moved at its centre: across / along the epipolar line (px)": (
+        r"(\S+) / (\S+)", ("right_correction.across_epipolar_px",
+                           "right_correction.along_epipolar_px")),
+    "along the epipolar line: set from the reference DEM (px)": (
+        r"(\S+) ± (\S+)", ("along_epipolar.shift_px", "along_epipolar.sigma_px")),
+    "tie-point heights - reference before, median (m) / reference sigma (m) / points": (
+        r"(\S+) / (\S+) / (\S+)", ("along_epipolar.height_offset_m",
+                                   "along_epipolar.reference_sigma_m",
+                                   "along_epipolar.n_points")),
+    "rays' miss distance at the tie points: median / 95 % (m)": (
+        r"(\S+) / (\S+)", ("miss_distance_m.median", "miss_distance_m.p95")),
+    "main parameter solved point by point (Goncalves's Table 1)": (
+        r"(\S+): (\S+) ± (\S+) (\S+), (\S+) \.\. (\S+) \((\S+) points\)",
+        tuple(f"adjustment.point_angle.{k}"
+              for k in ("name", "mean", "std", "unit", "min", "max", "count"))),
+}
+REL_REFERENCE = {"reference DEM: vertical datum (decided by)": (
+    r"(.+): (\S+) \((.+)\)", ("reference.path", "reference.vertical", "reference.vertical_source"))}
+REASONS = "interest points rejected, by reason"
+SEEN = "along the epipolar line: seen by the tie points"
+
+
+def check_relative(tables: Tables, rel: dict[str, Any]) -> None:
+    """The relative orientation's tables show rel.json's values: the curated table row by row
+    (no row unchecked), the parameters with the square roots of the covariance's diagonal."""
+    header, rows = tables[REL_TABLE]
+    cells = dict(rows)
+    assert header == ["", "value"] and len(cells) == len(rows)
+    expected = {**REL_ROWS, **(REL_REFERENCE if rel.get("reference") else {})}
+    assert set(cells) == {*expected, REASONS, SEEN}
+    for label, (pattern, paths) in expected.items():
+        m = re.fullmatch(pattern, cells[label])
+        assert m, (label, cells[label])
+        bad = [(p, c, at(rel, p)) for p, c in zip(paths, m.groups(), strict=True)
+               if not same(c, at(rel, p))]
+        assert not bad, (label, bad)
+    reasons = dict(re.findall(r"([a-z ]+) (\d+)(?:, |$)", cells[REASONS]))
+    assert reasons == {k.lower().replace("_", " "): str(v)
+                       for k, v in rel["tie_point_search"]["rejected"].items()}
+    # across-track stereo: the tie points cannot tell a roll from a height (Goncalves 3.1)
+    unobservable = rel["adjustment"]["unobservable"]
+    mostly = {k for u in unobservable for k, v in u["direction"].items() if abs(v) > 0.5}
+    m = re.fullmatch(r"no: (\d+) directions? held \(mostly (.+)\)", cells[SEEN])
+    assert m and int(m[1]) == len(unobservable) and set(m[2].split(", ")) == mostly
+    assert "roll_bias" in mostly
+    adj = rel["adjustment"]
+    check_rows(tables["Right-image parameters from the tie points (sigma: the adjustment's, "
+                      "within the directions the tie points see)"],
+               ["name", "unit", "before", "after", "sigma"],
+               [{"name": n, "unit": u, "before": b, "after": a, "sigma": math.sqrt(c[i])}
+                for i, (n, u, b, a, c) in enumerate(zip(
+                    adj["param_names"], adj["param_units"], adj["params_before"],
+                    adj["params_after"], adj["covariance"], strict=True))])
+
+
 def images_of(report_dir: Path) -> tuple[list[str], list[str]]:
     html = (report_dir / "report.html").read_text()
     md = (report_dir / "report.md").read_text()
@@ -239,6 +323,11 @@ def test_report_and_its_figures_are_written(run):
     assert html.startswith("<!DOCTYPE html>") and html.rstrip().endswith("</html>")
     assert "Not available" not in html and "could not be made" not in html
     assert "Relief sufficient" in html
+    # the relative orientation is curated, not a dump of rel.json's keys
+    relative = outcome.markdown.read_text().split("## Relative orientation\n")[1].split("\n## ")[0]
+    for key in ("right_model", "tie_point_search", "| covariance", "left.image",
+                "gcpfree.relative", "orbit.positions_m"):
+        assert key not in relative, key
 
 
 def test_the_numbers_shown_are_those_of_the_json_products(run, evaluation):
@@ -249,15 +338,13 @@ def test_the_numbers_shown_are_those_of_the_json_products(run, evaluation):
     windows = json.loads((out / "windows.json").read_text())["windows"]
     ev = json.loads(evaluation.read_text())
     rel, ab = doc["relative"], doc["absolute"]
-    flat = {"Relative orientation (rel.json)": rel, "Relative adjustment": rel["adjustment"],
-            "Right model after the relative orientation": rel["right_model"],
-            "Relative DEM": doc["relative_dem"],
+    flat = {"Relative DEM": doc["relative_dem"],
             "Surface matching and relief verdict": doc["surface_matching"],
             "Simulated GCPs": doc["gcps"], "Absolute adjustment": ab,
             "Lens self-calibration": ab["self_calibration"],
             **{f"Image {n}: residuals at the GCPs used (px)": ab["images"][n]
                for n in ("left", "right")},
-            "Other entries": {k: original[k] for k in ("models", "dsm")},
+            "Other entries": {k: v for k, v in original.items() if k not in SECTIONS},
             "Window drawn: grid maximum and the refined shift (windows.json)":
                 doc[JSON_KEY]["correlation_surface"],
             **{f"Evaluation: {k.replace('_', ' ')}": ev
@@ -265,7 +352,8 @@ def test_the_numbers_shown_are_those_of_the_json_products(run, evaluation):
     for tables in both_tables(out):
         two_col = {c for c, (h, _) in tables.items() if h == ["quantity", "value"]}
         assert two_col == set(flat)  # no table left unchecked
-        assert sum(check_flat(tables[c], d) for c, d in flat.items()) > 300
+        assert sum(check_flat(tables[c], d) for c, d in flat.items()) > 150
+        check_relative(tables, rel)
         # the paper's Table 2: check points per image, before and after
         cp = next(t for c, t in tables.items() if c.startswith("Check-point residuals"))
         assert cp[0] == ["image", "orientation", *STATS]
@@ -379,23 +467,85 @@ def test_products_not_available_are_said_not_raised(run, tmp_path):
     assert not (empty / "report.json").exists()  # never made up
 
 
+def test_the_relative_table_says_what_set_the_along_epipolar_part():
+    """The tie points see every direction, or the reference DEM set those they cannot, or
+    nothing did (held at the metadata): each is said. An empty rel.json gives dashes and no
+    parameter table, never an error."""
+    def rows(rel: dict[str, Any]) -> dict[str, str]:
+        [table] = [b for b in relative_tables(rel) if isinstance(b, Table)
+                   and b.caption == REL_TABLE]
+        return dict(table.rows)
+
+    roll = [{"direction": {"roll_bias": -0.99, "pitch_bias": 0.14}, "step": {},
+             "observable_share": 0.0}]
+    seen = rows({"adjustment": {"unobservable": []}, "along_epipolar": {"observable": True}})
+    assert seen["along the epipolar line"] == "seen by the tie points" and SEEN not in seen
+    held = rows({"adjustment": {"unobservable": roll},
+                 "along_epipolar": {"observable": False, "sigma_px": None}})
+    assert held[SEEN] == "no: 1 direction held (mostly roll_bias)"
+    assert held["along the epipolar line: set from the reference DEM"] == (
+        "no: held at the metadata (no reference DEM heights at 3 tie points or more)")
+    empty = relative_tables({})
+    assert [b.caption for b in empty if isinstance(b, Table)] == [REL_TABLE]
+    assert rows({})["tie points used / rejected"] == "– / –"
+    assert rows({})[REASONS] == "(none)"
+    adj = {"param_names": ["a", "b"], "params_before": [0.0, 0.0], "params_after": [1.0, 2.0]}
+    [_, params] = [b for b in relative_tables({"adjustment": adj}) if isinstance(b, Table)]
+    assert params.rows == (("a", "", "0", "1", "–"), ("b", "", "0", "2", "–"))
+
+
+# what a reader of the report sees in the browser
+LOOK = """() => ({
+  figures: Array.from(document.querySelectorAll('figure')).map(f => {
+    const img = f.querySelector('img');
+    return {src: img ? img.getAttribute('src') : null,
+            loaded: !!img && img.complete && img.naturalWidth > 0,
+            caption: (f.querySelector('figcaption') || {}).textContent || ''};
+  }),
+  images: document.images.length,
+  sections: Array.from(document.querySelectorAll('h2')).map(h => h.textContent),
+  pageWidth: document.documentElement.scrollWidth,
+  windowWidth: window.innerWidth,
+})"""
+
+
+def look_at(page: Any, html: Path, shot: Path) -> dict[str, Any]:
+    """What a reader of ``html`` sees once it has loaded: each figure with its image loaded or
+    not, the sections, the page's width against the window's; a full-page screenshot in
+    ``shot``."""
+    page.goto(html.resolve().as_uri(), wait_until="load")
+    seen = page.evaluate(LOOK)
+    page.screenshot(path=str(shot), full_page=True)
+    return seen
+
+
+@pytest.mark.slow
 def test_the_report_renders_in_headless_chromium(run, tmp_path):
-    """When playwright and its Chromium are installed: the page loads its images and a
-    screenshot of it is not blank."""
-    sync_api = pytest.importorskip("playwright.sync_api")
-    _, _, outcome, _ = run
-    try:
-        with sync_api.sync_playwright() as p:
-            browser = p.chromium.launch()
-            page = browser.new_page(viewport={"width": 1200, "height": 2000})
-            page.goto(outcome.html.resolve().as_uri())
-            page.wait_for_load_state("load")
-            broken = page.evaluate("Array.from(document.images).filter("
-                                   "i => !i.complete || i.naturalWidth === 0).length")
-            shot = page.screenshot(path=str(tmp_path / "report.png"), full_page=True)
-            browser.close()
-    except sync_api.Error as exc:  # no browser binary installed
-        pytest.skip(f"headless Chromium unavailable: {exc}")
-    assert broken == 0 and shot[:8] == PNG_MAGIC
-    with Image.open(tmp_path / "report.png") as im:
+    """report.html in headless Chromium (Debian's, as .ci/run installs it): every figure of
+    the run is there with its image loaded and a caption, the page is no wider than the window
+    (wide tables scroll in their own box), the screenshot is not blank; and the same look
+    catches a figure whose PNG has gone."""
+    from tests.browser import chromium
+
+    _, out, outcome, _ = run
+    gone = tmp_path / "gone"
+    gone.mkdir()
+    shutil.copy(outcome.html, gone)
+    shutil.copytree(out / FIGURES_DIR, gone / FIGURES_DIR)
+    (gone / FIGURES_DIR / "profile.png").unlink()
+    shot = tmp_path / "report.png"
+    with chromium() as browser:
+        page = browser.new_page(viewport={"width": 1280, "height": 2400})
+        seen = look_at(page, outcome.html, shot)
+        missing = look_at(page, gone / "report.html", tmp_path / "gone.png")
+    print(f"screenshot of the report: {shot}")
+    assert {Path(f["src"]).stem for f in seen["figures"]} == FIGURES
+    assert [f["src"] for f in seen["figures"] if not f["loaded"]] == []
+    assert seen["images"] == len(FIGURES) and all(f["caption"] for f in seen["figures"])
+    assert seen["sections"][:4] == ["Summary", "Inputs", "Tie points", "Relative orientation"]
+    assert seen["pageWidth"] <= seen["windowWidth"], "the page scrolls sideways"
+    with Image.open(shot) as im:
+        assert im.width == 1280 and im.height > 2400
         assert np.asarray(im.convert("L")).std() > 5
+    assert [f["src"] for f in missing["figures"] if not f["loaded"]] == [
+        f"{FIGURES_DIR}/profile.png"]
