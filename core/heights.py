@@ -77,3 +77,83 @@ def height_difference_m(dem_z: ArrayLike, dem: HeightFrame, ref_z: ArrayLike, re
                          "give the geoid and the points' lon/lat to convert them")
     n_m = geoid.undulation_m(lon_deg, lat_deg)
     return d - r + (n_m if dem.datum == "egm96" else -n_m)
+
+
+# ---- the vertical datum of a DEM: one rule ----------------------------------------------------
+
+VERTICAL_CHOICES = ("auto", *DATUMS)
+
+
+@dataclass(frozen=True)
+class DatumDecision:
+    """The vertical datum of a DEM's heights and why: ``datum`` is ``"ellipsoidal"`` or
+    ``"egm96"``; ``source`` says what decided it (the option given, the ``vertical_datum``
+    tag, the CRS's vertical part, or an SRTM file name)."""
+
+    datum: str
+    source: str
+
+    def describe(self) -> str:
+        """One line for the terminal: the datum, why, and what gcpfree does with it."""
+        what = ("EGM96 orthometric heights, converted with h = H + N" if self.datum == "egm96"
+                else "WGS84 ellipsoidal heights, used as they are")
+        return f"{what} ({self.source})"
+
+    def to_dict(self) -> dict[str, str]:
+        return {"vertical": self.datum, "vertical_source": self.source}
+
+
+def datum_of_tag(text: str) -> str | None:
+    """``ellipsoidal`` or ``egm96`` from the text of a ``vertical_datum`` tag (gcpfree writes
+    ``WGS84 ellipsoid ...`` or ``EGM96 ...``); None when the text names neither."""
+    t = text.lower()
+    if "ellipsoid" in t:  # "WGS84 ellipsoid (h = SRTM H + EGM96 N)": ellipsoidal heights
+        return "ellipsoidal"
+    if "egm96" in t.replace(" ", "") or "egm 96" in t:
+        return "egm96"
+    return None
+
+
+def decide_datum(what: str, option: str, *, given: str = "auto", tag: str | None = None,
+                 crs_datum: str | None = None, crs_vertical_name: str | None = None,
+                 srtm_name: str | None = None) -> DatumDecision:
+    """The one rule for the vertical datum of a DEM, first that speaks wins:
+
+    1. ``given`` (``ellipsoidal`` or ``egm96`` from the command line's ``option``);
+    2. the file's ``vertical_datum`` tag (gcpfree writes one on every height raster);
+    3. the vertical part of the file's CRS (a compound CRS such as EPSG:4326+5773, or a 3-D
+       geographic/projected CRS, which is ellipsoidal): ``crs_datum`` as read, with
+       ``crs_vertical_name`` naming it;
+    4. an SRTM file (``srtm_name``: a ``.hgt``, or a file named after its tile like
+       ``N44E005.tif``), whose heights are EGM96;
+    5. else refused: guessing costs the geoid undulation (about 50 m in southern France).
+
+    ``what`` names the file in messages (``reference DEM x.tif``). A tag or a vertical CRS in
+    a datum gcpfree does not convert is refused too.
+
+    Raises:
+        InputError: unknown ``given``, unconvertible datum, or nothing says the datum.
+    """
+    if given not in VERTICAL_CHOICES:
+        raise InputError(f"{option} {given!r} unknown; use one of {VERTICAL_CHOICES}")
+    if given != "auto":
+        return DatumDecision(given, f"given: {option} {given}")
+    if tag is not None and tag.strip():
+        datum = datum_of_tag(tag)
+        if datum is None:
+            raise InputError(f"{what}: its vertical_datum tag {tag!r} names a datum gcpfree "
+                             f"cannot convert (EGM96 and WGS84 ellipsoidal only); convert the "
+                             f"heights first, or declare them with {option} egm96|ellipsoidal")
+        return DatumDecision(datum, f"tag vertical_datum={tag!r}")
+    if crs_vertical_name is not None:
+        if crs_datum not in DATUMS:
+            raise InputError(f"{what}: its heights are {crs_vertical_name!r}, a vertical datum "
+                             "gcpfree cannot convert (EGM96 and WGS84 ellipsoidal only); "
+                             f"convert them first, or declare them with {option} "
+                             "egm96|ellipsoidal")
+        return DatumDecision(crs_datum, f"CRS: {crs_vertical_name}")
+    if srtm_name is not None:
+        return DatumDecision("egm96", f"SRTM file {srtm_name}: EGM96")
+    raise InputError(f"{what} does not say whether its heights are ellipsoidal or EGM96 (no "
+                     "vertical_datum tag, no vertical CRS, not an SRTM tile name); give "
+                     f"{option} egm96 or {option} ellipsoidal")

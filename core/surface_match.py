@@ -78,17 +78,22 @@ class SurfaceMatchConfig:
     def __post_init__(self) -> None:
         if not (self.radius_m > 0 and self.shift_max_arcsec > 0
                 and 0 < self.shift_step_arcsec <= self.shift_max_arcsec):
-            raise InputError("surface matching needs radius_m > 0 and 0 < shift_step_arcsec <= "
-                             "shift_max_arcsec")
+            raise InputError(
+                f"surface matching needs a window radius > 0 m (--window-radius, got "
+                f"{self.radius_m:g}), a largest shift > 0 arcsec (--max-shift, got "
+                f"{self.shift_max_arcsec:g}) and a shift step in (0, largest shift] (got "
+                f"{self.shift_step_arcsec:g})")
         if self.refine_step_arcsec is not None and not (
                 0 < self.refine_step_arcsec < self.shift_step_arcsec):
-            raise InputError("refine_step_arcsec must be in (0, shift_step_arcsec) or None")
+            raise InputError(f"the surface-matching refinement step ({self.refine_step_arcsec:g}"
+                             "\") must be smaller than the search step, or none")
         if not (0 <= self.max_masked_share <= 1 and -1 < self.min_correlation < 1):
-            raise InputError("max_masked_share must be in [0, 1] and min_correlation in (-1, 1)")
+            raise InputError("surface matching needs a largest masked share in [0, 1] and a "
+                             "least correlation in (-1, 1)")
         if not (self.max_precision_m > 0 and self.height_noise_m > 0
                 and self.error_length_m > 0 and self.min_cells >= 10):
-            raise InputError("max_precision_m, height_noise_m and error_length_m must be > 0 "
-                             "and min_cells >= 10")
+            raise InputError("surface matching needs a precision limit, a reference noise and "
+                             "an error length > 0 m, and at least 10 cells per window")
 
 
 @dataclass(frozen=True)

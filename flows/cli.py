@@ -20,6 +20,7 @@ from flows.commands import pair as pair_command
 from flows.commands import relative as relative_command
 from flows.commands import report as report_command
 from flows.commands import serve as serve_command
+from flows.commands._pair import VERTICAL_HELP, VERTICALS
 
 
 def _add_prepare_reference(sub: argparse._SubParsersAction) -> None:
@@ -57,7 +58,13 @@ def _run_prepare_reference(args: argparse.Namespace) -> int:
 
     params_box = BBox(*args.bbox).expanded(args.margin_deg)
     # check inputs before starting Prefect, so bad input is one clean line
-    find_tiles(args.srtm_dir or BUNDLED_SRTM_DIR, params_box, allow_missing=args.allow_missing_tiles)
+    tiles = find_tiles(args.srtm_dir or BUNDLED_SRTM_DIR, params_box,
+                       allow_missing=args.allow_missing_tiles)
+    from tasks.dem_io import check_srtm_tiles
+
+    check_srtm_tiles(tiles)
+    print(f"heights        {len(tiles)} SRTM tile(s): EGM96 orthometric heights, converted with "
+          "h = H + N")
     if args.geoid is not None:
         from tasks.geoid import read_gtx
         read_gtx(args.geoid)
@@ -87,8 +94,10 @@ def _add_simulate(sub: argparse._SubParsersAction) -> None:
         ),
     )
     p.add_argument("--dem", type=Path, default=None,
-                   help="DEM in EPSG:4326 (GeoTIFF or .hgt), orthometric heights (EGM96); "
-                        "default: the bundled SRTM tile N44E005")
+                   help="DEM in EPSG:4326 (GeoTIFF or .hgt); default: the bundled SRTM tile "
+                        "N44E005")
+    p.add_argument("--dem-vertical", choices=VERTICALS, default="auto",
+                   help=VERTICAL_HELP.replace("REF", "DEM"))
     p.add_argument("--out", type=Path, required=True, help="output folder DIR")
     p.add_argument("--preset", choices=("tiny", "spot", "hrs"), default="tiny",
                    help="tiny: 600x600 px at 40 m (CI); spot: 6000x6000 px at 10 m, "
@@ -117,19 +126,22 @@ def _run_simulate(args: argparse.Namespace) -> int:
         from flows.simulate_scene import BUNDLED_DEM
         dem = BUNDLED_DEM
     check_dem(dem)
+    from tasks.dem_io import dem_datum
+
+    print(f"DEM              {dem}: "
+          f"{dem_datum(dem, args.dem_vertical, what='DEM', option='--dem-vertical').describe()}")
     from flows.simulate_scene import SimulationParams, simulate_scene
 
     summary = simulate_scene(SimulationParams(
         out=args.out, dem=dem, preset=args.preset, seed=args.seed, lens=args.lens,
         jitter=args.jitter, date_change=args.date_change, relief_factor=args.relief_factor,
         bits=args.bits, center=tuple(args.center) if args.center else None,
-        lidar=not args.no_lidar,
+        lidar=not args.no_lidar, dem_vertical=args.dem_vertical,
     ))
     print("\n".join(summary.lines()))
     return 0
 
 
-INFO_VERTICALS = ("auto", "ellipsoidal", "egm96")  # tasks.info.VERTICALS, without importing it
 
 
 def _add_info(sub: argparse._SubParsersAction) -> None:
@@ -162,10 +174,8 @@ def _add_info(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--reference", type=Path, default=None, metavar="REF",
                    help="DEM in EPSG:4326 (GeoTIFF or .hgt): mean terrain height under each "
                         "footprint, corners and view at that height")
-    p.add_argument("--reference-vertical", choices=INFO_VERTICALS, default="auto",
-                   help="heights of REF: egm96 (orthometric, converted with h = H + N), "
-                        "ellipsoidal, or auto (default): .hgt and SRTM-named tiles are egm96, "
-                        "anything else ellipsoidal (as prepare-reference writes)")
+    p.add_argument("--reference-vertical", choices=VERTICALS, default="auto",
+                   help=VERTICAL_HELP)
 
 
 def _run_info(args: argparse.Namespace) -> int:

@@ -80,11 +80,13 @@ def oriented_pair(params: DsmParams) -> OrientedPair:
         outcome = relative_models(
             Path(params.left), Path(params.right), left_model=params.left_model,
             right_model=params.right_model, band=params.band, reference=params.reference,
-            srtm_dir=params.srtm_dir, out_dir=out.parent / f"{out.stem}_relative")
+            reference_vertical=params.reference_vertical, srtm_dir=params.srtm_dir,
+            out_dir=out.parent / f"{out.stem}_relative")
         same = params.reference is not None and outcome.reference is not None and \
             Path(outcome.reference).resolve() == Path(params.reference).resolve()
+        # a reference prepared from SRTM tiles says its datum in its own tag
         return OrientedPair(outcome.left, outcome.right, outcome.reference,
-                            params.reference_vertical if same else "ellipsoidal")
+                            params.reference_vertical if same else "auto")
     from tasks.sensor_io import load_model
 
     left = load_model(params.left, model=params.left_model, band=params.band)
@@ -97,7 +99,7 @@ def oriented_pair(params: DsmParams) -> OrientedPair:
     box = pair_box(left, right, params.height_range_m or (-500.0, 9000.0))
     tiles = locate_tiles(Path(params.srtm_dir), box, True)
     ref = build_reference(tiles, box, out.with_name(out.stem + ".reference.tif"))
-    return OrientedPair(left, right, Path(ref.path), "ellipsoidal")
+    return OrientedPair(left, right, Path(ref.path), "auto")
 
 
 @dataclass(frozen=True, eq=False)

@@ -19,12 +19,12 @@ from pathlib import Path
 from typing import TYPE_CHECKING
 
 from flows._env import one_line_errors
+from flows.commands._pair import VERTICAL_HELP, VERTICALS
 
 if TYPE_CHECKING:
     from core.evaluation import EvaluationReport
     from tasks.evaluate import EvaluationOptions
 
-VERTICALS = ("auto", "ellipsoidal", "egm96")  # tasks.evaluate.VERTICALS, without importing it
 Z_UNITS = ("auto", "m", "ft", "us-ft")  # "auto" and the keys of core.heights.Z_UNITS
 
 
@@ -124,8 +124,7 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
                    help="lidar heights: auto (default) takes the compound CRS's vertical part "
                         "(EGM96 height -> egm96) and assumes ellipsoidal without one")
     p.add_argument("--dem-vertical", choices=VERTICALS, default="auto",
-                   help="DEM heights: auto (default) reads the vertical_datum tag, then a "
-                        "compound CRS; SRTM-named files egm96, anything else ellipsoidal")
+                   help=VERTICAL_HELP.replace("REF", "DEM"))
     p.add_argument("--lidar-crs", default=None, metavar="CRS",
                    help="CRS of the lidar when the file has none or a wrong one (e.g. "
                         "EPSG:32631+5773: UTM 31N with EGM96 heights)")

@@ -12,7 +12,7 @@ from __future__ import annotations
 
 import json
 import shutil
-from dataclasses import dataclass, field, replace
+from dataclasses import asdict, dataclass, field, replace
 from pathlib import Path
 from typing import Any
 
@@ -94,7 +94,7 @@ def orient_flow(params: OrientParams) -> OrientOutcome:
     from core.surface_match import relief_sufficiency
     from flows.dsm import OrientedPair, match_pair
     from flows.relative import relative_models
-    from tasks.dem_io import read_reference, resolve_vertical
+    from tasks.dem_io import dem_datum, read_reference
     from tasks.dense import DenseConfig, grid_dem_cog, pair_box, retriangulate_tiles
     from tasks.orient import check_point_report, orient_absolute, read_checkpoints, write_gcps
     from tasks.raster_io import atomic_write_json, json_ready
@@ -108,11 +108,12 @@ def orient_flow(params: OrientParams) -> OrientOutcome:
     out.mkdir(parents=True, exist_ok=True)
     rel = relative_models(params.left, params.right, left_model=params.left_model,
                           right_model=params.right_model, band=params.band,
-                          reference=params.reference, srtm_dir=params.srtm_dir,
-                          out_dir=out / "relative")
-    vertical = (resolve_vertical(Path(params.reference), params.reference_vertical)
-                if params.reference is not None else "ellipsoidal")
-    pair = OrientedPair(rel.left, rel.right, rel.reference, vertical)
+                          reference=params.reference,
+                          reference_vertical=params.reference_vertical,
+                          srtm_dir=params.srtm_dir, out_dir=out / "relative")
+    # a reference prepared from SRTM tiles says its datum in its own tag
+    datum = dem_datum(rel.reference, params.reference_vertical if params.reference else "auto")
+    pair = OrientedPair(rel.left, rel.right, rel.reference, datum.datum)
     dense_cfg = DenseConfig(num_workers=params.workers, progress=params.progress)
     matched = match_pair(pair, out / "relative_dem.tif", dense_cfg)
     dem = grid_dem_cog(matched.plan, matched.stats, matched.work, out / "relative_dem.tif",
@@ -123,7 +124,7 @@ def orient_flow(params: OrientParams) -> OrientOutcome:
     cfg = params.surface
     margin = (cfg.shift_max_arcsec + 5.0) / 3600.0
     box = pair_box(rel.left, rel.right, (dem.h_min_m, dem.h_max_m)).expanded(margin)
-    reference = read_reference(rel.reference, box, vertical)
+    reference = read_reference(rel.reference, box, datum.datum)
     ties = TieGround.from_tiepoints_json(rel.rel_json.with_suffix(".tiepoints.json"))
     windows = match_surfaces(out / "relative_dem.tif", ties, reference, cfg, params.spacing_m,
                              out=out / "windows.json", progress=params.progress)
@@ -144,7 +145,9 @@ def orient_flow(params: OrientParams) -> OrientOutcome:
         "format": FORMAT, "version": 1,
         "relative": json.loads(rel.rel_json.read_text()),
         "relative_dem": dem.to_dict(),
-        "surface_matching": {"windows": len(windows.matches), "counts": windows.counts(),
+        "surface_matching": {"settings": {**asdict(cfg), "spacing_m": params.spacing_m,
+                                          "min_windows": params.min_windows},
+                             "windows": len(windows.matches), "counts": windows.counts(),
                              "qualified": verdict.n_qualified, "relief": verdict.to_dict(),
                              "windows_file": "windows.json"},
         "gcps": {**absolute.gcp_summary(gcps), "file": "gcps.json"},
@@ -152,6 +155,9 @@ def orient_flow(params: OrientParams) -> OrientOutcome:
                      "self_calibration": (absolute.self_calibration.to_dict()
                                           if absolute.self_calibration else None)},
         "models": {"left": "left.json", "right": "right.json"},
+        "reference": {"path": str(rel.reference), **datum.to_dict(),
+                      "given": None if params.reference is None else str(params.reference),
+                      "srtm_dir": None if params.srtm_dir is None else str(params.srtm_dir)},
     }
     final = {}
     for vert, name in (("ellipsoidal", "dsm.tif"), ("egm96", "dsm_egm96.tif")):

@@ -55,14 +55,15 @@ def relative_flow(params: RelativeParams) -> RelativeOutcome:
     from dataclasses import replace
 
     from core.matching.tiepoints import default_search_radius_m, ground_sampling_m
+    from tasks.dem_io import dem_datum, read_reference
     from tasks.dense import scene_height_range
     from tasks.reference import build_reference, locate_tiles
     from tasks.relative import (
+        ReferenceUsed,
         check_overlap,
         load_pair,
         orient_relative,
         pair_box,
-        read_reference_dem,
         reference_box_heights,
         scene_height_m,
     )
@@ -78,11 +79,12 @@ def relative_flow(params: RelativeParams) -> RelativeOutcome:
         tiles = locate_tiles(Path(params.srtm_dir), box, True)
         reference_path = Path(build_reference(tiles, box, out.with_name(out.stem +
                                                                         ".reference.tif")).path)
-        vertical = "ellipsoidal"
-    dem = None
+        vertical = "auto"  # its own tag says ellipsoidal
+    dem, used = None, None
     if reference_path is not None:
-        dem = read_reference_dem(Path(reference_path), vertical,
-                                 pair_box(left, right, first_range))
+        used = ReferenceUsed(Path(reference_path), dem_datum(reference_path, vertical),
+                             None if params.reference is not None else params.srtm_dir)
+        dem = read_reference(used.path, pair_box(left, right, first_range), used.datum.datum)
         h_range = reference_box_heights(dem)
     else:
         h_range = scene_height_range(left, right, params.height_range_m, None)
@@ -98,7 +100,7 @@ def relative_flow(params: RelativeParams) -> RelativeOutcome:
                            right.model, dem, cfg, h_range_m=h_range)
     products = orient_relative(left, right, ties, out, dem, h_range,
                                RelativeConfig(corrections=params.corrections),
-                               params.reference_sigma_m)
+                               params.reference_sigma_m, used)
     for line in products.lines():
         print(line)
     return RelativeOutcome(left, replace(right, model=products.right_model), reference_path,
@@ -108,12 +110,13 @@ def relative_flow(params: RelativeParams) -> RelativeOutcome:
 @flow(name="relative-models")
 def relative_models(left: Path, right: Path, *, left_model: Path | None = None,
                     right_model: Path | None = None, band: int | None = None,
-                    reference: Path | None = None, srtm_dir: Path | None = None,
-                    out_dir: Path) -> RelativeOutcome:
+                    reference: Path | None = None, reference_vertical: str = "auto",
+                    srtm_dir: Path | None = None, out_dir: Path) -> RelativeOutcome:
     """The pair relatively oriented (for the steps that follow, e.g. ``gcpfree dsm``); writes
     ``out_dir/rel.json`` and its tie points."""
     out_dir = Path(out_dir)
     out_dir.mkdir(parents=True, exist_ok=True)
     return relative_flow(RelativeParams(
         left=Path(left), right=Path(right), out=out_dir / "rel.json", left_model=left_model,
-        right_model=right_model, band=band, reference=reference, srtm_dir=srtm_dir))
+        right_model=right_model, band=band, reference=reference,
+        reference_vertical=reference_vertical, srtm_dir=srtm_dir))

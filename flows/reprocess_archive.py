@@ -80,7 +80,7 @@ def _reason(exc: BaseException) -> str:
 
 @task(name="orient-pair-of-archive", cache_policy=NO_CACHE)  # no retries: deterministic
 def process_pair(entry: PairEntry, out: Path, srtm_dir: Path | None, reference: Path | None,
-                 self_calibrate: bool = False) -> PairResult:
+                 self_calibrate: bool = False, reference_vertical: str = "auto") -> PairResult:
     """One pair through ``orient-pair`` (single-threaded: the archive's parallelism is over
     pairs). Any failure becomes the pair's reason instead of an exception."""
     from flows._env import one_line_errors
@@ -93,6 +93,7 @@ def process_pair(entry: PairEntry, out: Path, srtm_dir: Path | None, reference: 
             orient_pair_flow(PairParams(
                 left=entry.left, right=entry.right, out=Path(out), left_model=entry.left_model,
                 right_model=entry.right_model, srtm_dir=srtm_dir, reference=reference,
+                reference_vertical=reference_vertical,
                 lidar=entry.lidar, landcover=entry.landcover, checkpoints=entry.checkpoints,
                 self_calibrate=self_calibrate, workers=1, progress=False, pair_id=entry.id))
     except Exception as exc:  # noqa: BLE001 - a failing pair never stops the others
@@ -124,7 +125,8 @@ def _dashboard_link() -> str | None:
 @flow(name="archive-pairs")
 def run_pairs(entries: list[PairEntry], root: Path, srtm_dir: Path | None = None,
               reference: Path | None = None, self_calibrate: bool = False,
-              progress: bool = False) -> tuple[list[PairResult], str | None]:
+              progress: bool = False, reference_vertical: str = "auto"
+              ) -> tuple[list[PairResult], str | None]:
     """The pairs submitted to the flow's Dask task runner; (results in entry order, the Dask
     dashboard link)."""
     from prefect.futures import as_completed
@@ -136,7 +138,8 @@ def run_pairs(entries: list[PairEntry], root: Path, srtm_dir: Path | None = None
         print(f"Dask dashboard        {link}", flush=True)
         create_link_artifact(link, link_text="Dask dashboard", key="dask-dashboard",
                              description="the Dask cluster running the pairs")
-    futures = {process_pair.submit(e, Path(root) / e.id, srtm_dir, reference, self_calibrate): e
+    futures = {process_pair.submit(e, Path(root) / e.id, srtm_dir, reference, self_calibrate,
+                                   reference_vertical): e
                for e in entries}
     results: dict[str, PairResult] = {}
     with _PairProgress(len(entries), progress) as bar:
@@ -201,11 +204,13 @@ def reprocess_archive(catalog: Path, out: Path, srtm_dir: Path | None = None,
                       reference: Path | None = None, dask_address: str | None = None,
                       workers: int | None = None, processes: bool = True,
                       dashboard_address: str = DEFAULT_DASHBOARD, self_calibrate: bool = False,
-                      progress: bool = False) -> ArchiveOutcome:
+                      progress: bool = False, reference_vertical: str = "auto"
+                      ) -> ArchiveOutcome:
     """Catalog -> skip complete pairs -> the rest on Dask -> summary.csv/json + artifacts.
 
     ``catalog``: a folder of pair folders or a CSV/JSON list (``tasks.catalog``); ``out``: ROOT,
-    one folder per pair id. ``srtm_dir`` or ``reference``: the ground every pair is oriented to.
+    one folder per pair id. ``srtm_dir`` or ``reference`` (its heights ``reference_vertical``):
+    the ground every pair is oriented to.
     ``dask_address``: an existing scheduler (``tcp://HOST:PORT``), else a LocalCluster of
     ``workers`` (default: one per core, at most one per pair) single-threaded workers, in
     processes unless ``processes`` is False.
@@ -228,7 +233,8 @@ def reprocess_archive(catalog: Path, out: Path, srtm_dir: Path | None = None,
         n = min(workers or os.cpu_count() or 1, len(todo))
         runner = dask_task_runner(dask_address, n, processes, dashboard_address)
         found, link = run_pairs.with_options(task_runner=runner)(
-            todo, root, srtm_dir, reference, self_calibrate, progress)
+            todo, root, srtm_dir, reference, self_calibrate, progress,
+            reference_vertical=reference_vertical)
         results = {r.id: r for r in found}
     rows = tuple(
         pair_row(e.id, "skipped", root / e.id) if e.id in done_before

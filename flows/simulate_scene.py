@@ -40,6 +40,7 @@ class SimulationParams:
     bits: int = 8
     center: tuple[float, float] | None = None
     lidar: bool = True
+    dem_vertical: str = "auto"
 
 
 @flow(name="simulate-scene", log_prints=True)
@@ -48,7 +49,8 @@ def simulate_scene(params: SimulationParams) -> SimulationSummary:
     out = Path(params.out)
     errors = ErrorConfig(lens=params.lens, jitter=params.jitter)
     scene = define_scene(Path(params.dem), out, params.preset, params.seed, errors,
-                         params.relief_factor, params.bits, params.date_change, params.center)
+                         params.relief_factor, params.bits, params.date_change, params.center,
+                         params.dem_vertical)
     write_spot_metadata(scene, out)
     scene = build_truth_surface(scene, out)
     for i in range(len(scene.image_names)):

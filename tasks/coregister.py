@@ -1,19 +1,29 @@
 """``gcpfree coregister``: read two DEM rasters, align one onto the other (Nuth & Kaab), write
-the translation. The maths is :func:`core.coregister.nuth_kaab`."""
+the translation. The maths is :func:`core.coregister.nuth_kaab`.
+
+Both DEMs' vertical datums are decided by the one rule (:func:`tasks.dem_io.dem_datum`); when
+they differ, the DEM's heights are brought to the reference's datum with the EGM96 geoid
+(``h = H + N``) before the fit, so ``shift_up_m`` is a shift, not the geoid undulation.
+"""
 
 from __future__ import annotations
 
 import json
 import warnings
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
+import pyproj
 import rasterio
 from rasterio.errors import NotGeoreferencedWarning, RasterioIOError
 from rasterio.warp import Resampling, reproject
 
 from core.coregister import CoregConfig, CoregResult, Grid, nuth_kaab
 from core.errors import InputError
+from core.heights import DatumDecision
+from tasks.dem_io import dem_datum
+from tasks.geoid import load_geoid
 from tasks.raster_io import atomic_write_text
 from tasks.srtm import SRTM_VOID
 
@@ -58,17 +68,45 @@ def read_grid(path: str | Path, crs: object | None = None,
     return grid, src_crs
 
 
+def datums(reference: str | Path, dem: str | Path, reference_vertical: str = "auto",
+           dem_vertical: str = "auto") -> tuple[DatumDecision, DatumDecision]:
+    """The vertical datums of the reference and of the DEM (one-line InputError when one
+    cannot be told)."""
+    return (dem_datum(reference, reference_vertical),
+            dem_datum(dem, dem_vertical, what="DEM", option="--dem-vertical"))
+
+
+def _to_datum(grid: Grid, crs: object, src: str, dst: str) -> Grid:
+    """The grid's heights brought from datum ``src`` to ``dst`` with the EGM96 geoid."""
+    if src == dst:
+        return grid
+    x, y = grid.nodes()
+    if not grid.geographic:
+        t = pyproj.Transformer.from_crs(pyproj.CRS.from_wkt(crs.to_wkt()), 4326,  # type: ignore[attr-defined]
+                                        always_xy=True)
+        x, y = t.transform(x, y)
+    n_m = load_geoid().undulation_m(x, y)
+    z = grid.z_m + n_m if src == "egm96" else grid.z_m - n_m
+    return replace(grid, z_m=z)
+
+
 def coregister(reference: str | Path, dem: str | Path, out: str | Path | None = None,
-               config: CoregConfig = CoregConfig()) -> CoregResult:
-    """The translation that, added to ``dem``'s coordinates, aligns it with ``reference``;
-    written as JSON to ``out`` when given."""
+               config: CoregConfig = CoregConfig(), reference_vertical: str = "auto",
+               dem_vertical: str = "auto") -> CoregResult:
+    """The translation that, added to ``dem``'s coordinates, aligns it with ``reference``
+    (heights compared in the reference's vertical datum); written as JSON to ``out`` when
+    given."""
+    ref_datum, dem_d = datums(reference, dem, reference_vertical, dem_vertical)
     ref, crs = read_grid(reference)
     with _open(Path(reference)) as like:
-        grid, _ = read_grid(dem, like=like)
+        grid, grid_crs = read_grid(dem, like=like)
+    grid = _to_datum(grid, grid_crs, dem_d.datum, ref_datum.datum)
     result = nuth_kaab(ref, grid, config)
     if out is not None:
         doc = {"format": "gcpfree.coregister", "version": 1, "reference": str(reference),
-               "dem": str(dem), "crs": str(crs),
+               "reference_vertical": ref_datum.to_dict(), "dem": str(dem),
+               "dem_vertical": dem_d.to_dict(), "heights_compared_in": ref_datum.datum,
+               "crs": str(crs),
                "convention": "adding the shift to the DEM's coordinates aligns it with the "
                              "reference: ref(x + dx, y + dy) = dem(x, y) + dz",
                **result.to_dict()}

@@ -11,6 +11,7 @@ import warnings
 from pathlib import Path
 
 import numpy as np
+import pyproj
 import rasterio
 from rasterio.errors import NotGeoreferencedWarning, RasterioIOError, WindowError
 from rasterio.windows import Window, from_bounds
@@ -18,22 +19,67 @@ from rasterio.windows import Window, from_bounds
 from core.dem import GeoDEM
 from core.errors import CoverageError, InputError
 from core.geodesy import BBox
+from core.heights import VERTICAL_CHOICES, DatumDecision, decide_datum
+from tasks.evaluation_crs import split_crs
 from tasks.geoid import load_geoid
-from tasks.srtm import SRTM_VOID, parse_tile_name
+from tasks.srtm import SRTM_VOID, SrtmTile, parse_tile_name
 
-VERTICALS = ("auto", "ellipsoidal", "egm96")
+VERTICALS = VERTICAL_CHOICES
 
 
-def resolve_vertical(path: Path, vertical: str) -> str:
-    """``egm96`` or ``ellipsoidal``. ``auto``: a ``.hgt`` or a file named like an SRTM tile
-    (``N44E005...``, ``n44_e005_...``) holds EGM96 orthometric heights; anything else is taken
-    as ellipsoidal, like the outputs of ``gcpfree prepare-reference``."""
-    if vertical not in VERTICALS:
-        raise InputError(f"reference vertical {vertical!r} unknown; use one of {VERTICALS}")
-    if vertical != "auto":
-        return vertical
-    srtm = path.suffix.lower() == ".hgt" or parse_tile_name(path.name) is not None
-    return "egm96" if srtm else "ellipsoidal"
+def srtm_name(path: Path) -> str | None:
+    """The file's name when it is an SRTM tile by its name (a ``.hgt``, or named after its
+    tile: ``N44E005.tif``, ``n44_e005_1arc_v3.tif``), else None."""
+    if path.suffix.lower() == ".hgt" or parse_tile_name(path.name) is not None:
+        return path.name
+    return None
+
+
+def dem_datum(path: str | Path, given: str = "auto", *, what: str = "reference DEM",
+              option: str = "--reference-vertical") -> DatumDecision:
+    """The vertical datum of a DEM file, by the one rule of :func:`core.heights.decide_datum`
+    (the option given, the ``vertical_datum`` tag, the CRS's vertical part, an SRTM name, else
+    refused). Every command that reads a DEM decides with this function; ``what`` and
+    ``option`` name the file and the command-line option in the messages.
+
+    Raises:
+        InputError: the file cannot be read, or its datum cannot be told or converted.
+    """
+    path = Path(path)
+    label = f"{what} {path}"
+    if given != "auto":  # the option decides: no need to open the file
+        return decide_datum(label, option, given=given)
+    if not path.is_file():
+        raise InputError(f"{label} does not exist; give a GeoTIFF or .hgt file")
+    try:
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore", NotGeoreferencedWarning)
+            with rasterio.open(path) as src:
+                tags = {k.lower(): v for k, v in src.tags().items()}
+                crs = src.crs
+    except RasterioIOError as exc:
+        raise InputError(f"cannot read {label}: {exc}; give a GeoTIFF or .hgt file") from exc
+    vert = None
+    if crs is not None:
+        try:
+            _, vert = split_crs(pyproj.CRS.from_wkt(crs.to_wkt()))
+        except InputError as exc:
+            raise InputError(f"{label}: {exc}") from None
+    return decide_datum(label, option, given=given, tag=tags.get("vertical_datum"),
+                        crs_datum=None if vert is None else vert.datum,
+                        crs_vertical_name=None if vert is None else vert.datum_name,
+                        srtm_name=srtm_name(path))
+
+
+def check_srtm_tiles(tiles: list[SrtmTile]) -> None:
+    """SRTM tiles are converted with h = H + N: refuse a tile whose own tag or CRS says its
+    heights are ellipsoidal (the one rule, :func:`dem_datum`)."""
+    for t in tiles:
+        decision = dem_datum(t.path, what="SRTM tile", option="--reference-vertical")
+        if decision.datum != "egm96":
+            raise InputError(f"SRTM tile {t.path} holds {decision.datum} heights "
+                             f"({decision.source}); prepare-reference converts EGM96 tiles: "
+                             "give the tiles as distributed, or this DEM as --reference")
 
 
 def check_reference(path: str | Path) -> None:

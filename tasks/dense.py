@@ -59,7 +59,7 @@ from core.sensors.base import SensorModel
 from core.sensors.rpc import RPCModel
 from core.sensors.viewing import point_geometry
 from tasks.crs import Projection
-from tasks.dem_io import read_reference, resolve_vertical
+from tasks.dem_io import dem_datum, read_reference
 from tasks.dense_blocks import (
     check_roi,
     dense_block,
@@ -136,6 +136,7 @@ class DensePlan:
     gsd_m: float
     h_range_m: tuple[float, float]
     reference: str | None
+    reference_vertical: dict[str, str] | None = None  # DatumDecision.to_dict()
 
 
 @dataclass(frozen=True)
@@ -166,6 +167,7 @@ class DemSummary:
     pointing_dy_px: tuple[float, float]
     n_disp_range: tuple[int, int]
     tiles: tuple[dict[str, Any], ...] = ()
+    reference: dict[str, str] | None = None  # the reference DEM's path and vertical datum
 
     def to_dict(self) -> dict[str, Any]:
         return {"format": "gcpfree.dem", "version": 1, **asdict(self)}
@@ -228,13 +230,13 @@ def pair_box(left: LoadedModel, right: LoadedModel, h_range_m: tuple[float, floa
                 float(lat.max())).expanded(0.01)
 
 
-def _reference_dem(reference: Path, vertical: str, model: SensorModel, roi: Box,
+def _reference_dem(reference: Path, datum: str, model: SensorModel, roi: Box,
                    h_range: tuple[float, float]) -> GeoDEM:
     border = sample_terrain(model, roi, None, h_range, step_px=max(roi[2] - roi[0],
                                                                    roi[3] - roi[1]) / 8.0)
     lon, lat = model.localize(border.col, border.row, border.h_m)
     box = BBox(float(lon.min()), float(lat.min()), float(lon.max()), float(lat.max()))
-    dem = read_reference(reference, box.expanded(0.005), resolve_vertical(reference, vertical))
+    dem = read_reference(reference, box.expanded(0.005), datum)
     if not np.isfinite(dem.h_m).any():
         raise CoverageError(f"reference DEM {reference} has no height over the region of "
                             "interest; give a DEM covering the scene")
@@ -254,8 +256,9 @@ def plan_dense(left: LoadedModel, right: LoadedModel, roi: tuple[int, int, int, 
     """
     box = check_roi(roi, left.size)
     lo, hi = map(float, h_range_m)
-    dem = (_reference_dem(Path(reference), reference_vertical, left.model, box, (lo, hi))
-           if reference is not None else None)
+    decision = dem_datum(reference, reference_vertical) if reference is not None else None
+    dem = (_reference_dem(Path(reference), decision.datum, left.model, box, (lo, hi))
+           if decision is not None else None)
     if dem is not None:
         lo, hi = dem.height_range_m()
     pad = int(cfg.matching.pointing_max_px) + 3 if cfg.matching.pointing_correction else 3
@@ -281,7 +284,8 @@ def plan_dense(left: LoadedModel, right: LoadedModel, roi: tuple[int, int, int, 
     res = cfg.resolution_m if cfg.resolution_m is not None else float(f"{2.0 * gsd:.2g}")
     return DensePlan(tuple(plans), len(boxes), box, epsg,
                      (float(round(x[0], -3)), float(round(y[0], -3))), float(res), gsd, (lo, hi),
-                     str(reference) if reference is not None else None)
+                     str(reference) if reference is not None else None,
+                     None if decision is None else decision.to_dict())
 
 
 # ---------------------------------------------------------------------------- 2. match
@@ -429,4 +433,6 @@ def _summary(plan: DensePlan, stats: tuple[TileStats, ...], spec: GridSpec, out:
         y_residual_max_px=max(s.y_residual_max_px for s in stats),
         pointing_dy_px=(float(min(dys)), float(max(dys))),
         n_disp_range=(min(s.n_disp for s in stats), max(s.n_disp for s in stats)),
-        tiles=tuple(s.to_dict() for s in stats))
+        tiles=tuple(s.to_dict() for s in stats),
+        reference=(None if plan.reference is None else
+                   {"path": plan.reference, **(plan.reference_vertical or {})}))

@@ -33,8 +33,8 @@ from core.evaluation import (
 from core.grid_points import affine_nodes, inside_grid, sample_nearest, window_groups
 from core.heights import Z_UNITS, HeightFrame, unit_key
 from core.jsonio import parse_json
-from tasks.dem_io import resolve_vertical
-from tasks.evaluation_crs import crs_info, existing_file, split_crs, unsupported_datum
+from tasks.dem_io import dem_datum
+from tasks.evaluation_crs import crs_info, existing_file, split_crs
 
 #: DEM windows are read at most this many cells on a side (8 MB of float64)
 WINDOW_CELLS = 1024
@@ -79,25 +79,8 @@ def inspect_dem(path: Path, vertical: str = "auto") -> tuple[RasterSource, DemIn
         bounds = tuple(src.bounds)
         width, height = src.width, src.height
     _, vert = split_crs(full)
-    if vertical != "auto":
-        datum, v_src = vertical, "given"
-    elif "vertical_datum" in tags:
-        text = tags["vertical_datum"]
-        v_src = f"tag vertical_datum={text!r}"
-        if "ellipsoid" in text.lower():
-            datum = "ellipsoidal"
-        elif "egm96" in text.lower().replace(" ", ""):
-            datum = "egm96"
-        else:
-            raise unsupported_datum(f"DEM {path}", text, "--dem-vertical")
-    elif vert is not None:
-        if vert.datum is None:
-            raise unsupported_datum(f"DEM {path}", vert.datum_name, "--dem-vertical")
-        datum, v_src = vert.datum, f"CRS: {vert.datum_name}"
-    else:
-        datum = resolve_vertical(path, "auto")
-        v_src = ("SRTM file name" if datum == "egm96" else
-                 "assumed: no vertical_datum tag or vertical CRS")
+    decision = dem_datum(path, vertical, what="DEM", option="--dem-vertical")
+    datum, v_src = decision.datum, decision.source
     if vert is not None:
         z_factor, z_name, z_src = vert.z_factor_m, vert.z_unit, "vertical CRS"
     else:

@@ -26,6 +26,7 @@ from rasterio.errors import NotGeoreferencedWarning
 
 from core.errors import GeometryError, InputError
 from core.geodesy import BBox
+from core.heights import DatumDecision
 from core.sensors.base import footprint_lonlat
 from core.sensors.rpc import RPCModel
 from core.sensors.spot import frame_errors_m
@@ -39,7 +40,7 @@ from core.sensors.viewing import (
     pair_geometry,
     scene_geometry,
 )
-from tasks.dem_io import VERTICALS, check_reference, read_reference, resolve_vertical
+from tasks.dem_io import VERTICALS, check_reference, dem_datum, read_reference
 from tasks.raster_io import atomic_write_text
 from tasks.sensor_io import LoadedModel, load_model
 
@@ -59,6 +60,7 @@ class ReferenceHeight:
 
     path: str
     vertical: str
+    vertical_source: str
     terrain: TerrainHeight
     geometry: SceneGeometry
 
@@ -116,7 +118,8 @@ class ImageInfo:
         if self.reference is not None:
             ref = self.reference
             d["reference"] = {
-                "path": ref.path, "vertical": ref.vertical, "mean_h_m": ref.terrain.mean_h_m,
+                "path": ref.path, "vertical": ref.vertical,
+                "vertical_source": ref.vertical_source, "mean_h_m": ref.terrain.mean_h_m,
                 "covered_pct": ref.terrain.covered_pct,
                 "corners": _corners(ref.geometry.corners),
             }
@@ -156,10 +159,11 @@ class ImageInfo:
                 "(as the producer computes them)")))
         if self.reference is not None:
             ref = self.reference
-            datum = "EGM96 heights, h = H + N" if ref.vertical == "egm96" else "ellipsoidal"
-            out.append(_line("reference", (
-                f"{ref.path} ({datum}): mean h {ref.terrain.mean_h_m:.1f} m under the "
-                f"footprint ({ref.terrain.covered_pct:.0f} % of samples)")))
+            out.append(_line("reference", f"{ref.path}: " + DatumDecision(
+                ref.vertical, ref.vertical_source).describe()))
+            out.append(_line("", (
+                f"mean h {ref.terrain.mean_h_m:.1f} m (ellipsoidal) under the footprint "
+                f"({ref.terrain.covered_pct:.0f} % of samples)")))
             out += _corner_lines(ref.geometry)
         return out
 
@@ -269,11 +273,11 @@ def describe_image(path: str | Path, *, model: str | Path | None = None, band: i
     ref = None
     if reference is not None:
         reference = Path(reference)
-        datum = resolve_vertical(reference, vertical)
-        dem = read_reference(reference, _reference_box(lm, h_view), datum)
+        decision = dem_datum(reference, vertical)
+        dem = read_reference(reference, _reference_box(lm, h_view), decision.datum)
         terrain = footprint_mean_height_m(lm.model, n_cols, n_rows, dem, h0_m=h_view)
         h_view, why = terrain.mean_h_m, "the reference's mean height"
-        ref = ReferenceHeight(str(reference), datum, terrain,
+        ref = ReferenceHeight(str(reference), decision.datum, decision.source, terrain,
                               scene_geometry(lm.model, n_cols, n_rows, h_view))
     view = at_zero if h_view == 0.0 else (
         ref.geometry if ref is not None else scene_geometry(lm.model, n_cols, n_rows, h_view))
@@ -302,6 +306,7 @@ def gather_info(path: str | Path, path2: str | Path | None = None, *,
         raise InputError(f"band {band}: BAND_INDEX starts at 1")
     if reference is not None:
         check_reference(reference)
+        dem_datum(reference, vertical)  # refused in one line before any model is read
     first = describe_image(path, model=model, band=band, reference=reference, vertical=vertical)
     if path2 is None:
         return InfoReport((first,))

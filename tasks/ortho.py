@@ -31,6 +31,7 @@ from prefect.cache_policies import NO_CACHE
 
 from core.errors import CoverageError, InputError
 from core.geodesy import BBox, utm_epsg
+from core.heights import DatumDecision
 from core.matching.grid import GridSpec
 from core.ortho import OrthoConfig, resample, source_window, tile_geometry, to_dtype
 from core.sensors.base import footprint_lonlat, ray_ground_move_per_m
@@ -98,6 +99,7 @@ class OrthoSummary:
     model: str
     dem: str
     dem_vertical: str
+    dem_vertical_source: str
     epsg: int
     resolution_m: float
     width: int
@@ -122,9 +124,11 @@ class OrthoSummary:
              f"nodata {self.nodata})"),
             (f"coverage       {self.valid_pct:.1f} % of the grid has a value; the DEM covers "
              f"{self.coverage_pct:.1f} % of the image footprint"),
-            (f"geometry       DEM {self.dem} ({self.dem_vertical}), heights "
-             f"{self.h_range_m[0]:.0f} .. {self.h_range_m[1]:.0f} m; model interpolated "
-             f"within {self.max_error_px:.4f} px (lattice down to {self.min_step_px} cells)"),
+            (f"DEM            {self.dem}: "
+             + DatumDecision(self.dem_vertical, self.dem_vertical_source).describe()),
+            (f"geometry       ellipsoidal heights {self.h_range_m[0]:.0f} .. "
+             f"{self.h_range_m[1]:.0f} m; model interpolated within {self.max_error_px:.4f} px "
+             f"(lattice down to {self.min_step_px} cells)"),
         ]
         if self.occlusion_path is not None:
             out.append(f"occlusion      {self.occlusion_path} ({self.occluded_pct:.2f} % of the "
@@ -342,7 +346,7 @@ def orthorectify(plan: OrthoPlan, out: Path, config: OrthoConfig = DEFAULT_CONFI
         path=str(out), occlusion_path=str(occlusion_path) if occlusion_path else None,
         json_path=str(out.with_suffix(".json")), image=plan.image,
         model=str(plan.model.source), dem=plan.dem.path, dem_vertical=plan.dem.vertical,
-        epsg=plan.epsg, resolution_m=g.res_m, width=g.n_cols, height=g.n_rows,
+        dem_vertical_source=plan.dem.vertical_source, epsg=plan.epsg, resolution_m=g.res_m, width=g.n_cols, height=g.n_rows,
         resampling=config.resampling, dtype=dtype.name,
         nodata=None if plan.nodata is None or math.isnan(plan.nodata) else plan.nodata,
         valid_pct=100.0 * n_valid / (g.n_rows * g.n_cols),

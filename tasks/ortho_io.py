@@ -24,19 +24,20 @@ from core.errors import CoverageError, InputError
 from core.geodesy import BBox
 from core.ortho import SourceWindow, TileDEM
 from tasks.crs import Projection
-from tasks.dem_io import read_reference, resolve_vertical
+from tasks.dem_io import VERTICALS, dem_datum, read_reference
 from tasks.geoid import load_geoid
 from tasks.raster_io import open_image
 
-DEM_VERTICALS = ("auto", "ellipsoidal", "egm96")
+DEM_VERTICALS = VERTICALS
 
 
 @dataclass(frozen=True)
 class DemSource:
     """A DEM as the ortho reads it: ``geographic`` (lon/lat, read as :class:`GeoDEM` through
     :func:`tasks.dem_io.read_reference`) or projected (EPSG ``epsg``, square cells of
-    ``res``); ``vertical`` ``"ellipsoidal"`` or ``"egm96"``; ``bounds`` (left, bottom, right,
-    top) in its own CRS; ``nodata`` its nodata value."""
+    ``res``); ``vertical`` ``"ellipsoidal"`` or ``"egm96"`` and ``vertical_source`` what
+    decided it (:func:`tasks.dem_io.dem_datum`); ``bounds`` (left, bottom, right, top) in its
+    own CRS; ``nodata`` its nodata value."""
 
     path: str
     geographic: bool
@@ -45,32 +46,19 @@ class DemSource:
     bounds: tuple[float, float, float, float]
     res: float
     nodata: float | None
+    vertical_source: str = "given"
 
     @property
     def crs(self) -> str:
         return f"EPSG:{self.epsg}"
 
 
-def _vertical_from_file(tags: dict[str, str], crs: pyproj.CRS) -> str | None:
-    """``ellipsoidal``/``egm96`` from the file's ``vertical_datum`` tag or compound CRS."""
-    tag = str(tags.get("vertical_datum", "")).lower()
-    if "wgs84 ellipsoid" in tag or tag.startswith("ellipsoid"):
-        return "ellipsoidal"
-    if "egm96" in tag:
-        return "egm96"
-    if (crs.is_compound and len(crs.sub_crs_list) > 1
-            and "egm96" in crs.sub_crs_list[1].name.lower()):
-        return "egm96"
-    return None
-
-
 def describe_dem(path: str | Path, vertical: str = "auto") -> DemSource:
     """Open a DEM and tell how to read it; one-line InputError when it cannot be used.
 
-    ``vertical`` ``auto``: the file's ``vertical_datum`` tag (gcpfree writes one), else its
-    compound CRS, else for a lon/lat DEM the SRTM rule of :func:`tasks.dem_io.resolve_vertical`
-    (``.hgt`` and SRTM-named tiles EGM96, others ellipsoidal); a projected DEM without any of
-    these needs the datum given.
+    ``vertical`` ``auto``: the one rule of :func:`tasks.dem_io.dem_datum` (the file's
+    ``vertical_datum`` tag, its CRS's vertical part, an SRTM name, else refused: give
+    ``--dem-vertical``).
     """
     path = Path(path)
     if vertical not in DEM_VERTICALS:
@@ -79,7 +67,7 @@ def describe_dem(path: str | Path, vertical: str = "auto") -> DemSource:
         raise InputError(f"DEM {path} does not exist; give a GeoTIFF or .hgt file")
     try:
         with rasterio.open(path) as src:
-            crs_r, t, tags, nodata, b = src.crs, src.transform, src.tags(), src.nodata, src.bounds
+            crs_r, t, nodata, b = src.crs, src.transform, src.nodata, src.bounds
     except RasterioIOError as exc:
         raise InputError(f"cannot read DEM {path}: {exc}; give a GeoTIFF or .hgt file") from exc
     if crs_r is None:
@@ -88,10 +76,10 @@ def describe_dem(path: str | Path, vertical: str = "auto") -> DemSource:
         raise InputError(f"DEM {path} is rotated; warp it north-up (gdalwarp) first")
     crs = pyproj.CRS.from_wkt(crs_r.to_wkt())
     horizontal = crs.sub_crs_list[0] if crs.is_compound else crs
-    found = _vertical_from_file(tags, crs)
+    decision = dem_datum(path, vertical, what="DEM", option="--dem-vertical")
     if horizontal.is_geographic:
-        datum = vertical if vertical != "auto" else found or resolve_vertical(path, "auto")
-        return DemSource(str(path), True, 4326, datum, tuple(b), abs(t.a), nodata)
+        return DemSource(str(path), True, 4326, decision.datum, tuple(b), abs(t.a), nodata,
+                         decision.source)
     epsg = horizontal.to_epsg()
     if epsg is None:
         raise InputError(f"DEM {path}: its CRS has no EPSG code; warp it to a UTM zone or "
@@ -102,11 +90,8 @@ def describe_dem(path: str | Path, vertical: str = "auto") -> DemSource:
     if horizontal.axis_info and horizontal.axis_info[0].unit_name not in ("metre", "meter"):
         raise InputError(f"DEM {path} is in {horizontal.axis_info[0].unit_name}s; warp it to a "
                          "CRS in metres (UTM) or EPSG:4326")
-    datum = vertical if vertical != "auto" else found
-    if datum is None:
-        raise InputError(f"DEM {path} does not say whether its heights are ellipsoidal or "
-                         "EGM96 (no vertical_datum tag); give --dem-vertical")
-    return DemSource(str(path), False, int(epsg), datum, tuple(b), abs(t.a), nodata)
+    return DemSource(str(path), False, int(epsg), decision.datum, tuple(b), abs(t.a), nodata,
+                     decision.source)
 
 
 def bounds_in(dem: DemSource, epsg: int) -> tuple[float, float, float, float]:

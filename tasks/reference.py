@@ -17,6 +17,7 @@ from prefect import task
 
 from core.geodesy import BBox, metres_per_degree
 from core.geoid import GeoidGrid
+from tasks.dem_io import check_srtm_tiles
 from tasks.geoid import load_geoid
 from tasks.raster_io import atomic_write_bytes, atomic_write_text, cog_item, write_arrays_cog
 from tasks.srtm import SrtmTile, build_vrt, covered, find_tiles, mosaic_grid
@@ -81,8 +82,11 @@ def void_block(
 
 @task(name="locate-srtm-tiles")
 def locate_tiles(srtm_dir: Path, bbox: BBox, allow_missing: bool = False) -> list[SrtmTile]:
-    """Find and check the SRTM tiles covering the box."""
-    return find_tiles(srtm_dir, bbox, allow_missing=allow_missing)
+    """Find and check the SRTM tiles covering the box (EGM96 heights, as SRTM is: the one
+    vertical-datum rule of :func:`tasks.dem_io.dem_datum` on each)."""
+    tiles = find_tiles(srtm_dir, bbox, allow_missing=allow_missing)
+    check_srtm_tiles(tiles)
+    return tiles
 
 
 def open_mosaic(tiles: list[SrtmTile], bbox: BBox, vrt_path: Path) -> xr.DataArray:

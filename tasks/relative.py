@@ -18,6 +18,7 @@ from prefect import task
 from core.dem import GeoDEM
 from core.errors import CoverageError, GeometryError, InsufficientDataError
 from core.geodesy import BBox
+from core.heights import DatumDecision
 from core.intersection import triangulate
 from core.matching.tiepoint_results import TiePointResult, TiePointStatus
 from core.orientation.relative import (
@@ -30,7 +31,6 @@ from core.orientation.relative import (
 )
 from core.sensors.base import SensorModel, footprint_lonlat
 from core.sensors.viewing import footprint_mean_height_m, pair_geometry
-from tasks.dem_io import read_reference, resolve_vertical
 from tasks.raster_io import atomic_write_text
 from tasks.sensor_io import LoadedModel, load_model
 
@@ -99,9 +99,19 @@ def check_overlap(left: LoadedModel, right: LoadedModel, h_m: float,
     return best
 
 
-def read_reference_dem(path: Path, vertical: str, box: BBox) -> GeoDEM:
-    """The reference DEM over the pair as ellipsoidal heights."""
-    return read_reference(path, box, resolve_vertical(Path(path), vertical))
+@dataclass(frozen=True)
+class ReferenceUsed:
+    """The reference DEM a step used: its file, its vertical datum decision, and the SRTM
+    folder it was prepared from (None when given as a file)."""
+
+    path: Path
+    datum: DatumDecision
+    srtm_dir: Path | None = None
+
+    def to_dict(self) -> dict[str, Any]:
+        return {"path": str(self.path), **self.datum.to_dict(),
+                "srtm_dir": None if self.srtm_dir is None else str(self.srtm_dir)}
+
 
 
 @dataclass(frozen=True, eq=False)
@@ -117,6 +127,7 @@ class RelativeProducts:
     parallax_rms_after_px: float
     along_epipolar: AlongEpipolar
     cell_m: float | None = None  # the tie points' ground cell (smaller than asked on crops)
+    reference: ReferenceUsed | None = None
 
     def lines(self) -> list[str]:
         ae = self.along_epipolar
@@ -143,6 +154,7 @@ def orient_relative(
     left: LoadedModel, right: LoadedModel, ties: TiePointResult, out: Path,
     reference: GeoDEM | None = None, h_range: tuple[float, float] | None = None,
     config: RelativeConfig = DEFAULT_CONFIG, reference_sigma_m: float = 5.0,
+    reference_used: ReferenceUsed | None = None,
 ) -> RelativeProducts:
     """Adjust the right model to the left from the tie points, set the along-epipolar part
     from the reference DEM when there is one, intersect the tie points, write ``out``
@@ -211,12 +223,14 @@ def orient_relative(
         "miss_distance_m": {"median": float(np.median(ground.miss_m[rel.inlier])),
                             "p95": float(np.percentile(ground.miss_m[rel.inlier], 95))},
         "adjustment": rel.to_dict(),
+        "reference": None if reference_used is None else reference_used.to_dict(),
         "right_model": _model_dict(model),
     }
     atomic_write_text(out, json.dumps(doc, indent=1))
     return RelativeProducts(Path(out), tie_json, model, int(rel.inlier.sum()),
                             int((~rel.inlier).sum()), rel.parallax_rms_before_px,
-                            rel.parallax_rms_after_px, along, ties.report.cell_m)
+                            rel.parallax_rms_after_px, along, ties.report.cell_m,
+                            reference_used)
 
 
 def reference_box_heights(reference: GeoDEM) -> tuple[float, float]:

@@ -22,7 +22,7 @@ from core.geodesy import BBox
 from core.points import ControlPoint, control_points_from_dict
 from core.surface_match import SurfaceMatchConfig
 from tasks.crs import Projection
-from tasks.dem_io import read_reference, resolve_vertical
+from tasks.dem_io import dem_datum, read_reference
 from tasks.surface_match import TieGround
 
 log = logging.getLogger(__name__)
@@ -77,7 +77,7 @@ def read_inputs(out: Path, reference: Path | None, vertical: str, surface: Surfa
     if reference is not None and (out / "relative_dem.tif").is_file():
         ref = _attempt(missing, f"the reference DEM {reference}", lambda: read_reference(
             reference, dem_box(out / "relative_dem.tif", surface),
-            resolve_vertical(Path(reference), vertical)))
+            dem_datum(reference, vertical).datum))
     windows = wdoc.get("windows") if isinstance(wdoc, dict) else None
     return ReportInputs(windows, ties, tie_doc if isinstance(tie_doc, dict) else None, gcps,
                         ref, surface)

@@ -50,6 +50,7 @@ from core.simulation.scene import (
 )
 from core.simulation.surface import SurfaceSpec, sample_surface, slope_deg
 from tasks.crs import Projection
+from tasks.dem_io import dem_datum
 from tasks.dimap import write_dimap
 from tasks.geoid import load_geoid
 from tasks.raster_io import (
@@ -86,9 +87,11 @@ def _model(text: str) -> PushbroomModel:
 def define_scene(
     dem: Path, out: Path, preset_name: str, seed: int, errors: ErrorConfig,
     relief_factor: float = 1.0, bits: int = 8, date_change: float = 0.0,
-    centre_lonlat: tuple[float, float] | None = None,
+    centre_lonlat: tuple[float, float] | None = None, dem_vertical: str = "auto",
 ) -> SceneDef:
-    """Choose the scene, build truth and delivered models, save them with scene.json."""
+    """Choose the scene, build truth and delivered models, save them with scene.json; the
+    DEM's heights are read in the datum the one rule gives (:func:`tasks.dem_io.dem_datum`,
+    ``dem_vertical`` as ``--dem-vertical``)."""
     if preset_name not in PRESETS:
         raise InputError(f"unknown preset {preset_name!r}; choose one of {sorted(PRESETS)}")
     if not 0 < relief_factor <= 10:
@@ -101,12 +104,13 @@ def define_scene(
     paths = ScenePaths(Path(out))
     dem = Path(dem)
     check_dem(dem)
+    datum = dem_datum(dem, dem_vertical, what="DEM", option="--dem-vertical")
     if centre_lonlat is None:
         with rasterio.open(dem) as src:
             b = src.bounds
         centre_lonlat = (0.5 * (b.left + b.right), 0.5 * (b.bottom + b.top))
     clon, clat = map(float, centre_lonlat)
-    H, tr, window = read_dem_window(dem, dem_window(preset, clon, clat))
+    H, tr, window = read_dem_window(dem, dem_window(preset, clon, clat), datum.datum)
     levels = terrain_levels(H, tr, load_geoid(), clon, clat, relief_factor)
     centre = GeoPoint(clon, clat, levels.h_centre_m)
     models = scene_models(preset, centre, errors, seed)
@@ -121,6 +125,7 @@ def define_scene(
         grid=TruthGrid.covering(x, y, res, 10 * res), water_level_m=levels.water_level_m,
         bits=int(bits), date_change=float(date_change), errors=errors,
         image_names=tuple(models), injected={n: m.injected for n, m in models.items()},
+        dem_vertical=datum.datum, dem_vertical_source=datum.source,
     )
     if paths.scene_json.exists():
         try:

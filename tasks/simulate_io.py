@@ -103,8 +103,10 @@ def check_dem(path: Path) -> None:
         )
 
 
-def read_dem_window(path: Path, window: BBox | None) -> tuple[np.ndarray, tuple, BBox]:
-    """(H float64, geotransform, the box read) of a geographic DEM, voids filled.
+def read_dem_window(path: Path, window: BBox | None, datum: str = "egm96"
+                    ) -> tuple[np.ndarray, tuple, BBox]:
+    """(H float64, geotransform, the box read) of a geographic DEM, voids filled; heights
+    orthometric (EGM96), those of an ``ellipsoidal`` DEM converted with ``H = h - N``.
 
     The simulated world has no holes: SRTM voids (-32768, or the declared nodata) are filled
     by GDAL's inverse-distance fill.
@@ -131,6 +133,10 @@ def read_dem_window(path: Path, window: BBox | None) -> tuple[np.ndarray, tuple,
                              "damaged, give a whole GeoTIFF or .hgt") from None
         tr = src.window_transform(win) if win is not None else src.transform
     H[H <= -1000] = np.nan  # SRTM voids (-32768) when no nodata is declared
+    if datum == "ellipsoidal":
+        rows, cols = np.mgrid[0:H.shape[0], 0:H.shape[1]]
+        H = load_geoid().ellipsoidal_to_orthometric(tr.c + (cols + 0.5) * tr.a,
+                                                    tr.f + (rows + 0.5) * tr.e, H)
     voids = np.isnan(H)
     if voids.any() and not voids.all():
         with warnings.catch_warnings():  # GDAL's fill works on an in-memory, unreferenced copy
@@ -154,7 +160,7 @@ def load_surface_spec(scene_json: str) -> SurfaceSpec:
 @lru_cache(maxsize=4)
 def _load_surface_spec(scene_json: str) -> SurfaceSpec:
     scene = SceneDef.from_json(scene_json)
-    H, tr, _ = read_dem_window(Path(scene.dem_path), scene.dem_window)
+    H, tr, _ = read_dem_window(Path(scene.dem_path), scene.dem_window, scene.dem_vertical)
     return SurfaceSpec(
         dem_H=GeoDEM.from_transform(scale_relief(H, scene.H_ref_m, scene.relief_factor), tr),
         geoid=load_geoid(),

@@ -3,9 +3,9 @@ in the tile's own format and grid. The maths is :func:`core.void_fill.delta_surf
 
 1. The tile: an SRTM ``.hgt`` (1201x1201 or 3601x3601 big-endian int16, placed by its name,
    ``N44E005.hgt``) or a lon/lat GeoTIFF of any size (int16 SRTM tiles, or float heights).
-   Voids are ``-32768`` (or the GeoTIFF's nodata, NaN). Heights EGM96 orthometric ``H`` unless
-   a ``vertical_datum`` tag says ellipsoidal (``prepare-reference`` output) or the caller says
-   otherwise.
+   Voids are ``-32768`` (or the GeoTIFF's nodata, NaN). Its vertical datum by the one rule
+   (:func:`tasks.dem_io.dem_datum`: ``--srtm-vertical``, a ``vertical_datum`` tag such as
+   ``prepare-reference`` writes, a vertical CRS, an SRTM name for EGM96, else refused).
 2. The DSM (any projected or geographic CRS, NaN nodata): its vertical datum and height unit
    as ``gcpfree evaluate`` reads them (:func:`tasks.evaluation_rasters.inspect_dem`: the
    ``vertical_datum`` tag of ``gcpfree dsm``, a compound CRS...). Only the window under the
@@ -40,16 +40,16 @@ from core.evaluation import DemInfo
 from core.geodesy import metres_per_degree
 from core.geoid import GeoidGrid
 from core.grid_points import affine_nodes
-from core.heights import HeightFrame
+from core.heights import VERTICAL_CHOICES, HeightFrame
 from core.void_fill import FillConfig, FillResult, delta_surface_fill, dsm_to_datum
 from tasks.crs import Projection
-from tasks.evaluation_crs import unsupported_datum
+from tasks.dem_io import dem_datum
 from tasks.evaluation_rasters import inspect_dem
 from tasks.geoid import load_geoid
 from tasks.raster_io import atomic_write_bytes, atomic_write_json
 from tasks.srtm import SRTM_VOID, check_tile, parse_tile_name
 
-VERTICALS = ("auto", "egm96", "ellipsoidal")
+VERTICALS = VERTICAL_CHOICES
 TIFF_SUFFIXES = (".tif", ".tiff")
 REPORT_FORMAT = "gcpfree.fill_voids"
 BLOCK_ROWS = 256  # tile node rows resampled at a time
@@ -73,8 +73,8 @@ class FillOptions:
     def __post_init__(self) -> None:
         for name in ("srtm_vertical", "dem_vertical"):
             if getattr(self, name) not in VERTICALS:
-                raise InputError(f"{name} {getattr(self, name)!r} unknown; use one of "
-                                 f"{VERTICALS}")
+                raise InputError(f"--{name.replace('_', '-')} {getattr(self, name)!r} unknown; "
+                                 f"use one of {VERTICALS}")
 
     @property
     def json_path(self) -> Path:
@@ -220,18 +220,10 @@ class FillSummary:
 # ---- reading ------------------------------------------------------------------------------------
 
 
-def _tile_vertical(tags: dict[str, str], vertical: str, path: Path) -> tuple[str, str]:
-    """The tile's datum: given, else its ``vertical_datum`` tag, else EGM96 (SRTM)."""
-    if vertical != "auto":
-        return vertical, "given"
-    text = {k.lower(): v for k, v in tags.items()}.get("vertical_datum")
-    if text is None:
-        return "egm96", "SRTM: EGM96 orthometric"
-    if "ellipsoid" in text.lower():
-        return "ellipsoidal", f"tag vertical_datum={text!r}"
-    if "egm96" in text.lower().replace(" ", ""):
-        return "egm96", f"tag vertical_datum={text!r}"
-    raise unsupported_datum(f"SRTM tile {path}", text, "--srtm-vertical")
+def _tile_vertical(vertical: str, path: Path) -> tuple[str, str]:
+    """The tile's datum by the one rule (:func:`tasks.dem_io.dem_datum`)."""
+    d = dem_datum(path, vertical, what="SRTM tile", option="--srtm-vertical")
+    return d.datum, d.source
 
 
 def read_tile(path: str | Path, vertical: str = "auto") -> TileGrid:
@@ -249,10 +241,9 @@ def read_tile(path: str | Path, vertical: str = "auto") -> TileGrid:
         n = tile.size
         values = np.fromfile(path, dtype=">i2").reshape(n, n).astype(np.int16)
         r = tile.res_deg
-        datum, source = _tile_vertical({}, vertical, path)
+        datum, source = _tile_vertical(vertical, path)
         return TileGrid(path, "hgt", values, (r, 0.0, tile.lon0 - r / 2, 0.0, -r,
-                                              tile.lat0 + 1 + r / 2),
-                        SRTM_VOID, datum, source if vertical != "auto" else "SRTM .hgt: EGM96")
+                                              tile.lat0 + 1 + r / 2), SRTM_VOID, datum, source)
     if suffix not in TIFF_SUFFIXES:
         raise InputError(f"SRTM tile {path}: give a .hgt or a GeoTIFF (.tif), not {suffix!r}")
     try:
@@ -277,7 +268,7 @@ def read_tile(path: str | Path, vertical: str = "auto") -> TileGrid:
     nodata = profile.get("nodata")
     if nodata is None:
         nodata = np.nan if kind == "f" else SRTM_VOID
-    datum, source = _tile_vertical(tags, vertical, path)
+    datum, source = _tile_vertical(vertical, path)
     return TileGrid(path, "geotiff", values, tuple(t)[:6], float(nodata), datum, source,
                     profile, tags)
 

@@ -306,7 +306,9 @@ class TruthGrid:
 class SceneDef:
     """Everything later steps need about a simulated scene; saved as DIR/truth/scene.json.
 
-    ``dem_window`` is the part of the DEM read (degrees); relief is scaled by
+    ``dem_window`` is the part of the DEM read (degrees), ``dem_vertical`` the datum of its
+    heights (``egm96`` or ``ellipsoidal``, converted to orthometric when read) and
+    ``dem_vertical_source`` what decided it; relief is scaled by
     ``relief_factor`` around the orthometric height ``H_ref_m``; ``centre`` is the point the
     centre pixels see; ``epsg`` the UTM zone of the truth ``grid``; ``dsm_range_m`` the
     ellipsoidal range of the truth DSM once built; ``injected`` the metadata errors per image.
@@ -328,6 +330,8 @@ class SceneDef:
     image_names: tuple[str, str]
     dsm_range_m: tuple[float, float] | None = None
     injected: Mapping[str, InjectedErrors] = field(default_factory=dict)
+    dem_vertical: str = "egm96"
+    dem_vertical_source: str = "SRTM: EGM96"
 
     @property
     def preset_spec(self) -> Preset:
@@ -344,6 +348,7 @@ class SceneDef:
             "image_names": list(self.image_names),
             "dsm_range_m": None if self.dsm_range_m is None else list(self.dsm_range_m),
             "injected": {k: v.to_dict() for k, v in self.injected.items()},
+            "dem_vertical": self.dem_vertical, "dem_vertical_source": self.dem_vertical_source,
         }
 
     def to_json(self) -> str:
@@ -367,6 +372,8 @@ class SceneDef:
                 image_names=tuple(str(n) for n in d["image_names"]),  # type: ignore[arg-type]
                 dsm_range_m=None if rng is None else (float(rng[0]), float(rng[1])),
                 injected={str(k): InjectedErrors.from_dict(v) for k, v in d["injected"].items()},
+                dem_vertical=str(d.get("dem_vertical", "egm96")),
+                dem_vertical_source=str(d.get("dem_vertical_source", "SRTM: EGM96")),
             )
         except (KeyError, TypeError, ValueError) as exc:
             raise InputError(f"scene definition is malformed ({exc!r}); it was not written by "

@@ -5,6 +5,12 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
+VERTICALS = ("auto", "ellipsoidal", "egm96")  # core.heights.VERTICAL_CHOICES (not imported:
+# the parser is built without numpy, so --help answers at once)
+VERTICAL_HELP = ("heights of REF: auto (default) reads its vertical_datum tag, then its CRS's "
+                 "vertical part, then an SRTM name (.hgt, N44E005.tif: EGM96); a DEM none of "
+                 "these describe is refused: say egm96 or ellipsoidal")
+
 
 def add_pair_arguments(p: argparse.ArgumentParser, *, right_help: str = "right image") -> None:
     """``--left --right --left-model --right-model --band``."""
@@ -26,9 +32,8 @@ def add_reference_arguments(p: argparse.ArgumentParser, *, use: str) -> None:
                           f": {use}")
     ref.add_argument("--srtm-dir", type=Path, default=None, metavar="DIR",
                      help="folder of SRTM tiles: a reference is prepared over the pair")
-    p.add_argument("--reference-vertical", choices=("auto", "ellipsoidal", "egm96"),
-                   default="auto", help="heights of --reference (auto: .hgt and SRTM-named "
-                                        "files are EGM96, others ellipsoidal)")
+    p.add_argument("--reference-vertical", choices=VERTICALS,
+                   default="auto", help=VERTICAL_HELP)
 
 
 def add_orientation_arguments(p: argparse.ArgumentParser) -> None:
@@ -87,7 +92,7 @@ def check_pair(args: argparse.Namespace):  # -> tuple[LoadedModel, LoadedModel]
     """Both models loaded and the reference checked before Prefect starts: bad input is one
     clean line (InputError)."""
     from core.errors import InputError
-    from tasks.dem_io import check_reference
+    from tasks.dem_io import check_reference, dem_datum
     from tasks.sensor_io import load_model
 
     for path in (args.left, args.right):
@@ -97,6 +102,9 @@ def check_pair(args: argparse.Namespace):  # -> tuple[LoadedModel, LoadedModel]
     right = load_model(args.right, model=args.right_model, band=args.band)
     if args.reference is not None:
         check_reference(args.reference)
+        # refused here in one line, or said before the long run starts
+        print(f"reference      {args.reference}: "
+              f"{dem_datum(args.reference, args.reference_vertical).describe()}")
     if args.srtm_dir is not None and not Path(args.srtm_dir).is_dir():
         raise InputError(f"SRTM directory {args.srtm_dir} does not exist")
     h_range = getattr(args, "height_range", None) or OVERLAP_HEIGHTS_M
@@ -106,6 +114,15 @@ def check_pair(args: argparse.Namespace):  # -> tuple[LoadedModel, LoadedModel]
         from tasks.relative import pair_box
 
         read_reference(args.reference, pair_box(left, right, h_range), "ellipsoidal")
+    if args.srtm_dir is not None:  # the tiles that would be used: EGM96 as SRTM is
+        from tasks.dem_io import check_srtm_tiles
+        from tasks.relative import pair_box
+        from tasks.srtm import find_tiles
+
+        check_srtm_tiles(find_tiles(args.srtm_dir, pair_box(left, right, h_range),
+                                    allow_missing=True))
+        print(f"reference      prepared from the SRTM tiles of {args.srtm_dir}: EGM96 "
+              "orthometric heights, converted with h = H + N")
     return left, right
 
 

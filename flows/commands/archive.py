@@ -5,6 +5,8 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
+from flows.commands._pair import VERTICAL_HELP, VERTICALS
+
 CATALOG_HELP = ("a folder of pair folders (each with left.tif + right.tif and their models, or "
                 "left/ and right/ folders with IMAGERY.TIF + METADATA.DIM; optional lidar.laz, "
                 "landcover.tif, checkpoints.json), or a CSV/JSON list with the columns "
@@ -23,6 +25,8 @@ def add_archive_arguments(p: argparse.ArgumentParser) -> None:
     ref.add_argument("--reference", type=Path, default=None, metavar="REF",
                      help="one reference DEM in EPSG:4326 for every pair (prepare-reference "
                           "output or SRTM .hgt)")
+    p.add_argument("--reference-vertical", choices=VERTICALS, default="auto",
+                   help=VERTICAL_HELP)
     p.add_argument("--dask-address", default=None, metavar="tcp://HOST:PORT",
                    help="scheduler of an existing Dask cluster (its workers must see the same "
                         "paths and have gcpfree installed); default: a LocalCluster")
@@ -61,11 +65,13 @@ def check_archive_args(args: argparse.Namespace) -> None:
     """Bad arguments refused in one line before Prefect starts."""
     from core.errors import InputError
     from tasks.catalog import read_catalog
-    from tasks.dem_io import check_reference
+    from tasks.dem_io import check_reference, dem_datum
 
     read_catalog(args.catalog)
     if args.reference is not None:
         check_reference(args.reference)
+        print(f"reference      {args.reference}: "
+              f"{dem_datum(args.reference, args.reference_vertical).describe()}")
     if args.srtm_dir is not None and not Path(args.srtm_dir).is_dir():
         raise InputError(f"SRTM directory {args.srtm_dir} does not exist")
     if args.workers is not None and args.workers < 1:
@@ -82,6 +88,7 @@ def flow_parameters(args: argparse.Namespace) -> dict:
 
     return {"catalog": path(args.catalog), "out": path(args.out),
             "srtm_dir": path(args.srtm_dir), "reference": path(args.reference),
+            "reference_vertical": args.reference_vertical,
             "dask_address": args.dask_address, "workers": args.workers,
             "processes": not args.threads, "dashboard_address": args.dashboard_address,
             "self_calibrate": args.self_calibrate}

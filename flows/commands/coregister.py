@@ -5,6 +5,8 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
+from flows.commands._pair import VERTICAL_HELP, VERTICALS
+
 
 def add_parser(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser(
@@ -19,19 +21,29 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
             "pixels: the translation that, added to the DEM's coordinates, aligns it with the "
             "reference."),
     )
-    p.add_argument("--ref", type=Path, required=True, help="reference DEM (GeoTIFF or .hgt)")
+    p.add_argument("--reference", "--ref", dest="reference", type=Path, required=True,
+                   metavar="REF", help="reference DEM (GeoTIFF or .hgt)")
     p.add_argument("--dem", type=Path, required=True, help="DEM to align")
+    p.add_argument("--reference-vertical", choices=VERTICALS, default="auto",
+                   help=VERTICAL_HELP)
+    p.add_argument("--dem-vertical", choices=VERTICALS, default="auto",
+                   help=VERTICAL_HELP.replace("REF", "DEM"))
     p.add_argument("--out", type=Path, required=True, help="output result.json")
 
 
 def run(args: argparse.Namespace) -> int:
     from core.errors import InputError
-    from tasks.coregister import coregister
+    from tasks.coregister import coregister, datums
 
-    for path in (args.ref, args.dem):
+    for path in (args.reference, args.dem):
         if not Path(path).is_file():
             raise InputError(f"{path} does not exist; give two DEM rasters")
-    r = coregister(args.ref, args.dem, args.out)
+    ref_datum, dem_d = datums(args.reference, args.dem, args.reference_vertical,
+                              args.dem_vertical)
+    print(f"reference      {args.reference}: {ref_datum.describe()}")
+    print(f"DEM            {args.dem}: {dem_d.describe()}")
+    r = coregister(args.reference, args.dem, args.out,
+                   reference_vertical=args.reference_vertical, dem_vertical=args.dem_vertical)
     print(f"shift          east {r.shift_east_m:+.3f} m, north {r.shift_north_m:+.3f} m, "
           f"up {r.shift_up_m:+.3f} m")
     print(f"in ref pixels  col {r.shift_col_px:+.4f}, row {r.shift_row_px:+.4f} "

@@ -17,11 +17,11 @@ from pathlib import Path
 from typing import TYPE_CHECKING
 
 from flows._env import one_line_errors
+from flows.commands._pair import VERTICAL_HELP, VERTICALS
 
 if TYPE_CHECKING:
     from tasks.void_fill import FillOptions, FillSummary
 
-VERTICALS = ("auto", "egm96", "ellipsoidal")  # tasks.void_fill.VERTICALS, without importing it
 
 
 @functools.cache
@@ -78,11 +78,9 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
                         "them (default 0: as measured; raise it for a tile noisy from cell to "
                         "cell)")
     p.add_argument("--dem-vertical", choices=VERTICALS, default="auto",
-                   help="DSM heights: auto (default) reads the vertical_datum tag, then a "
-                        "compound CRS")
+                   help=VERTICAL_HELP.replace("REF", "DSM"))
     p.add_argument("--srtm-vertical", choices=VERTICALS, default="auto",
-                   help="tile heights: auto (default) is EGM96 unless a vertical_datum tag "
-                        "says ellipsoidal (a prepare-reference output)")
+                   help=VERTICAL_HELP.replace("REF", "TILE"))
     p.add_argument("--geoid", type=Path, default=None,
                    help="geoid grid in GTX format (default: bundled EGM96 15')")
 

@@ -18,12 +18,12 @@ from pathlib import Path
 from typing import TYPE_CHECKING
 
 from flows._env import one_line_errors
+from flows.commands._pair import VERTICAL_HELP, VERTICALS
 
 if TYPE_CHECKING:
     from tasks.ortho import OrthoOptions, OrthoSummary
 
 RESAMPLINGS = ("nearest", "bilinear", "cubic")  # core.ortho.RESAMPLINGS, without importing it
-VERTICALS = ("auto", "egm96", "ellipsoidal")
 
 
 @functools.cache
@@ -76,9 +76,7 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
                    help="heights: a lon/lat DEM (SRTM .hgt, prepare-reference output) or a "
                         "projected DSM (gcpfree dsm/orient output)")
     p.add_argument("--dem-vertical", choices=VERTICALS, default="auto",
-                   help="heights of DEM: auto (default) reads the vertical_datum tag, then a "
-                        "compound CRS; an untagged lon/lat DEM is EGM96 when it is an SRTM "
-                        "tile (.hgt, SRTM name), else ellipsoidal")
+                   help=VERTICAL_HELP.replace("REF", "DEM"))
     p.add_argument("--resolution", type=float, default=None, metavar="M",
                    help="cell size in metres (default the image's GSD, 2 digits)")
     p.add_argument("--crs", type=int, default=None, metavar="EPSG",

@@ -14,6 +14,8 @@ import argparse
 import json
 from pathlib import Path
 
+from flows.commands._pair import VERTICAL_HELP, VERTICALS
+
 # products of gcpfree orient, one of which a folder must hold to be reported on
 ORIENT_PRODUCTS = ("report.json", "windows.json", "relative/rel.json")
 
@@ -39,9 +41,8 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
                    help="the reference DEM the orientation used (profile and correlation "
                         "surface); default: the one orient made from --srtm-dir in "
                         "OUT_DIR/relative/")
-    p.add_argument("--reference-vertical", choices=("auto", "ellipsoidal", "egm96"),
-                   default="auto", help="heights of --reference (auto: .hgt and SRTM-named "
-                                        "files are EGM96, others ellipsoidal)")
+    p.add_argument("--reference-vertical", choices=VERTICALS, default="auto",
+                   help=VERTICAL_HELP)
     p.add_argument("--checkpoints", type=Path, default=None, metavar="CP",
                    help="the check points given to orient (their residual vectors)")
     p.add_argument("--evaluation", type=Path, default=None, metavar="EVAL_JSON",
@@ -64,9 +65,11 @@ def check_inputs(args: argparse.Namespace) -> None:
         raise InputError(f"{out} holds no gcpfree orient products (none of "
                          f"{', '.join(ORIENT_PRODUCTS)}); run gcpfree orient --out {out} first")
     if args.reference is not None:
-        from tasks.dem_io import check_reference
+        from tasks.dem_io import check_reference, dem_datum
 
         check_reference(args.reference)
+        print(f"reference      {args.reference}: "
+              f"{dem_datum(args.reference, args.reference_vertical).describe()}")
     if args.checkpoints is not None:
         from tasks.orient import read_checkpoints
 

@@ -14,7 +14,7 @@ from scipy.ndimage import shift as nd_shift
 
 from core.coregister import Grid, metres_per_unit, nuth_kaab
 from core.errors import InputError, InsufficientDataError
-from tasks.geoid import BUNDLED_SRTM_DIR
+from tasks.geoid import BUNDLED_SRTM_DIR, load_geoid
 
 D = 1 / 1200
 
@@ -76,21 +76,32 @@ def test_bad_inputs(srtm):
 
 
 def test_cli_on_geotiffs(srtm, tmp_path):
+    """The reference in EGM96 heights (its tag says so), the DEM in ellipsoidal heights
+    h = H + N (about 50 m more here): the heights are compared in one datum, so the vertical
+    shift is the 4 m put in, not the geoid undulation."""
     tr = Affine(D, 0, 5.25 - D / 2, 0, -D, 44.75 + D / 2)
-    for name, z in (("ref.tif", srtm), ("dem.tif", shifted(srtm, 0.35, -0.2, 4.0))):
+    rows, cols = np.mgrid[0:srtm.shape[0], 0:srtm.shape[1]]
+    n_m = load_geoid().undulation_m(tr.c + (cols + 0.5) * D, tr.f - (rows + 0.5) * D)
+    assert n_m.min() > 48.0
+    for name, z, datum in (("ref.tif", srtm, "EGM96 geoid"),
+                           ("dem.tif", shifted(srtm, 0.35, -0.2, 4.0) + n_m, "WGS84 ellipsoid")):
         with rasterio.open(tmp_path / name, "w", driver="GTiff", width=z.shape[1],
                            height=z.shape[0], count=1, dtype="float32", crs="EPSG:4326",
                            transform=tr, nodata=np.nan) as dst:
             dst.write(z.astype(np.float32), 1)
+            dst.update_tags(vertical_datum=datum)
     out = tmp_path / "result.json"
-    r = subprocess.run([sys.executable, "-m", "flows.cli", "coregister", "--ref",
+    r = subprocess.run([sys.executable, "-m", "flows.cli", "coregister", "--reference",
                         str(tmp_path / "ref.tif"), "--dem", str(tmp_path / "dem.tif"), "--out",
                         str(out)], capture_output=True, text=True, timeout=120, check=False)
     assert r.returncode == 0, r.stderr
+    assert "EGM96 orthometric heights" in r.stdout and "WGS84 ellipsoidal heights" in r.stdout
     doc = json.loads(out.read_text())
     assert doc["shift_col_px"] == pytest.approx(0.35, abs=0.01)
     assert doc["shift_row_px"] == pytest.approx(-0.2, abs=0.01)
     assert doc["shift_up_m"] == pytest.approx(4.0, abs=0.05)
+    assert doc["reference_vertical"]["vertical"] == "egm96"
+    assert doc["dem_vertical"]["vertical"] == "ellipsoidal"
     r = subprocess.run([sys.executable, "-m", "flows.cli", "coregister", "--ref",
                         str(tmp_path / "none.tif"), "--dem", str(tmp_path / "dem.tif"), "--out",
                         str(out)], capture_output=True, text=True, timeout=60, check=False)

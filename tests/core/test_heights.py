@@ -36,3 +36,31 @@ def test_unit_names_and_factors():
     assert unit_key(None, "test") is None and unit_key("  ", "test") is None
     with pytest.raises(InputError, match="furlong"):
         unit_key("furlong", "DEM band")
+
+
+def test_the_one_datum_rule_order_and_refusal():
+    from core.heights import decide_datum
+
+    kw = {"what": "DEM x.tif", "option": "--dem-vertical"}
+    # the option wins over everything the file says
+    assert decide_datum(**kw, given="ellipsoidal", tag="EGM96", srtm_name="N44E005.hgt"
+                        ).datum == "ellipsoidal"
+    # then the tag (gcpfree's own "WGS84 ellipsoid (h = SRTM H + EGM96 N)" is ellipsoidal)
+    d = decide_datum(**kw, tag="WGS84 ellipsoid (h = SRTM H + EGM96 N)", crs_datum="egm96",
+                     crs_vertical_name="EGM96 height", srtm_name="N44E005.tif")
+    assert (d.datum, d.source.startswith("tag")) == ("ellipsoidal", True)
+    assert decide_datum(**kw, tag="EGM96 geoid (EPSG:5773), H = h - N").datum == "egm96"
+    # then the CRS's vertical part, then an SRTM name
+    d = decide_datum(**kw, crs_datum="egm96", crs_vertical_name="EGM96 height",
+                     srtm_name=None)
+    assert (d.datum, d.source) == ("egm96", "CRS: EGM96 height")
+    assert decide_datum(**kw, srtm_name="n44_e005_1arc_v3.tif").datum == "egm96"
+    # nothing says it: refused, naming the option, never guessed
+    with pytest.raises(InputError, match="--dem-vertical egm96 or --dem-vertical ellipsoidal"):
+        decide_datum(**kw)
+    with pytest.raises(InputError, match="NAVD88"):
+        decide_datum(**kw, crs_datum=None, crs_vertical_name="NAVD88 height")
+    with pytest.raises(InputError, match="Normal Null"):
+        decide_datum(**kw, tag="Normal Null")
+    with pytest.raises(InputError, match="unknown"):
+        decide_datum(**kw, given="navd88")

@@ -39,8 +39,9 @@ def stub_orientation(monkeypatch, tiny_clean_scene):
     calls = []
 
     def relative_models(left, right, *, left_model=None, right_model=None, band=None,
-                        reference=None, srtm_dir=None, out_dir):
-        calls.append({"left": left, "right": right, "reference": reference, "out_dir": out_dir})
+                        reference=None, reference_vertical="auto", srtm_dir=None, out_dir):
+        calls.append({"left": left, "right": right, "reference": reference,
+                      "reference_vertical": reference_vertical, "out_dir": out_dir})
         pair = []
         for name, image in (("left", left), ("right", right)):
             path = scene_dir / "truth" / f"{name}_truth.json"

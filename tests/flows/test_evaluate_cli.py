@@ -68,7 +68,8 @@ def scene(tmp_path_factory) -> dict[str, Path]:
     nocrs = write_las(tmp / "nocrs.laz", x, y, H, cls, None)
     cut = tmp / "cut.laz"
     cut.write_bytes(laz.read_bytes()[: laz.stat().st_size // 2])
-    far = write_raster(tmp / "far.tif", z, UTM31, (CELL, 0, X0 - 90_000, 0, -CELL, Y1))
+    far = write_raster(tmp / "far.tif", z, UTM31, (CELL, 0, X0 - 90_000, 0, -CELL, Y1),
+                       tags={"vertical_datum": "WGS84 ellipsoid"})
     return {"dem": dem, "laz": laz, "nocrs": nocrs, "cut": cut, "far": far, "dir": tmp}
 
 

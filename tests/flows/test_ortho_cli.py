@@ -88,9 +88,12 @@ def test_bad_input_is_one_line_before_anything_runs(tiny_scene, tmp_path):
                        dtype="float32", crs="EPSG:4326",
                        transform=rasterio.Affine(0.01, 0, 10.0, 0, -0.01, 10.0)) as dst:
         dst.write(np.full((10, 10), 100.0, np.float32), 1)
-    with pytest.raises(CoverageError):
+    with pytest.raises(InputError, match="--dem-vertical egm96"):  # untagged: datum unknown
         ortho.run(parse(ortho, "ortho", "--image", str(scene_dir / "left.tif"), "--dem",
                         str(far), "--out", str(tmp_path / "o.tif")))
+    with pytest.raises(CoverageError):
+        ortho.run(parse(ortho, "ortho", "--image", str(scene_dir / "left.tif"), "--dem",
+                        str(far), "--dem-vertical", "egm96", "--out", str(tmp_path / "o.tif")))
     with pytest.raises(InputError, match="projected"):
         ortho.run(ortho_args(scene_dir, "left", tmp_path / "o.tif", "--crs", "4326"))
     with pytest.raises(InputError, match="folder of --out"):

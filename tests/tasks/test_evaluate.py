@@ -281,7 +281,10 @@ def test_autzen_is_read_in_metres_and_its_ground_has_no_bias(tmp_path):
     assert "horizontal unit" in src.info.z_unit_source and src.info.vertical == "ellipsoidal"
     dsm, cells = _autzen_dsm(tmp_path / "autzen_dsm.tif")
     assert cells > 5000
-    report = _evaluate(dem=dsm, lidar=AUTZEN)
+    # the DSM is made of the lidar's own heights, whose datum no file says: declared
+    with pytest.raises(InputError, match="--dem-vertical egm96"):
+        _evaluate(dem=dsm, lidar=AUTZEN)
+    report = _evaluate(dem=dsm, lidar=AUTZEN, dem_vertical="ellipsoidal")
     ground = report.classes["2"]
     assert ground.count > 20_000 and abs(ground.mean_m) < 0.05 and ground.nmad_m < 0.1
     assert report.points.outside_dem == 0
@@ -289,7 +292,8 @@ def test_autzen_is_read_in_metres_and_its_ground_has_no_bias(tmp_path):
     assert "ballpark" not in report.transformation.lower()
     assert report.classes["1"].count > 40_000  # unclassified points over ground cells
     # read as metres the heights are 3.3 times too large: the unit is what makes the bias 0
-    wrong = _evaluate(dem=dsm, lidar=AUTZEN, lidar_z_unit="m", classes=(2,))
+    wrong = _evaluate(dem=dsm, lidar=AUTZEN, lidar_z_unit="m", classes=(2,),
+                      dem_vertical="ellipsoidal")
     assert wrong.classes["2"].mean_m < -200.0
 
 
@@ -351,12 +355,13 @@ def test_bad_input_is_named(utm_scene, tmp_path):
         plan_evaluation(EvaluationOptions(dem=s["dem"], lidar=junk))
     # a DEM 50 km away: the extents are named
     far = write_raster(tmp_path / "far.tif", dem_surface(20, 20), UTM31,
-                       (CELL, 0, X0 + 50_000, 0, -CELL, Y1))
+                       (CELL, 0, X0 + 50_000, 0, -CELL, Y1),
+                       tags={"vertical_datum": "WGS84 ellipsoid"})
     with pytest.raises(CoverageError, match=r"does not cover the lidar \(x 680"):
         plan_evaluation(EvaluationOptions(dem=far, lidar=s["laz"]))
     # a DEM all void over the lidar
     void = write_raster(tmp_path / "void.tif", np.full((NR, NC), np.nan, np.float32), UTM31,
-                        (CELL, 0, X0, 0, -CELL, Y1))
+                        (CELL, 0, X0, 0, -CELL, Y1), tags={"vertical_datum": "WGS84 ellipsoid"})
     with pytest.raises(InsufficientDataError, match="voids"):
         _evaluate(dem=void, lidar=s["laz"])
     # NAVD88 heights cannot be converted

@@ -13,7 +13,7 @@ from rasterio.transform import RPCTransformer, from_origin
 from core.errors import CoverageError, InputError
 from core.geodesy import BBox
 from core.sensors.pushbroom_synthetic import SyntheticSpec, synthetic_pushbroom
-from tasks.dem_io import check_reference, read_reference, resolve_vertical
+from tasks.dem_io import check_reference, read_reference
 from tasks.geoid import BUNDLED_SRTM_DIR, load_geoid
 from tasks.info import describe_image, gather_info, write_info_json
 
@@ -44,16 +44,6 @@ def synthetic_json(tmp_path_factory) -> Path:
 
 
 # ------------------------------------------------------------------------- reference
-
-
-def test_vertical_datum_is_guessed_from_the_name():
-    assert resolve_vertical(Path("N44E005.hgt"), "auto") == "egm96"
-    assert resolve_vertical(Path("n44_e005_1arc_v3.tif"), "auto") == "egm96"
-    assert resolve_vertical(Path("ref.tif"), "auto") == "ellipsoidal"
-    assert resolve_vertical(Path("ref.tif"), "egm96") == "egm96"
-    assert resolve_vertical(Path("N44E005.hgt"), "ellipsoidal") == "ellipsoidal"
-    with pytest.raises(InputError, match="unknown"):
-        resolve_vertical(Path("ref.tif"), "navd88")
 
 
 def test_reference_window_in_egm96_is_converted_to_ellipsoidal_heights():
@@ -93,11 +83,15 @@ def test_reference_errors(tmp_path):
 
 def test_model_file_alone_with_a_flat_ellipsoidal_reference(synthetic_json, tmp_path):
     ref = write_geotiff(tmp_path / "flat.tif", np.full((200, 200), 650.0), 4.5, 45.0, 0.01)
-    info = describe_image(synthetic_json, reference=ref)
+    # an untagged, non-SRTM DEM says nothing of its datum: refused unless given
+    with pytest.raises(InputError, match="--reference-vertical egm96"):
+        describe_image(synthetic_json, reference=ref)
+    info = describe_image(synthetic_json, reference=ref, vertical="ellipsoidal")
     d = info.to_dict()
     assert d["family"] == "pushbroom" and d["size"] == {"cols": 300, "rows": 200}
     assert d["image"] is None and d["acquisition_utc"].startswith("2024-06-01T10:")
     assert d["reference"]["vertical"] == "ellipsoidal"
+    assert d["reference"]["vertical_source"] == "given: --reference-vertical ellipsoidal"
     assert d["reference"]["mean_h_m"] == pytest.approx(650.0)
     assert d["reference"]["covered_pct"] == 100.0
     assert d["view_h_m"] == pytest.approx(650.0)

@@ -281,7 +281,8 @@ def ref_dir_dtm(scene_dir) -> Path:
     return scene_dir[0] / "truth" / "dtm.tif"
 
 
-def write_dem(path: Path, lon0: float, lat1: float, res_deg: float, shape, crs="EPSG:4326"):
+def write_dem(path: Path, lon0: float, lat1: float, res_deg: float, shape, crs="EPSG:4326",
+              plus_m: float = 0.0, tags: dict[str, str] | None = None):
     rows, cols = np.mgrid[0 : shape[0], 0 : shape[1]]
     lon = lon0 + (cols + 0.5) * res_deg
     lat = lat1 - (rows + 0.5) * res_deg
@@ -289,18 +290,23 @@ def write_dem(path: Path, lon0: float, lat1: float, res_deg: float, shape, crs="
     with rasterio.open(path, "w", driver="GTiff", width=shape[1], height=shape[0], count=1,
                        dtype="float32", crs=crs, nodata=-9999,
                        transform=from_origin(lon0, lat1, res_deg, res_deg)) as dst:
-        dst.write(H.astype(np.float32), 1)
+        dst.write((H + plus_m).astype(np.float32), 1)
+        dst.update_tags(**(tags or {}))
     return H
 
 
 def test_any_geographic_dem_geotiff(tmp_path):
+    """A DEM of ellipsoidal heights (its tag says so) is brought to orthometric heights for
+    the world: the truth DSM is at the same ellipsoidal heights, not one undulation higher."""
     dem = tmp_path / "my_dem.tif"
-    H = write_dem(dem, 10.0, 46.45, 1.5 / 3600, (1080, 1200))  # 0.5 x 0.45 deg at 1.5"
+    n = load_geoid().undulation_m(10.25, 46.22)
+    H = write_dem(dem, 10.0, 46.45, 1.5 / 3600, (1080, 1200), plus_m=float(n),
+                  tags={"vertical_datum": "WGS84 ellipsoid"})  # 0.5 x 0.45 deg at 1.5"
     out = tmp_path / "scene"
     scene = run_scene(out, dem=dem, centre=None, seed=5, lidar=False)
-    assert scene.epsg == 32632
-    n = load_geoid().undulation_m(10.25, 46.22)
+    assert scene.epsg == 32632 and scene.dem_vertical == "ellipsoidal"
     lo, hi = scene.dsm_range_m
+    assert 40 < n < 55  # one undulation more would put the DSM out of the bounds below
     assert H.min() + n - 30 < lo and hi < H.max() + n + 40
     pts = json.loads((out / "truth" / "checkpoints.json").read_text())["points"]
     assert len(pts) >= 50
@@ -310,7 +316,7 @@ def test_dem_that_does_not_cover_the_scene(tmp_path):
     dem = tmp_path / "small.tif"
     write_dem(dem, 10.0, 46.1, 1.5 / 3600, (120, 120))  # 0.05 deg: far too small
     with pytest.raises(CoverageError, match="does not cover the simulated scene"):
-        S.define_scene.fn(dem, tmp_path / "o", "tiny", 0, ErrorConfig())
+        S.define_scene.fn(dem, tmp_path / "o", "tiny", 0, ErrorConfig(), dem_vertical="egm96")
 
 
 def test_projected_or_missing_dem_is_refused(tmp_path):

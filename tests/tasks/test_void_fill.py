@@ -92,7 +92,7 @@ def tif_tile(folder: Path, dtype: str = "int16") -> tuple[Path, np.ndarray, np.n
     void = voids_at(lon, lat)
     nodata = SRTM_VOID if dtype == "int16" else np.nan
     values = np.where(void, nodata, np.rint(H) if dtype == "int16" else H).astype(dtype)
-    path = folder / f"tile_{dtype}.tif"
+    path = folder / f"n44_e005_{dtype}.tif"  # named as USGS names its SRTM GeoTIFFs: EGM96
     with rasterio.open(path, "w", driver="GTiff", width=w, height=h, count=1, dtype=dtype,
                        crs="EPSG:4326", nodata=nodata, compress="deflate",
                        transform=rasterio.Affine(RES, 0, lon0 - RES / 2, 0, -RES,
@@ -212,7 +212,7 @@ def test_bad_input_is_refused_in_one_line(tmp_path, dsm):
         read_tile(png)
     with pytest.raises(InputError, match="geographic"):
         read_tile(dsm)
-    with pytest.raises(InputError, match="srtm_vertical"):
+    with pytest.raises(InputError, match="--srtm-vertical"):
         FillOptions(tile, dsm, tmp_path / "o.hgt", srtm_vertical="navd88")
     with pytest.raises(InputError, match="border_cells"):
         FillConfig(border_cells=0)
