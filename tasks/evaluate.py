@@ -1,12 +1,14 @@
 """Evaluate a DEM against lidar (step 6): the DEM interpolated at every lidar point, per class.
 
-The lidar (LAS/LAZ) streams through laspy's chunk iterator (:mod:`tasks.lidar_io`); for each
-chunk the points are transformed (pyproj) from their CRS to the DEM's, the DEM windows they
-fall in are read (rasterio windows, bounded in size) and interpolated bilinearly at the points
-(:mod:`tasks.evaluation_rasters`; the lidar is never interpolated), heights are brought to
-metres and to the DEM's vertical datum (:mod:`core.heights`), and the differences
-``dz = DEM - lidar`` are accumulated per class by :mod:`core.evaluation`. Memory stays flat
-whatever the file size.
+The lidar (LAS/LAZ) streams a chunk at a time (:mod:`tasks.lidar_io`: a LAZ is decoded in a
+child process, so a decoder crash on a damaged file is one error; points outside the header's
+box or of a reserved class are refused, counted and left out, and the file refused when they
+are more than 1 in 10,000). For each chunk the points are transformed (pyproj) from their CRS
+to the DEM's, the DEM windows they fall in are read (rasterio windows, bounded in size) and
+interpolated bilinearly at the points (:mod:`tasks.evaluation_rasters`; the lidar is never
+interpolated), heights are brought to metres and to the DEM's vertical datum
+(:mod:`core.heights`), and the differences ``dz = DEM - lidar`` are accumulated per class by
+:mod:`core.evaluation`. Memory stays flat whatever the file size.
 
 Units and datums, read from the files (``auto``) unless given:
 
@@ -19,10 +21,10 @@ Units and datums, read from the files (``auto``) unless given:
   height, ellipsoidal for a 3-D CRS; with no vertical CRS, WGS84 ellipsoidal is *assumed*
   and said so in the report. Any other vertical datum (NAVD88, EGM2008...) is refused:
   gcpfree converts only EGM96 (``h = H + N``);
-- DEM: the tag ``vertical_datum`` (``"WGS84 ellipsoid..."`` as simulate and prepare-reference
-  write it; ``"EGM96..."``), else a compound CRS, else :func:`tasks.dem_io.resolve_vertical`
-  (``.hgt`` and SRTM-named files EGM96, anything else ellipsoidal); heights in the unit of
-  the vertical CRS, the band unit or the ``units`` tag, metres by default.
+- DEM: the one rule every command follows (:func:`tasks.dem_io.dem_datum`: ``--dem-vertical``,
+  else the tag ``vertical_datum`` as gcpfree writes it, else the CRS's vertical part, else an
+  SRTM file name for EGM96, else refused); heights in the unit of the vertical CRS, the band
+  unit or the ``units`` tag, metres by default.
 
 Differences are taken in the DEM's datum; the geoid is read only when the two datums differ.
 """
@@ -31,6 +33,7 @@ from __future__ import annotations
 
 import contextlib
 import math
+import sys
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -235,16 +238,15 @@ def stream_dz(plan: EvaluationPlan) -> tuple[ClassedDz, PointCounts]:
         dem_src = stack.enter_context(rasterio.open(plan.dem.path))
         lc_src = (stack.enter_context(rasterio.open(plan.landcover.path))
                   if plan.landcover is not None else None)
-        for pts in lidar_chunks(lidar.info.path, opts.chunk_points, lidar.info.point_count):
-            cls = np.asarray(pts.classification)
-            withheld = np.asarray(pts.withheld).astype(bool)
-            keep = select_points(cls, withheld, opts.classes)
-            x, y = np.asarray(pts.x)[keep], np.asarray(pts.y)[keep]
-            z, cls = np.asarray(pts.z)[keep], cls[keep]
+        for pts in lidar_chunks(lidar.info.path, opts.chunk_points, lidar.info.point_count,
+                                opts.classes or ()):
+            tally.refuse(pts.refused_bounds, pts.refused_class)
+            keep = select_points(pts.classification, pts.withheld, opts.classes)
+            x, y, z, cls = pts.x[keep], pts.y[keep], pts.z[keep], pts.classification[keep]
             xd, yd = to_dem.transform(x, y)
             dem_z, inside = sample_dem(dem_src, plan.dem, xd, yd)
             ok = np.isfinite(dem_z)
-            tally.add(withheld, keep, inside, ok)
+            tally.add(pts.withheld, keep, inside, ok)
             if not ok.any():
                 continue
             if lc_src is not None and to_lc is not None:
@@ -276,6 +278,14 @@ def evaluate_plan(plan: EvaluationPlan) -> EvaluationReport:
     """Stream the lidar and build the report (no Prefect: :func:`evaluate_lidar` wraps it)."""
     acc, counts = stream_dz(plan)
     opts = plan.options
+    if counts.refused_bounds:  # under MAX_REFUSED_SHARE: lidar_chunks refuses the file beyond
+        print(f"lidar file {opts.lidar}: {counts.refused_bounds} of {counts.read} points "
+              f"({100 * counts.refused_bounds / max(counts.read, 1):.3f} %) left out, outside "
+              "the header's box: the file is damaged", file=sys.stderr, flush=True)
+    if counts.refused_class:
+        print(f"lidar file {opts.lidar}: {counts.refused_class} points of reserved classes "
+              "23..63 left out (name them with --classes to evaluate them)", file=sys.stderr,
+              flush=True)
     if counts.evaluated == 0:
         kept = counts.read - counts.withheld - counts.excluded_class
         if counts.on_void == 0:

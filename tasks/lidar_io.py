@@ -4,22 +4,45 @@
 datum (the rules are in :mod:`tasks.evaluate`) and checks that the file is whole;
 :func:`lidar_chunks` streams the points a chunk at a time, so memory stays flat whatever the
 file size.
+
+A LAZ is never decompressed in this process: lazrs, laspy's decoder, aborts the process or
+panics on some damaged files instead of raising (:mod:`tasks.laz_child` says which), so a child
+process decodes it and sends the raw point records through a pipe, and a crash of the child
+becomes one :class:`~core.errors.InputError` naming the file. A plain LAS is read here (laspy,
+NumPy only). Damaged bytes can also decode without any error into wrong points (always in a
+plain LAS; in a LAZ when the damage keeps the decoder going): every chunk is checked
+(:func:`core.evaluation.refused_points`: inside the header's box, no reserved class), the
+refused points are counted and left out, and a file with more of them than
+:data:`core.evaluation.MAX_REFUSED_SHARE` of its points is refused as corrupt.
 """
 
 from __future__ import annotations
 
 import contextlib
 import logging
-from collections.abc import Iterator
+import os
+import signal
+import subprocess
+import sys
+import tempfile
+from collections.abc import Iterator, Sequence
 from dataclasses import dataclass
 from pathlib import Path
+from typing import BinaryIO, cast
 
 import laspy
+import numpy as np
 import pyproj
+from numpy.typing import NDArray
 from pyproj.exceptions import CRSError
 
-from core.errors import InputError
-from core.evaluation import LidarInfo
+from core.errors import GcpFreeError, InputError
+from core.evaluation import (
+    MAX_REFUSED_SHARE,
+    LidarInfo,
+    refused_points,
+    too_many_refused,
+)
 from core.heights import EPSG_UNITS, Z_UNITS, HeightFrame
 from tasks.evaluation_crs import (
     VerticalPart,
@@ -29,6 +52,14 @@ from tasks.evaluation_crs import (
     unsupported_datum,
     vertical_datum,
 )
+from tasks.laz_child import END, ERROR, WORD
+
+#: the module the child runs, and the package root put on its path so that ``-m`` finds it
+CHILD = "tasks.laz_child"
+_ROOT = Path(__file__).resolve().parents[1]
+_SEL = laspy.DecompressionSelection
+#: the LAZ layers the evaluation reads (point formats 6-10 skip the others; 0-5 decode all)
+LAYERS = _SEL.XY_RETURNS_CHANNEL | _SEL.Z | _SEL.CLASSIFICATION | _SEL.FLAGS
 
 
 @dataclass(frozen=True, eq=False)
@@ -91,8 +122,9 @@ def _check_header(path: str | Path) -> None:
 
 
 def _check_complete(f: laspy.LasReader, path: Path) -> None:
-    """A cheap check for a truncated file: the size of a LAS, the chunk table of a LAZ (lazrs
-    reads it when decompression starts)."""
+    """A cheap check for a truncated file: the size of a LAS, the chunk table and the first
+    point of a LAZ (decoded in the child process); and the header's box, which the points are
+    checked against."""
     h = f.header
     if not h.are_points_compressed:
         need = h.offset_to_point_data + h.point_count * h.point_format.size
@@ -100,11 +132,95 @@ def _check_complete(f: laspy.LasReader, path: Path) -> None:
             raise InputError(f"lidar file {path} is truncated: {path.stat().st_size} bytes for "
                              f"{h.point_count} points ({need} needed); give an intact file")
     elif h.point_count:
+        for _ in _laz_records(path, h, 0, h.point_count):
+            pass
+    lo, hi = np.asarray(h.mins, dtype=float), np.asarray(h.maxs, dtype=float)
+    if h.point_count and not (np.isfinite(lo).all() and np.isfinite(hi).all()
+                              and (lo <= hi).all()):
+        box = ", ".join(f"{a} {u:g}..{v:g}" for a, u, v in zip("xyz", lo, hi, strict=True))
+        raise InputError(f"lidar file {path} has a corrupt header: its box ({box}) is not "
+                         "finite or inverted; give an intact LAS/LAZ file")
+
+
+# ---------------------------------------------------------------------------- LAZ in a child
+
+
+def _read_word(stream: BinaryIO) -> int | None:
+    b = stream.read(WORD.size)
+    return WORD.unpack(b)[0] if len(b) == WORD.size else None
+
+
+def _crash(proc: subprocess.Popen, err: BinaryIO) -> str:
+    """How the child ended, with the first line it wrote on stderr (lazrs's panic or failed
+    allocation), e.g. ``killed by SIGABRT: memory allocation of 61347878160 bytes failed``."""
+    rc = proc.wait()
+    how = f"exit status {rc}"
+    if rc < 0:
         try:
-            f.read_points(1)
-        except RuntimeError as exc:  # lazrs.LazrsError
-            raise InputError(f"lidar file {path} is truncated or corrupt ({exc}); give an "
-                             "intact LAZ file") from exc
+            how = f"killed by {signal.Signals(-rc).name}"
+        except ValueError:
+            how = f"killed by signal {-rc}"
+    err.seek(0)
+    lines = [ln.strip() for ln in err.read(4096).decode("utf-8", "replace").splitlines()]
+    first = next((ln for ln in lines if ln), "")
+    return f"{how}: {first[:200]}" if first else how
+
+
+def _laz_records(path: Path, header: laspy.LasHeader, n: int, expected: int
+                 ) -> Iterator[laspy.ScaleAwarePointRecord]:
+    """The LAZ file's points, ``n`` at a time, decoded by :mod:`tasks.laz_child` in a child
+    process (``n = 0``: only check the chunk table and the first point). The decoder's error
+    or crash raises InputError; a consumer that stops early kills the child."""
+    vlrs = header.vlrs.get("LasZipVlr")
+    if not vlrs:
+        raise InputError(f"cannot read lidar file {path}: its points are compressed but it has "
+                         "no LASzip record; give an intact LAZ file")
+    cmd = [sys.executable, "-P", "-m", CHILD, str(path),
+           str(header.offset_to_point_data), str(expected), vlrs[0].record_data.hex(), str(n),
+           str(int(LAYERS))]
+    env = {**os.environ, "RUST_BACKTRACE": "0",
+           "PYTHONPATH": os.pathsep.join(filter(None, [str(_ROOT),
+                                                       os.environ.get("PYTHONPATH")]))}
+    size, dtype, read = header.point_format.size, header.point_format.dtype(), 0
+    with tempfile.TemporaryFile() as err, subprocess.Popen(
+            cmd, stdin=subprocess.DEVNULL, stdout=subprocess.PIPE, stderr=err, env=env) as proc:
+        out = cast(BinaryIO, proc.stdout)
+        try:
+            word = _read_word(out)
+            if word is not None and word != size:
+                raise InputError(f"lidar file {path} is corrupt: its LASzip record describes "
+                                 f"{word}-byte points where its header says {size}; give an "
+                                 "intact LAZ file")
+            while word is not None:
+                word = _read_word(out)
+                if word is None or word == END:
+                    break
+                if word == ERROR:
+                    k = _read_word(out) or 0
+                    msg = out.read(min(max(k, 0), 1000)).decode("utf-8", "replace")
+                    where = f" after {read} of {expected} points" if n else ""
+                    raise InputError(f"lidar file {path} is truncated or corrupt{where} ({msg});"
+                                     " give an intact LAZ file")
+                if not 0 < word <= min(n, expected - read):
+                    raise InputError(f"lidar file {path}: the LAZ decoder sent {word} points "
+                                     f"after {read} of {expected}; give an intact LAZ file")
+                data = out.read(word * size)
+                if len(data) < word * size:
+                    break
+                read += word
+                yield laspy.ScaleAwarePointRecord(np.frombuffer(data, dtype), header.point_format,
+                                                  header.scales, header.offsets)
+            if word != END:
+                where = f"after {read} of {expected} points" if n else \
+                    "reading its chunk table and first point"
+                raise InputError(f"lidar file {path} is corrupt: the LAZ decoder crashed {where} "
+                                 f"({_crash(proc, err)}); give an intact LAZ file")
+        finally:
+            if proc.poll() is None:
+                proc.kill()
+
+
+# ---------------------------------------------------------------------------- inspect
 
 
 def inspect_lidar(path: Path, crs: str | None = None, vertical: str = "auto",
@@ -117,6 +233,8 @@ def inspect_lidar(path: Path, crs: str | None = None, vertical: str = "auto",
         with _laspy_quiet(), laspy.open(path) as f:
             header = f.header
             _check_complete(f, path)
+    except GcpFreeError:
+        raise
     except (laspy.errors.LaspyException, OSError, ValueError) as exc:
         raise InputError(f"cannot read lidar file {path}: {exc}; give an intact LAS/LAZ "
                          "file") from exc
@@ -184,15 +302,77 @@ def inspect_lidar(path: Path, crs: str | None = None, vertical: str = "auto",
     return LidarSource(info, horizontal, HeightFrame(datum, z_factor))
 
 
-def lidar_chunks(path: Path, n: int, expected: int) -> Iterator[laspy.ScaleAwarePointRecord]:
-    """The file's points, ``n`` at a time; a truncated or corrupt file raises InputError."""
-    read = 0
+@dataclass(frozen=True, eq=False)
+class LidarChunk:
+    """The points of one chunk that passed the checks: ``x``, ``y``, ``z`` in the file's units,
+    the LAS class and the withheld flag; and how many of the chunk's points were refused,
+    outside the header's box or of a reserved class."""
+
+    x: NDArray[np.float64]
+    y: NDArray[np.float64]
+    z: NDArray[np.float64]
+    classification: NDArray[np.uint8]
+    withheld: NDArray[np.bool_]
+    refused_bounds: int = 0
+    refused_class: int = 0
+
+    def __len__(self) -> int:
+        return int(self.x.size)
+
+
+def _checked(pts: laspy.ScaleAwarePointRecord, header: laspy.LasHeader,
+             accept: Sequence[int]) -> LidarChunk:
+    """The chunk's points checked against the header's box and the reserved classes (but those
+    in ``accept``); the refused ones counted and left out."""
+    x, y, z = (np.asarray(v, dtype=np.float64) for v in (pts.x, pts.y, pts.z))
+    cls = np.asarray(pts.classification)
+    withheld = np.asarray(pts.withheld).astype(bool)
+    outside, reserved = refused_points(x, y, z, cls, header.mins, header.maxs, header.scales,
+                                       accept)
+    bad = outside | reserved
+    if not bad.any():
+        return LidarChunk(x, y, z, cls, withheld)
+    ok = ~bad
+    return LidarChunk(x[ok], y[ok], z[ok], cls[ok], withheld[ok], int(outside.sum()),
+                      int(reserved.sum()))
+
+
+def _too_many(path: Path, expected: int, outside: int) -> InputError:
+    return InputError(
+        f"lidar file {path} is corrupt: {outside} points read lie outside its header's box, "
+        f"more than {100 * MAX_REFUSED_SHARE:g} % of its {expected} points; give an intact "
+        "LAS/LAZ file")
+
+
+def lidar_chunks(path: Path, n: int, expected: int, accept_classes: Sequence[int] = ()
+                 ) -> Iterator[LidarChunk]:
+    """The file's points, ``n`` at a time, checked (module docstring): a truncated or corrupt
+    file raises InputError, as does one with more than
+    :data:`~core.evaluation.MAX_REFUSED_SHARE` of its ``expected`` points outside its header's
+    box (as soon as that many are). Points of a reserved class are left out and counted but do
+    not condemn the file: national products use them (AHN's class 26), so only the box, which
+    a sound file never breaks, decides. ``accept_classes``: reserved classes the user named
+    (``--classes``)."""
+    path = Path(path)
+    read = outside = reserved = 0
     _check_header(path)
     try:
-        with _laspy_quiet(), laspy.open(path) as f:
-            for pts in f.chunk_iterator(n):
+        with contextlib.ExitStack() as stack:
+            stack.enter_context(_laspy_quiet())
+            f = stack.enter_context(laspy.open(path))
+            h = f.header
+            records = (stack.enter_context(contextlib.closing(_laz_records(path, h, n, expected)))
+                       if h.are_points_compressed else f.chunk_iterator(n))
+            for pts in records:
                 read += len(pts)
-                yield pts
+                chunk = _checked(pts, h, accept_classes)
+                outside += chunk.refused_bounds
+                reserved += chunk.refused_class
+                if too_many_refused(outside, expected):
+                    raise _too_many(path, expected, outside)
+                yield chunk
+    except GcpFreeError:
+        raise
     except (laspy.errors.LaspyException, RuntimeError, OSError, ValueError) as exc:
         raise InputError(f"lidar file {path} is truncated or corrupt after {read} of {expected} "
                          f"points ({exc}); give an intact LAS/LAZ file") from exc

@@ -375,7 +375,8 @@ def make_lidar(scene: SceneDef, out: Path, tile_m: float = 1000.0) -> Path:
     seed = derive_seed(scene.seed, "lidar")
     to_lonlat = Projection(scene.epsg).to_lonlat
     try:
-        with laspy.open(tmp, mode="w", header=header) as writer:
+        # the temporary name ends in .tmp: say LAZ, or laspy writes an uncompressed LAS
+        with laspy.open(tmp, mode="w", header=header, do_compress=True) as writer:
             for ty in np.arange(ymin, ymax, tile_m):
                 for tx in np.arange(xmin, xmax, tile_m):
                     box = (tx, ty, min(tx + tile_m, xmax), min(ty + tile_m, ymax))
