@@ -107,7 +107,9 @@ class WindowMatch:
     vertical one (the differences' robust spread over the root of the independent patches);
     ``predicted_precision_m`` the precision the relief promised before matching (with the
     reference's nominal noise ``cfg.height_noise_m``); ``spread_m`` the robust spread of the
-    height differences about their dominant mode after the shift (NaN when not matched).
+    height differences about their dominant mode after the shift (NaN when not matched);
+    ``n_dem_cells`` the window's lattice cells the relative DEM fills (``n_cells`` of them have
+    a reference height too): a scene smaller than a window fills few of them.
     """
 
     status: WindowStatus
@@ -125,6 +127,7 @@ class WindowMatch:
     n_cells: int = 0
     masked_share: float = 1.0
     spread_m: float = float("nan")
+    n_dem_cells: int = 0
 
     @property
     def ok(self) -> bool:
@@ -304,7 +307,7 @@ def predicted_precision_m(cells: WindowCells, cfg: SurfaceMatchConfig) -> tuple[
     """
     h = cells.h_m.reshape(cells.shape)
     gy, gx = np.gradient(h, cells.cell_m)
-    if cfg.detrend and np.isfinite(gx).any():
+    if cfg.detrend and np.isfinite(gx).any() and np.isfinite(gy).any():
         gx, gy = gx - np.nanmean(gx), gy - np.nanmean(gy)
     g2 = gx**2 + gy**2
     ok = np.isfinite(g2)
@@ -350,7 +353,7 @@ def match_window(lon_deg: ArrayLike, lat_deg: ArrayLike, h_m: ArrayLike,
     masked = 1.0 - n_pairs / max(cells.n_disk, 1)  # mismatched cells or reference voids
     pred, relief, slope, n_eff = predicted_precision_m(cells, cfg)
     base = dict(relief_m=relief, rms_slope=slope, n_cells=n_pairs, masked_share=masked,
-                predicted_precision_m=pred)
+                predicted_precision_m=pred, n_dem_cells=int(valid.sum()))
     if n_pairs < cfg.min_cells:
         return WindowMatch(WindowStatus.TOO_FEW_CELLS, **base)
     if masked > cfg.max_masked_share:
@@ -520,13 +523,20 @@ def shift_prior(lon_deg: ArrayLike, lat_deg: ArrayLike, matches: Sequence[Window
 
 @dataclass(frozen=True)
 class ReliefVerdict:
-    """Whether the terrain has the relief surface matching needs, judged before orienting.
+    """Whether the scene gives surface matching what it needs, judged before orienting, and
+    if not the true reason (:attr:`reason`).
 
     ``n_qualified``: windows whose relief promises ``max_precision_m`` (the precision predicted
-    from the relief and the measured noise, see :func:`realistic_precision_m`); ``relief_found_m``: the median relief
-    (std of heights) of the windows with enough cells; ``relief_needed_m``: the median over
-    those windows of the relief that would have made them qualify (the predicted precision
-    goes as one over the slopes, so as one over the relief of a terrain of the same shape).
+    from the relief and the measured noise, see :func:`realistic_precision_m`), of
+    ``n_windows`` placed; ``n_small``: windows the relative DEM fills with fewer than
+    ``min_cells`` lattice cells of ``cell_m`` (the scene, or its overlap, is smaller than a
+    window: ``best_dem_cells`` is the most any window got); ``n_voids``: windows the relative
+    DEM fills but the reference leaves without heights (voids) or that are masked beyond the
+    allowed share; the other windows are judged on their relief. ``relief_found_m``: the
+    median relief (std of heights) of the judged windows; ``relief_needed_m``: the median over
+    them of the relief that would have made them qualify (the predicted precision goes as one
+    over the slopes, so as one over the relief of a terrain of the same shape; NaN when no
+    judged window has a slope).
     """
 
     n_windows: int
@@ -535,20 +545,89 @@ class ReliefVerdict:
     relief_found_m: float
     relief_needed_m: float
     max_precision_m: float
+    n_small: int = 0
+    n_voids: int = 0
+    best_dem_cells: int = 0
+    min_cells: int = 100
+    cell_m: float = float("nan")
+    radius_m: float = float("nan")
 
     @property
     def enough(self) -> bool:
         return self.n_qualified >= self.n_needed
 
+    @property
+    def n_judged(self) -> int:
+        return self.n_windows - self.n_small - self.n_voids
+
+    @property
+    def reason(self) -> str | None:
+        """None when enough windows qualify, else why not: ``"too_small"`` (no window holds
+        enough of the relative DEM: the scene is smaller than a window), ``"voids"`` (the
+        reference has no heights under the windows), ``"few_windows"`` (every window judged
+        qualifies, but too few fit in the scene), ``"too_flat"``."""
+        if self.enough:
+            return None
+        if self.n_judged == 0:
+            return "too_small" if self.n_small >= self.n_voids else "voids"
+        if self.n_qualified == self.n_judged:
+            return "few_windows"
+        return "too_flat"
+
     def message(self) -> str:
+        """The refusal in one line: what was found, what is needed, what to do. Never NaN."""
+        n, need = self.n_windows, self.n_needed
+        skipped = "" if not (self.n_small or self.n_voids) else (
+            f" ({self.n_small} too little of the scene, {self.n_voids} on reference voids)")
+        if self.reason == "too_small":
+            area = self.min_cells * self.cell_m**2 / 1e6
+            have = self.best_dem_cells * self.cell_m**2 / 1e6
+            return (f"the scene is too small for SRTM surface matching: the best of {n} windows "
+                    f"holds {self.best_dem_cells} cells of the relative DEM at the reference's "
+                    f"{self.cell_m:.0f} m (about {have:.2g} km2), {self.min_cells} are needed "
+                    f"(about {area:.2g} km2 of overlap, in windows of radius "
+                    f"{self.radius_m:g} m); use a scene covering kilometres of terrain, or "
+                    "real GCPs")
+        if self.reason == "voids":
+            return (f"the reference DEM has no heights under the scene: {self.n_voids} of {n} "
+                    f"surface-matching windows fall on its voids or are masked beyond the "
+                    f"allowed share; fill the reference's voids (gcpfree fill-voids) or use "
+                    "another reference")
+        if self.reason == "few_windows":
+            return (f"the scene holds too few surface-matching windows: {n} placed, "
+                    f"{self.n_qualified} with enough relief{skipped}, {need} needed; use a "
+                    "larger scene, or lower --min-windows or --window-radius")
+        if np.isfinite(self.relief_needed_m):
+            needed = f"needed about {self.relief_needed_m:.1f} m"
+        else:
+            needed = "no window has a slope to match on"
         return (f"the terrain is too flat for GCP-free orientation: {self.n_qualified} of "
-                f"{self.n_windows} surface-matching windows have the relief to fix the position "
-                f"to {self.max_precision_m:g} m ({self.n_needed} needed); relief found "
-                f"{self.relief_found_m:.1f} m (median std of heights per window), needed about "
-                f"{self.relief_needed_m:.1f} m; use real GCPs or a scene with more relief")
+                f"{self.n_judged} windows judged{skipped} have the relief to fix the position "
+                f"to {self.max_precision_m:g} m ({need} needed); relief found "
+                f"{self.relief_found_m:.1f} m (median std of heights per window), {needed}; "
+                "use real GCPs or a scene with more relief")
 
     def to_dict(self) -> dict[str, Any]:
-        return {**vars(self), "enough": self.enough}
+        return {k: (None if isinstance(v, float) and not np.isfinite(v) else v)
+                for k, v in vars(self).items()} | {"enough": self.enough,
+                                                    "reason": self.reason}
+
+
+def scene_size_verdict(overlap_m2: float, cfg: SurfaceMatchConfig,
+                       cell_m: float) -> str | None:
+    """Before anything is matched: None when the pair's overlap (``overlap_m2``, its largest
+    over the heights the scene may have) can hold one surface-matching window's
+    ``cfg.min_cells`` lattice cells of ``cell_m`` (the reference's cell, or ``cfg.cell_m``),
+    else the refusal, with its figures. The relief verdict judges the windows afterwards; this
+    only spares minutes of matching on a scene that cannot hold one window."""
+    cell = float(cfg.cell_m if cfg.cell_m is not None else cell_m)
+    needed = cfg.min_cells * cell**2
+    if not overlap_m2 < needed:
+        return None
+    return (f"the scene is too small for SRTM surface matching: the two images overlap on about "
+            f"{overlap_m2 / 1e6:.2g} km2 ({overlap_m2 / cell**2:.0f} cells of the reference's "
+            f"{cell:.0f} m), one window needs {cfg.min_cells} cells (about "
+            f"{needed / 1e6:.2g} km2); use a scene covering kilometres of terrain, or real GCPs")
 
 
 def realistic_precision_m(m: WindowMatch, cfg: SurfaceMatchConfig) -> float:
@@ -571,11 +650,18 @@ def realistic_precision_m(m: WindowMatch, cfg: SurfaceMatchConfig) -> float:
 
 
 def relief_sufficiency(matches: Sequence[WindowMatch], cfg: SurfaceMatchConfig,
-                       n_needed: int) -> ReliefVerdict:
+                       n_needed: int, cell_m: float | None = None) -> ReliefVerdict:
     """The verdict on ``matches`` (windows matched or refused by :func:`match_window`), each
-    judged by :func:`realistic_precision_m`."""
-    sized = [m for m in matches if m.status not in (WindowStatus.TOO_FEW_CELLS,
-                                                    WindowStatus.MASKED)
+    judged by :func:`realistic_precision_m`; ``cell_m`` the lattice cell the windows were
+    averaged on (``cfg.cell_m`` or the reference's), for the message."""
+    def filled(m: WindowMatch) -> int:  # n_cells (with a reference height) <= n_dem_cells;
+        return max(m.n_dem_cells, m.n_cells)  # windows.json of older runs lack the latter
+
+    small = [m for m in matches if filled(m) < cfg.min_cells]
+    voids = [m for m in matches if filled(m) >= cfg.min_cells
+             and m.status in (WindowStatus.TOO_FEW_CELLS, WindowStatus.MASKED)]
+    sized = [m for m in matches if filled(m) >= cfg.min_cells
+             and m.status not in (WindowStatus.TOO_FEW_CELLS, WindowStatus.MASKED)
              and np.isfinite(m.relief_m)]
     precision = [realistic_precision_m(m, cfg) for m in sized]
     qualified = [m for m, p in zip(sized, precision, strict=True) if p <= cfg.max_precision_m]
@@ -583,8 +669,14 @@ def relief_sufficiency(matches: Sequence[WindowMatch], cfg: SurfaceMatchConfig,
     need = [m.relief_m * p / cfg.max_precision_m for m, p in zip(sized, precision, strict=True)
             if np.isfinite(p) and m.relief_m > 0]
     needed = float(np.median(need)) if need else float("nan")
-    return ReliefVerdict(len(matches), len(qualified), n_needed, found, needed,
-                         cfg.max_precision_m)
+    return ReliefVerdict(
+        len(matches), len(qualified), n_needed, found, needed, cfg.max_precision_m,
+        n_small=len(small), n_voids=len(voids),
+        best_dem_cells=max((filled(m) for m in matches), default=0),
+        min_cells=cfg.min_cells,
+        cell_m=float(cfg.cell_m if cfg.cell_m is not None else
+                     (cell_m if cell_m is not None else float("nan"))),
+        radius_m=cfg.radius_m)
 
 
 # ------------------------------------------------------------------------- report figure

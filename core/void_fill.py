@@ -71,14 +71,14 @@ class FillConfig:
 
     def __post_init__(self) -> None:
         if not 1 <= self.border_cells <= 50:
-            raise InputError(f"border_cells must be in 1..50 reference cells, got "
-                             f"{self.border_cells}")
+            raise InputError(f"the border ring (--border-cells) must be 1..50 tile cells "
+                             f"wide, got {self.border_cells}")
         if not 0 <= self.smooth_cells <= 50:
-            raise InputError(f"smooth_cells must be in 0..50 reference cells, got "
+            raise InputError(f"the smoothing (--smooth-cells) must be 0..50 tile cells, got "
                              f"{self.smooth_cells}")
         if not (self.outlier_nmad >= 0 and math.isfinite(self.outlier_nmad)):
-            raise InputError(f"outlier_nmad must be a finite number >= 0, got "
-                             f"{self.outlier_nmad}; 0 keeps every ring difference")
+            raise InputError(f"the outlier limit (--outlier-nmad) must be a finite number >= 0, "
+                             f"got {self.outlier_nmad}; 0 keeps every ring difference")
 
 
 @dataclass(frozen=True, eq=False)

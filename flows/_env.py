@@ -35,10 +35,26 @@ def configure_environment(prefect_home: str | Path | None = None, *,
         os.environ.setdefault(k, v)
     if verbose is not None:
         os.environ["PREFECT_LOGGING_LEVEL"] = "INFO" if verbose else "WARNING"
+    if verbose is False:
+        quiet_numeric_warnings()
     if prefect_home is not None:
         home = Path(prefect_home)
         os.environ["PREFECT_HOME"] = str(home)
         os.environ["DASK_TEMPORARY_DIRECTORY"] = str(home / "dask")
+
+
+def quiet_numeric_warnings() -> None:
+    """Keep NumPy's numeric warnings ("Mean of empty slice", "invalid value encountered...")
+    off a user's terminal, in this process and in the worker processes it starts (through
+    PYTHONWARNINGS): a window or tile without data is an expected case the products report,
+    not news. ``--verbose`` and the test suite (where they are errors) keep them."""
+    import warnings
+
+    warnings.filterwarnings("ignore", category=RuntimeWarning)
+    spec = "ignore::RuntimeWarning"
+    current = os.environ.get("PYTHONWARNINGS", "")
+    if spec not in current.split(","):
+        os.environ["PYTHONWARNINGS"] = ",".join(filter(None, (current, spec)))
 
 
 class _OurErrorsOnce(logging.Filter):

@@ -20,7 +20,7 @@ from flows.commands import pair as pair_command
 from flows.commands import relative as relative_command
 from flows.commands import report as report_command
 from flows.commands import serve as serve_command
-from flows.commands._pair import VERTICAL_HELP, VERTICALS
+from flows.commands._pair import VERTICAL_HELP, VERTICALS, OneLineParser
 
 
 def _add_prepare_reference(sub: argparse._SubParsersAction) -> None:
@@ -196,7 +196,7 @@ def _run_info(args: argparse.Namespace) -> int:
 
 
 def build_parser() -> argparse.ArgumentParser:
-    parser = argparse.ArgumentParser(
+    parser = OneLineParser(
         prog="gcpfree",
         description="Orient satellite stereo pairs without ground control points, using SRTM.",
     )
@@ -222,7 +222,10 @@ COMMANDS = {"prepare-reference": _run_prepare_reference, "simulate": _run_simula
 
 
 def main(argv: Sequence[str] | None = None) -> int:
-    args = build_parser().parse_args(argv)
+    try:
+        args = build_parser().parse_args(argv)
+    except SystemExit as exc:  # --help (0), or a one-line argument error (2)
+        return int(exc.code or 0)
     configure_environment(verbose=args.verbose)
     from core.errors import GcpFreeError
 

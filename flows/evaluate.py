@@ -19,7 +19,7 @@ from pathlib import Path
 from typing import TYPE_CHECKING
 
 from flows._env import one_line_errors
-from flows.commands._pair import VERTICAL_HELP, VERTICALS
+from flows.commands._pair import VERTICAL_HELP, VERTICALS, OneLineParser
 
 if TYPE_CHECKING:
     from core.evaluation import EvaluationReport
@@ -61,9 +61,10 @@ def report_lines(report: EvaluationReport) -> list[str]:
          f"{li.vertical} heights ({li.vertical_source})"),
         f"{'compared':<14} dz = DEM - lidar, metres, in {report.heights_compared} heights",
         f"{'lidar -> DEM':<14} {report.transformation}",
-        (f"{'points':<14} read {p.read}, withheld {p.withheld}, class excluded "
-         f"{p.excluded_class}, outside the DEM {p.outside_dem}, on DEM voids {p.on_void}, "
-         f"evaluated {p.evaluated}"),
+        (f"{'points':<14} read {p.read}, refused {p.refused} (outside the file's box "
+         f"{p.refused_bounds}, reserved class {p.refused_class}), withheld {p.withheld}, class "
+         f"excluded {p.excluded_class}, outside the DEM {p.outside_dem}, on DEM voids "
+         f"{p.on_void}, evaluated {p.evaluated}"),
     ]
     if report.landcover is not None:
         out.append(f"{'classes':<14} land cover {report.landcover.path} "
@@ -174,8 +175,8 @@ def main(argv: Sequence[str] | None = None) -> int:
     ``gcpfree evaluate`` runs it; exit status 2 with one line on bad input."""
     from flows._env import configure_environment
 
-    configure_environment()
-    parser = argparse.ArgumentParser(prog="gcpfree")
+    configure_environment(verbose=False)
+    parser = OneLineParser(prog="gcpfree")
     add_parser(parser.add_subparsers(dest="command", required=True, metavar="COMMAND"))
     args = parser.parse_args(["evaluate", *(sys.argv[1:] if argv is None else argv)])
     from core.errors import GcpFreeError

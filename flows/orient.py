@@ -128,9 +128,11 @@ def orient_flow(params: OrientParams) -> OrientOutcome:
     ties = TieGround.from_tiepoints_json(rel.rel_json.with_suffix(".tiepoints.json"))
     windows = match_surfaces(out / "relative_dem.tif", ties, reference, cfg, params.spacing_m,
                              out=out / "windows.json", progress=params.progress)
-    verdict = relief_sufficiency(windows.matches, cfg, params.min_windows)
-    if not verdict.enough:
-        raise InsufficientReliefError(verdict.message())
+    verdict = relief_sufficiency(windows.matches, cfg, params.min_windows,
+                                 reference.cell_size_m())
+    if not verdict.enough:  # the true reason: too flat, or too small, or reference voids
+        raise (InsufficientReliefError if verdict.reason == "too_flat"
+               else InsufficientDataError)(verdict.message())
     gcps = windows.gcps
     if len(gcps) < params.absolute.min_gcps:
         raise InsufficientDataError(

@@ -59,6 +59,9 @@ def dem_datum(path: str | Path, given: str = "auto", *, what: str = "reference D
                 crs = src.crs
     except RasterioIOError as exc:
         raise InputError(f"cannot read {label}: {exc}; give a GeoTIFF or .hgt file") from exc
+    if crs is None:
+        raise InputError(f"{label} has no CRS; give a georeferenced DEM (EPSG:4326 or a UTM "
+                         "zone), e.g. gdal_edit.py -a_srs EPSG:4326")
     vert = None
     if crs is not None:
         try:

@@ -121,7 +121,7 @@ class PairGeometry:
     same convergence (for views on either side of the vertical in one plane, flat Earth, it
     equals ``tan i1 + tan i2`` only when ``i1 = i2``). ``overlap_pct`` is the area of the
     intersection of the two footprints (corner quadrilaterals at ``h_m``) over the area of the
-    first footprint, in percent.
+    first footprint, in percent; ``overlap_area_m2`` that intersection's area.
     """
 
     h_m: float
@@ -138,6 +138,7 @@ class PairGeometry:
     azimuth1_deg: float
     incidence2_deg: float
     azimuth2_deg: float
+    overlap_area_m2: float = float("nan")
 
 
 # ------------------------------------------------------------------------- one image
@@ -363,6 +364,7 @@ def pair_geometry(model1: SensorModel, size1: tuple[int, int], model2: SensorMod
         b_over_h=2.0 * float(np.tan(0.5 * conv)), overlap_pct=100.0 * min(area / area1, 1.0),
         incidence1_deg=float(g1.incidence_deg), azimuth1_deg=float(g1.azimuth_deg),
         incidence2_deg=float(g2.incidence_deg), azimuth2_deg=float(g2.azimuth_deg),
+        overlap_area_m2=float(area),
     )
 
 

@@ -12,6 +12,27 @@ VERTICAL_HELP = ("heights of REF: auto (default) reads its vertical_datum tag, t
                  "these describe is refused: say egm96 or ellipsoidal")
 
 
+class OneLineParser(argparse.ArgumentParser):
+    """An argument parser whose errors are one line on stderr and exit code 2, like every
+    other gcpfree error (argparse prints its usage, then the error, on two or more)."""
+
+    def error(self, message: str, prog: str | None = None):  # type: ignore[override]
+        import sys
+
+        prog = prog or self.prog
+        sys.stderr.write(f"{prog}: error: {message}; see {prog} --help\n")
+        raise SystemExit(2)
+
+    def parse_args(self, args=None, namespace=None):  # type: ignore[override]
+        """As argparse's, with an unknown option named against its subcommand."""
+        ns, extras = self.parse_known_args(args, namespace)
+        if extras:
+            command = getattr(ns, "command", None)
+            self.error(f"unrecognized arguments: {' '.join(extras)}",
+                       f"{self.prog} {command}" if command else None)
+        return ns
+
+
 def add_pair_arguments(p: argparse.ArgumentParser, *, right_help: str = "right image") -> None:
     """``--left --right --left-model --right-model --band``."""
     p.add_argument("--left", type=Path, required=True, help="left image (its model stays fixed)")
@@ -68,9 +89,12 @@ def add_run_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--out", type=Path, required=True, help="output folder")
 
 
-def check_orientation_arguments(args: argparse.Namespace, command: str):  # -> SurfaceMatchConfig
+def check_orientation_arguments(args: argparse.Namespace, command: str,
+                                pair=None):  # -> SurfaceMatchConfig
     """The reference, check points and window settings checked before Prefect starts;
-    returns the surface-matching settings they make."""
+    returns the surface-matching settings they make. With ``pair`` (the two LoadedModels of
+    :func:`check_pair`), a scene too small for one surface-matching window is refused here,
+    in seconds, rather than after its matching."""
     from dataclasses import replace
 
     from core.errors import InputError
@@ -84,8 +108,46 @@ def check_orientation_arguments(args: argparse.Namespace, command: str):  # -> S
         read_checkpoints(args.checkpoints)
     if args.min_windows < 1:
         raise InputError("--min-windows must be at least 1")
-    return replace(SurfaceMatchConfig(), radius_m=args.window_radius,
-                   shift_max_arcsec=args.max_shift)
+    surface = replace(SurfaceMatchConfig(), radius_m=args.window_radius,
+                      shift_max_arcsec=args.max_shift)
+    if pair is not None:
+        _check_scene_size(args, surface, *pair)
+    return surface
+
+
+def _check_scene_size(args: argparse.Namespace, surface, left, right) -> None:
+    """InsufficientDataError when the pair's overlap, at the height that makes it largest,
+    cannot hold one surface-matching window (:func:`core.surface_match.scene_size_verdict`)."""
+    import numpy as np
+
+    from core.errors import GeometryError, InsufficientDataError
+    from core.geodesy import metres_per_degree
+    from core.sensors.viewing import pair_geometry
+    from core.surface_match import scene_size_verdict
+    from tasks.relative import pair_box
+
+    box = pair_box(left, right, OVERLAP_HEIGHTS_M)
+    if args.reference is not None:
+        from tasks.dem_io import read_reference
+
+        cell = read_reference(args.reference, box, "ellipsoidal").cell_size_m()
+    else:
+        from tasks.srtm import find_tiles
+
+        tiles = find_tiles(args.srtm_dir, box, allow_missing=True)
+        m_lon, m_lat = metres_per_degree(0.5 * (box.lat_min + box.lat_max))
+        res = min(t.res_deg for t in tiles)
+        cell = float(min(res * m_lon, res * m_lat))
+    areas = []
+    for h in np.linspace(*OVERLAP_HEIGHTS_M, 20):
+        try:
+            areas.append(pair_geometry(left.model, left.size, right.model, right.size,
+                                       float(h)).overlap_area_m2)
+        except GeometryError:
+            pass
+    refusal = scene_size_verdict(max(areas, default=0.0), surface, cell)
+    if refusal is not None:
+        raise InsufficientDataError(refusal)
 
 
 def check_pair(args: argparse.Namespace):  # -> tuple[LoadedModel, LoadedModel]

@@ -37,8 +37,8 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    check_pair(args)
-    surface = check_orientation_arguments(args, "orient")
+    pair = check_pair(args)
+    surface = check_orientation_arguments(args, "orient", pair)
     from flows.orient import OrientParams, orient_flow
 
     outcome = orient_flow(OrientParams(

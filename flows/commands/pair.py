@@ -45,14 +45,23 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
 def run(args: argparse.Namespace) -> int:
     from core.errors import InputError
 
-    check_pair(args)
-    surface = check_orientation_arguments(args, "pair")
+    pair = check_pair(args)
     for name in ("lidar", "landcover"):
         path = getattr(args, name)
         if path is not None and not path.is_file():
             raise InputError(f"--{name} {path} does not exist; give an existing file")
     if args.landcover is not None and args.lidar is None:
         raise InputError("--landcover classifies the lidar evaluation: give --lidar too")
+    if args.lidar is not None:  # its header now, not after the orientation's minutes
+        from tasks.lidar_io import inspect_lidar
+
+        inspect_lidar(args.lidar, vertical=args.lidar_vertical)
+    if args.landcover is not None:
+        from tasks.evaluation_rasters import open_raster
+
+        with open_raster(args.landcover, "land cover"):
+            pass
+    surface = check_orientation_arguments(args, "pair", pair)
     from flows.orient_pair import PairParams, orient_pair_flow
 
     outcome = orient_pair_flow(PairParams(

@@ -223,3 +223,41 @@ def test_search_prior_follows_the_scene_wide_misplacement(ref):
     # a prior box that misses the peak says so instead of returning its border
     off = match_window(lo, la, h, (LON0, LAT0), ref, prior=(-6.0, 6.0, 4.0))
     assert off.status == WindowStatus.EDGE_PEAK
+
+
+def test_a_refusal_names_its_true_reason_never_nan():
+    """Too small, reference voids, too few windows and too flat are told apart, each with its
+    figures (issue 17 item 5: a 250 m crop was refused as 'too flat ... needed about nan m')."""
+    from core.surface_match import WindowMatch, WindowStatus, relief_sufficiency
+
+    cfg = SurfaceMatchConfig(max_precision_m=10.0)
+    # a 250 m crop: each 4 km window holds a dozen 90 m cells of the relative DEM
+    tiny = [WindowMatch(WindowStatus.TOO_FEW_CELLS, relief_m=0.0, n_cells=12, n_dem_cells=12,
+                        masked_share=0.998) for _ in range(4)]
+    v = relief_sufficiency(tiny, cfg, 8, cell_m=90.0)
+    assert v.reason == "too_small" and v.best_dem_cells == 12
+    msg = v.message()
+    assert "too small" in msg and "12 cells" in msg and "100 are needed" in msg
+    assert "flat" not in msg and "nan" not in msg.lower()
+    # the relative DEM fills the windows, the reference has voids there
+    holes = [replace(w, n_dem_cells=3000, n_cells=40) for w in tiny]
+    holes += [replace(w, status=WindowStatus.MASKED, n_dem_cells=3000, n_cells=900)
+              for w in tiny]
+    v = relief_sufficiency(holes, cfg, 8, cell_m=90.0)
+    assert v.reason == "voids" and v.n_voids == 8 and "voids" in v.message()
+    # every window judged has the relief, but only 4 fit in the scene
+    good = [WindowMatch(WindowStatus.OK, relief_m=80.0, predicted_precision_m=3.0,
+                        correlation=0.97, n_cells=2000, n_dem_cells=2000, masked_share=0.0)
+            for _ in range(4)]
+    v = relief_sufficiency(good, cfg, 8, cell_m=90.0)
+    assert v.reason == "few_windows" and "4 placed" in v.message()
+    assert "--min-windows" in v.message()
+    # flat windows with no slope at all: found and needed said without NaN
+    flat = [WindowMatch(WindowStatus.LOW_RELIEF, relief_m=0.5, predicted_precision_m=float("inf"),
+                        n_cells=2000, n_dem_cells=2000, masked_share=0.0) for _ in range(9)]
+    v = relief_sufficiency(flat, cfg, 8, cell_m=90.0)
+    assert v.reason == "too_flat" and "relief found 0.5 m" in v.message()
+    assert "nan" not in v.message().lower() and "no window has a slope" in v.message()
+    assert v.to_dict()["relief_needed_m"] is None and v.to_dict()["reason"] == "too_flat"
+    # enough: no reason
+    assert relief_sufficiency(good * 2, cfg, 8).reason is None

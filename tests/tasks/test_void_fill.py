@@ -214,7 +214,7 @@ def test_bad_input_is_refused_in_one_line(tmp_path, dsm):
         read_tile(dsm)
     with pytest.raises(InputError, match="--srtm-vertical"):
         FillOptions(tile, dsm, tmp_path / "o.hgt", srtm_vertical="navd88")
-    with pytest.raises(InputError, match="border_cells"):
+    with pytest.raises(InputError, match="--border-cells"):
         FillConfig(border_cells=0)
     odd, _, _ = tif_tile(tmp_path, "float32")
     with rasterio.open(odd, "r+") as dst:
