@@ -28,13 +28,16 @@ def configure_environment(prefect_home: str | Path | None = None, *,
 
     With ``prefect_home``, Prefect's state (its SQLite database, profiles) and Dask's
     temporary files go to that folder, whatever the environment says (tests, benchmarks).
-    ``verbose`` False (the command line's default) keeps Prefect's INFO chatter off; True
-    brings it back; None leaves Prefect's own default.
+    ``verbose`` False (the command line's default) keeps Prefect's INFO chatter off the
+    terminal, and only there: the console handler shows warnings and errors while the runs'
+    INFO logs still reach the API, so the dashboard shows what a run did; True brings them back
+    to the terminal; None leaves Prefect's own default.
     """
     for k, v in DEFAULTS.items():
         os.environ.setdefault(k, v)
     if verbose is not None:
-        os.environ["PREFECT_LOGGING_LEVEL"] = "INFO" if verbose else "WARNING"
+        os.environ["PREFECT_LOGGING_LEVEL"] = "INFO"
+        os.environ["PREFECT_LOGGING_HANDLERS_CONSOLE_LEVEL"] = "INFO" if verbose else "WARNING"
     if verbose is False:
         quiet_numeric_warnings()
     if prefect_home is not None:

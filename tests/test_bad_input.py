@@ -674,7 +674,8 @@ def test_every_command_has_bad_input_cases():
 def test_bad_input_is_one_line_and_exit_2(bad, argv, fragment, capsys, monkeypatch):
     from flows.cli import main
 
-    monkeypatch.delenv("PREFECT_LOGGING_LEVEL", raising=False)  # main sets it; restored after
+    monkeypatch.delenv("PREFECT_LOGGING_LEVEL", raising=False)  # main sets them; restored after
+    monkeypatch.delenv("PREFECT_LOGGING_HANDLERS_CONSOLE_LEVEL", raising=False)
     monkeypatch.delenv("PYTHONWARNINGS", raising=False)
     rc = main(_argv(argv, bad))
     err = capsys.readouterr().err

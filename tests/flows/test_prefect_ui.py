@@ -127,6 +127,11 @@ def test_the_prefect_ui_shows_the_finished_run(prefect_server, tmp_path: Path):
     run = httpx.get(f"{url}/api/flow_runs/{run_id}", timeout=30).json()
     flow = httpx.get(f"{url}/api/flows/{run['flow_id']}", timeout=30).json()
     assert (flow["name"], run["state"]["name"]) == ("reprocess-archive", "Completed")
+    # the run's INFO logs reach the server although the terminal shows only warnings
+    logs = httpx.post(f"{url}/api/logs/filter", timeout=30, json={
+        "logs": {"flow_run_id": {"any_": [run_id]}}}).json()
+    finished = [entry["message"] for entry in logs if "Finished in state" in entry["message"]]
+    assert finished, [entry["message"] for entry in logs]
     shot = tmp_path / "prefect_run.png"
     with chromium() as browser:
         page = browser.new_page(viewport={"width": 1280, "height": 900})
@@ -139,6 +144,9 @@ def test_the_prefect_ui_shows_the_finished_run(prefect_server, tmp_path: Path):
         assert "Page not found" not in shown, f"the UI does not know run {run_id}"
         for text in (run["name"], flow["name"], "Completed"):
             assert text in shown, text
+        logged = wait_for_text(page, "key => document.body.innerText.includes(key)",
+                               "Finished in state", tmp_path / "prefect_logs.png")
+        assert "Waiting for logs" not in logged
         page.get_by_text("Artifacts", exact=True).click()  # the run's tab
         artifacts = wait_for_text(page, "key => document.body.innerText.includes(key)",
                                   "archive-summary", tmp_path / "prefect_artifacts.png")

@@ -161,6 +161,7 @@ def _argv(name: str, dem: Path, folder: Path) -> list[str]:
 def test_a_dem_whose_datum_cannot_be_told_is_refused_by_every_command(
         name, dems, tmp_path, capsys, monkeypatch):
     monkeypatch.delenv("PREFECT_LOGGING_LEVEL", raising=False)
+    monkeypatch.delenv("PREFECT_LOGGING_HANDLERS_CONSOLE_LEVEL", raising=False)
     argv = _argv(name, dems["untagged"], tmp_path)
     rc, _, err = _main(argv, capsys)
     option = DEM_COMMANDS[name][1]
