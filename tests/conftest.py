@@ -20,6 +20,19 @@ DATA = Path(__file__).parent / "data"
 REPO = Path(__file__).resolve().parents[1]
 
 
+# a simulated scene takes 30-40 s to render and its orientation 20-30 s more: every test that
+# needs one (directly or through another fixture) is slow, wherever it is written; tests slow
+# by themselves carry the mark. ``pytest -m "not slow"`` is the quick loop; CI runs them all.
+SCENE_FIXTURES = frozenset({"tiny_scene", "tiny_clean_scene", "tiny_oriented"})
+
+
+@pytest.hookimpl(tryfirst=True)  # before ``-m`` deselects
+def pytest_collection_modifyitems(config, items):
+    for item in items:
+        if SCENE_FIXTURES.intersection(getattr(item, "fixturenames", ())):
+            item.add_marker(pytest.mark.slow)
+
+
 @pytest.fixture(scope="session")
 def prefect_harness():
     """Run flows against a temporary local Prefect server (one per test session)."""

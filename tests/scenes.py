@@ -29,3 +29,24 @@ def run_scene(out: Path, dem: Path = DEM, centre: tuple[float, float] | None = C
     if lidar:
         S.make_lidar.fn(scene, out)
     return scene
+
+
+def dsm_against_truth(dsm_path: Path, truth_path: Path) -> tuple[float, float, int]:
+    """Median and NMAD (m) of the DSM minus the truth DSM (both ellipsoidal, one UTM zone) at
+    every valid DSM cell, and the number of cells."""
+    import numpy as np
+    import rasterio
+
+    from core.dem import sample_bilinear
+    from core.evaluation import NMAD_FACTOR
+
+    with rasterio.open(dsm_path) as src:
+        z, t = src.read(1).astype(np.float64), src.transform
+    with rasterio.open(truth_path) as src:
+        truth, tt = src.read(1).astype(np.float64), src.transform
+    rows, cols = np.nonzero(np.isfinite(z))
+    x, y = t.c + (cols + 0.5) * t.a, t.f + (rows + 0.5) * t.e
+    d = z[rows, cols] - sample_bilinear(truth, (tt.f - y) / -tt.e - 0.5, (x - tt.c) / tt.a - 0.5)
+    d = d[np.isfinite(d)]
+    med = float(np.median(d))
+    return med, float(NMAD_FACTOR * np.median(np.abs(d - med))), int(d.size)

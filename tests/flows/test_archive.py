@@ -10,6 +10,7 @@ import csv
 import io
 import json
 import os
+from dataclasses import dataclass
 from pathlib import Path
 
 import pytest
@@ -170,10 +171,21 @@ def test_bad_arguments_are_one_line_before_prefect(tmp_path: Path):
         parse("--catalog", str(tmp_path / "cat.csv"), "--out", str(tmp_path / "o"))
 
 
+@dataclass(frozen=True)
+class ExternalCluster:
+    """A Dask cluster started apart from the test process: the scheduler's address, its
+    dashboard port and the process id of its only worker."""
+
+    address: str
+    dashboard_port: int
+    worker_pid: int
+
+
 @pytest.fixture()
 def dask_cluster(tmp_path: Path, prefect_harness):
-    """A separately started ``dask scheduler`` and one ``dask worker`` process on 127.0.0.1,
-    the worker pointed at the test's Prefect API; yields the scheduler's address."""
+    """A separately started ``dask scheduler`` and one ``dask worker`` process (no nanny: the
+    process started here is the worker) on 127.0.0.1, the worker pointed at the test's Prefect
+    API; the scheduler records its task stream from the start."""
     import subprocess
     import sys
     import time
@@ -194,14 +206,16 @@ def dask_cluster(tmp_path: Path, prefect_harness):
         assert info.exists(), (tmp_path / "dask.log").read_text()
         procs.append(subprocess.Popen(
             [str(dask), "worker", "--scheduler-file", str(info), "--nthreads", "1",
-             "--nworkers", "1", "--no-dashboard", "--host", "127.0.0.1"],
+             "--no-nanny", "--no-dashboard", "--host", "127.0.0.1"],
             env=env, stdout=log, stderr=subprocess.STDOUT))
         address = json.loads(info.read_text())["address"]
         from distributed import Client
 
         with Client(address, timeout=60) as client:
             client.wait_for_workers(1, timeout=120)
-        yield address
+            client.get_task_stream()  # installs the scheduler's task-stream recorder
+            port = client.scheduler_info()["services"]["dashboard"]
+        yield ExternalCluster(address, port, procs[1].pid)
     finally:
         for p in reversed(procs):
             p.terminate()
@@ -215,6 +229,14 @@ def dask_cluster(tmp_path: Path, prefect_harness):
 
 def test_archive_on_a_separately_started_dask_cluster(tiny_clean_scene, dask_cluster,
                                                       tmp_path: Path):
+    """The pairs run on the external cluster, not on a LocalCluster the flow might start
+    instead (a link on 127.0.0.1 proves nothing: a LocalCluster can serve its dashboard there
+    too): the external scheduler's task stream holds both pairs' tasks, run by the worker
+    process the fixture started, the real pair's for the seconds an orientation takes; the
+    dashboard link is the external scheduler's."""
+    from dask.utils import key_split
+    from distributed import Client
+
     from flows.orient_pair import pair_complete
     from flows.reprocess_archive import reprocess_archive
 
@@ -224,9 +246,22 @@ def test_archive_on_a_separately_started_dask_cluster(tiny_clean_scene, dask_clu
     (cat / "real").symlink_to(scene)
     (cat / "broken").mkdir()
     outcome = reprocess_archive(catalog=cat, out=root, reference=scene / "reference.tif",
-                                dask_address=dask_cluster)
+                                dask_address=dask_cluster.address)
     assert {r.id: r.status for r in outcome.rows} == {"broken": "failed", "real": "done"}
-    assert pair_complete(root / "real")  # written by the external worker process
-    assert outcome.dashboard and "127.0.0.1" in outcome.dashboard
+    assert pair_complete(root / "real")
+    assert outcome.dashboard and outcome.dashboard.startswith(
+        f"http://127.0.0.1:{dask_cluster.dashboard_port}/")
     report = json.loads((root / "real" / "report.json").read_text())
     assert outcome.rows[1].gcps == report["gcps"]["used"] >= 8
+    with Client(dask_cluster.address, timeout=60) as client:
+        stream = client.get_task_stream()
+        pids = client.run(os.getpid)  # each worker's process id, asked of the worker
+    assert list(pids.values()) == [dask_cluster.worker_pid] != [os.getpid()]
+    # one task per pair (both end "memory": a failing pair returns its reason), on that worker
+    assert len(stream) == 2, stream
+    assert {key_split(t["key"]) for t in stream} == {"process_pair"}
+    assert {pids[t["worker"]] for t in stream} == {dask_cluster.worker_pid}
+    seconds = sorted(sum(s["stop"] - s["start"] for s in t["startstops"]
+                         if s["action"] == "compute") for t in stream)
+    # the broken pair, the real orientation (measured 0.2 s and 23 s)
+    assert seconds[0] < 5.0 < seconds[1], seconds

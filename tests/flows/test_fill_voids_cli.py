@@ -165,7 +165,7 @@ def test_bad_input_stops_before_prefect(tmp_path, punched_tile, scene_dsm):
     cases = [
         ("format", tile, tmp_path / "x.tif", ()),
         ("does not exist", tmp_path / "N1E1.hgt", tmp_path / "N1E1.hgt", ()),
-        ("border_cells", tile, tmp_path / "N44E005.hgt", ("--border-cells", "0")),
+        ("--border-cells", tile, tmp_path / "N44E005.hgt", ("--border-cells", "0")),
         ("name it N44E005.hgt", tile, tmp_path / "filled.hgt", ()),
         ("does not overlap", far / "N10E010.hgt", tmp_path / "N10E010.hgt", ()),
     ]

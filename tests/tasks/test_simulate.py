@@ -295,6 +295,7 @@ def write_dem(path: Path, lon0: float, lat1: float, res_deg: float, shape, crs="
     return H
 
 
+@pytest.mark.slow
 def test_any_geographic_dem_geotiff(tmp_path):
     """A DEM of ellipsoidal heights (its tag says so) is brought to orthometric heights for
     the world: the truth DSM is at the same ellipsoidal heights, not one undulation higher."""

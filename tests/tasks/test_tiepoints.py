@@ -210,6 +210,7 @@ def _rpc_height_range(*models) -> tuple[float, float]:
             max(m.alt_off + m.alt_scale for m in models))
 
 
+@pytest.mark.slow
 def test_reunion_pair_with_the_rpc_height_range():
     """No reference DEM here: the heights span the RPCs' validity range (-20..2610 m). The
     default 2 km cell is larger than the 1024 px crop (0.5 m Pleiades, so ~512 m): the overlap

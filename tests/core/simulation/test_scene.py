@@ -152,7 +152,8 @@ def test_scene_def_json_keeps_its_documented_layout_and_round_trips():
     d = json.loads(scene.to_json())
     assert list(d) == ["preset", "seed", "dem_path", "dem_window", "relief_factor", "H_ref_m",
                        "centre", "epsg", "grid", "water_level_m", "bits", "date_change",
-                       "errors", "image_names", "dsm_range_m", "injected"]
+                       "errors", "image_names", "dsm_range_m", "injected", "dem_vertical",
+                       "dem_vertical_source"]
     assert d["grid"] == [664280.0, 4911760.0, 20.0, 1550, 1519]
     assert d["centre"] == [5.25, 44.2, 858.9]
     assert d["errors"]["centre_error_m"] == [100.0, 300.0]
