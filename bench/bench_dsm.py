@@ -85,7 +85,7 @@ def tree_rss_mb(root: int) -> float:
 
 
 def run_child(scene: Path, out: Path, roi: list[int] | None, home: Path) -> dict:
-    from tasks.geoid import BUNDLED_SRTM_DIR
+    from tasks.io.geoid import BUNDLED_SRTM_DIR
 
     env = dict(os.environ, PREFECT_HOME=str(home), DASK_TEMPORARY_DIRECTORY=str(home / "dask"))
     extra = {"reference": str(BUNDLED_SRTM_DIR / "N44E005.hgt")}

@@ -1,4 +1,4 @@
-"""Time and peak memory of the lidar evaluation (``tasks.evaluate``) as the point count grows.
+"""Time and peak memory of the lidar evaluation (``tasks.evaluation.lidar``) as the point count grows.
 
 A synthetic scene is written once in a temporary folder: a 4000x4000 DSM (2 m cells, UTM 31N,
 ellipsoidal heights, tiled GeoTIFF) and LAZ files of 2 M and 20 M points (UTM 31N + EGM96
@@ -30,7 +30,7 @@ CHUNK = 1_000_000
 CHILD = """
 import sys, time
 from pathlib import Path
-from tasks.evaluate import EvaluationOptions, evaluate_plan, plan_evaluation
+from tasks.evaluation.lidar import EvaluationOptions, evaluate_plan, plan_evaluation
 t0 = time.perf_counter()
 options = EvaluationOptions(dem=Path(sys.argv[1]), lidar=Path(sys.argv[2]))
 r = evaluate_plan(plan_evaluation(options))

@@ -35,11 +35,11 @@ def steps_3_4(scene: Path, out: Path) -> None:
 
     from core.sensors.pushbroom import PushbroomModel
     from core.surface_match import SurfaceMatchConfig
-    from tasks.dem_io import read_reference
-    from tasks.dense import pair_box
-    from tasks.orient import orient_absolute
-    from tasks.sensor_io import load_model
-    from tasks.surface_match import TieGround, match_surfaces
+    from tasks.io.dem import read_reference
+    from tasks.dense.dem import pair_box
+    from tasks.absolute.orientation import orient_absolute
+    from tasks.io.sensors import load_model
+    from tasks.absolute.surface_match import TieGround, match_surfaces
 
     left = load_model(scene / "left.tif")
     rel = json.loads((out / "relative" / "rel.json").read_text())

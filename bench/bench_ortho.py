@@ -44,9 +44,9 @@ from flows._env import configure_environment
 configure_environment()
 import numpy as np
 from core.ortho import OrthoConfig
-from tasks.ortho import plan_ortho, orthorectify
-from tasks.ortho_io import describe_dem
-from tasks.sensor_io import load_model
+from tasks.ortho.orthorectify import plan_ortho, orthorectify
+from tasks.ortho.inputs import describe_dem
+from tasks.io.sensors import load_model
 scene, out, kind = Path(sys.argv[1]), Path(sys.argv[2]), sys.argv[3]
 image = scene / "left.tif"
 if kind == "pushbroom":
@@ -109,7 +109,7 @@ def agreement(a: Path, b: Path) -> str:
     import rasterio
 
     from core.ortho_compare import CompareConfig
-    from tasks.ortho_compare import compare_orthos, plan_compare
+    from tasks.ortho.compare import compare_orthos, plan_compare
 
     with rasterio.open(a) as fa, rasterio.open(b) as fb:
         va, vb = fa.read(1).astype(float), fb.read(1).astype(float)

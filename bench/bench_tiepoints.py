@@ -25,8 +25,8 @@ CHILD = """
 import json, sys, time
 from pathlib import Path
 from core.matching.tiepoints import TiePointConfig
-from tasks.sensor_io import load_model
-from tasks.tiepoints import find_tie_points
+from tasks.io.sensors import load_model
+from tasks.relative.tiepoints import find_tie_points
 scene, ref, out = (Path(a) for a in sys.argv[1:4])
 left, right = load_model(scene / "left.tif"), load_model(scene / "right.tif")
 t0 = time.perf_counter()
@@ -87,8 +87,8 @@ def score(scene: Path, tie_json: Path) -> str:
 def one_tile(scene: Path, ref: Path) -> float:
     """Seconds for the central 1024x1024 block alone, one thread."""
     from core.matching.tiepoints import HeightPrior, TiePointConfig
-    from tasks.sensor_io import load_model
-    from tasks.tiepoints import Block, block_matches, raster_info, read_reference
+    from tasks.io.sensors import load_model
+    from tasks.relative.tiepoints import Block, block_matches, raster_info, read_reference
 
     cfg = TiePointConfig()
     left, right = load_model(scene / "left.tif"), load_model(scene / "right.tif")
@@ -104,8 +104,8 @@ def one_tile(scene: Path, ref: Path) -> float:
 
 def main() -> None:
     from core.geodesy import BBox
-    from tasks.geoid import BUNDLED_SRTM_DIR
-    from tasks.reference import build_reference, locate_tiles
+    from tasks.io.geoid import BUNDLED_SRTM_DIR
+    from tasks.io.reference import build_reference, locate_tiles
 
     with tempfile.TemporaryDirectory() as tmp:
         tmp_path = Path(tmp)

@@ -30,7 +30,7 @@ replicate of a percentile costs two random draws, exact in distribution, for any
 The bookkeeping of a run is here too: which points are evaluated and where the others
 went (:class:`PointTally`), which points read a sound file cannot hold (:func:`refused_points`:
 outside the header's box, of a reserved class), the names of the classes, the mask and GCP
-checks. No I/O here: ``tasks.evaluate`` reads the points and the DEM and calls these functions; heights
+checks. No I/O here: ``tasks.evaluation.lidar`` reads the points and the DEM and calls these functions; heights
 are brought to metres and one datum by :mod:`core.heights`, points placed on the DEM's
 grid by :mod:`core.grid_points`.
 """

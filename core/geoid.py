@@ -1,7 +1,7 @@
 """Geoid undulation grids (EGM96) as immutable values, interpolated bilinearly
 (:func:`core.dem.sample_bilinear`).
 
-No I/O here: ``tasks.geoid`` reads the GTX file and builds a :class:`GeoidGrid`.
+No I/O here: ``tasks.io.geoid`` reads the GTX file and builds a :class:`GeoidGrid`.
 Orthometric heights H (SRTM) become ellipsoidal heights with ``h = H + N``.
 """
 

@@ -26,7 +26,7 @@ differences averaged over 3 / 5 / 7 cells; 13.7 m for the DSM alone on those cel
 (``tests/flows/test_fill_voids_cli.py``).
 
 Heights in metres, both grids on the same nodes and in the same vertical datum (the task
-converts the DSM); NaN marks voids and missing DSM. No I/O here: ``tasks.void_fill`` reads the
+converts the DSM); NaN marks voids and missing DSM. No I/O here: ``tasks.evaluation.void_fill`` reads the
 tile and the DSM and writes the result.
 """
 

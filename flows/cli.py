@@ -53,20 +53,20 @@ def _add_prepare_reference(sub: argparse._SubParsersAction) -> None:
 
 def _run_prepare_reference(args: argparse.Namespace) -> int:
     from core.geodesy import BBox
-    from tasks.geoid import BUNDLED_SRTM_DIR
-    from tasks.srtm import find_tiles
+    from tasks.io.geoid import BUNDLED_SRTM_DIR
+    from tasks.io.srtm import find_tiles
 
     params_box = BBox(*args.bbox).expanded(args.margin_deg)
     # check inputs before starting Prefect, so bad input is one clean line
     tiles = find_tiles(args.srtm_dir or BUNDLED_SRTM_DIR, params_box,
                        allow_missing=args.allow_missing_tiles)
-    from tasks.dem_io import check_srtm_tiles
+    from tasks.io.dem import check_srtm_tiles
 
     check_srtm_tiles(tiles)
     print(f"heights        {len(tiles)} SRTM tile(s): EGM96 orthometric heights, converted with "
           "h = H + N")
     if args.geoid is not None:
-        from tasks.geoid import read_gtx
+        from tasks.io.geoid import read_gtx
         read_gtx(args.geoid)
 
     from flows.prepare_reference import ReferenceParams, prepare_reference
@@ -119,14 +119,14 @@ def _add_simulate(sub: argparse._SubParsersAction) -> None:
 
 
 def _run_simulate(args: argparse.Namespace) -> int:
-    from tasks.simulate_io import check_dem
+    from tasks.simulate.io import check_dem
 
     dem = args.dem
     if dem is None:
         from flows.simulate_scene import BUNDLED_DEM
         dem = BUNDLED_DEM
     check_dem(dem)
-    from tasks.dem_io import dem_datum
+    from tasks.io.dem import dem_datum
 
     print(f"DEM              {dem}: "
           f"{dem_datum(dem, args.dem_vertical, what='DEM', option='--dem-vertical').describe()}")
@@ -180,7 +180,7 @@ def _add_info(sub: argparse._SubParsersAction) -> None:
 
 def _run_info(args: argparse.Namespace) -> int:
     # plain functions, no Prefect: info answers in about a second
-    from tasks.info import check_json_target, gather_info, write_info_json
+    from tasks.io.sensor_info import check_json_target, gather_info, write_info_json
 
     if args.json is not None:
         check_json_target(args.json)

@@ -13,8 +13,8 @@ from pathlib import Path
 from prefect import flow
 
 from core.matching.dense import MatchingConfig, TileStats
-from tasks.dense import DemSummary, DenseConfig, DensePlan
-from tasks.sensor_io import LoadedModel
+from tasks.dense.dem import DemSummary, DenseConfig, DensePlan
+from tasks.io.sensors import LoadedModel
 
 VERTICALS = ("ellipsoidal", "egm96")
 
@@ -87,14 +87,14 @@ def oriented_pair(params: DsmParams) -> OrientedPair:
         # a reference prepared from SRTM tiles says its datum in its own tag
         return OrientedPair(outcome.left, outcome.right, outcome.reference,
                             params.reference_vertical if same else "auto")
-    from tasks.sensor_io import load_model
+    from tasks.io.sensors import load_model
 
     left = load_model(params.left, model=params.left_model, band=params.band)
     right = load_model(params.right, model=params.right_model, band=params.band)
     if params.srtm_dir is None:
         return OrientedPair(left, right, params.reference, params.reference_vertical)
-    from tasks.dense import pair_box
-    from tasks.reference import build_reference, locate_tiles
+    from tasks.dense.dem import pair_box
+    from tasks.io.reference import build_reference, locate_tiles
 
     box = pair_box(left, right, params.height_range_m or (-500.0, 9000.0))
     tiles = locate_tiles(Path(params.srtm_dir), box, True)
@@ -105,7 +105,7 @@ def oriented_pair(params: DsmParams) -> OrientedPair:
 @dataclass(frozen=True, eq=False)
 class MatchedPair:
     """A pair matched tile by tile: the plan, each tile's figures and the folder of their
-    point files (which also hold the matches, for :func:`tasks.dense.retriangulate_tiles`)."""
+    point files (which also hold the matches, for :func:`tasks.dense.dem.retriangulate_tiles`)."""
 
     plan: DensePlan
     stats: tuple[TileStats, ...]
@@ -116,7 +116,7 @@ def match_pair(pair: OrientedPair, out: Path, cfg: DenseConfig,
                roi: tuple[int, int, int, int] | None = None,
                height_range_m: tuple[float, float] | None = None) -> MatchedPair:
     """Plan the tiles -> match and triangulate them into ``.<out>.work``."""
-    from tasks.dense import match_tiles, plan_dense, scene_height_range
+    from tasks.dense.dem import match_tiles, plan_dense, scene_height_range
 
     out = Path(out)
     h_range = scene_height_range(pair.left, pair.right, height_range_m, pair.reference)
@@ -130,7 +130,7 @@ def pair_dem(pair: OrientedPair, out: Path, cfg: DenseConfig,
              roi: tuple[int, int, int, int] | None = None,
              height_range_m: tuple[float, float] | None = None) -> DemSummary:
     """Plan the tiles -> match and triangulate them -> grid the DEM into ``out``."""
-    from tasks.dense import grid_dem_cog
+    from tasks.dense.dem import grid_dem_cog
 
     m = match_pair(pair, out, cfg, roi, height_range_m)
     return grid_dem_cog(m.plan, m.stats, m.work, Path(out), cfg)

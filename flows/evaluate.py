@@ -23,7 +23,7 @@ from flows.commands._pair import VERTICAL_HELP, VERTICALS, OneLineParser
 
 if TYPE_CHECKING:
     from core.evaluation import EvaluationReport
-    from tasks.evaluate import EvaluationOptions
+    from tasks.evaluation.lidar import EvaluationOptions
 
 Z_UNITS = ("auto", "m", "ft", "us-ft")  # "auto" and the keys of core.heights.Z_UNITS
 
@@ -35,7 +35,7 @@ def evaluate_flow() -> Callable[[EvaluationOptions], EvaluationReport]:
     from prefect import flow
 
     from core.evaluation import EvaluationReport
-    from tasks.evaluate import EvaluationOptions, evaluate_lidar, write_evaluation
+    from tasks.evaluation.lidar import EvaluationOptions, evaluate_lidar, write_evaluation
 
     def evaluate(options: EvaluationOptions) -> EvaluationReport:
         report = evaluate_lidar(options)
@@ -149,8 +149,8 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
 
 def run(args: argparse.Namespace) -> int:
     from core.evaluation import StatsConfig
-    from tasks.evaluate import EvaluationOptions, plan_evaluation
-    from tasks.info import check_json_target
+    from tasks.evaluation.lidar import EvaluationOptions, plan_evaluation
+    from tasks.io.sensor_info import check_json_target
 
     options = EvaluationOptions(
         dem=args.dem, lidar=args.lidar, out=args.out, landcover=args.landcover,

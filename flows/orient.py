@@ -94,11 +94,11 @@ def orient_flow(params: OrientParams) -> OrientOutcome:
     from core.surface_match import relief_sufficiency
     from flows.dsm import OrientedPair, match_pair
     from flows.relative import relative_models
-    from tasks.dem_io import dem_datum, read_reference
-    from tasks.dense import DenseConfig, grid_dem_cog, pair_box, retriangulate_tiles
-    from tasks.orient import check_point_report, orient_absolute, read_checkpoints, write_gcps
-    from tasks.raster_io import atomic_write_json, json_ready
-    from tasks.surface_match import TieGround, match_surfaces
+    from tasks.io.dem import dem_datum, read_reference
+    from tasks.dense.dem import DenseConfig, grid_dem_cog, pair_box, retriangulate_tiles
+    from tasks.absolute.orientation import check_point_report, orient_absolute, read_checkpoints, write_gcps
+    from tasks.io.rasters import atomic_write_json, json_ready
+    from tasks.absolute.surface_match import TieGround, match_surfaces
 
     out = Path(params.out)
     if params.reference is None and params.srtm_dir is None:
@@ -177,7 +177,7 @@ def orient_flow(params: OrientParams) -> OrientOutcome:
             (rel.left.model, rel.right.model), checkpoints)
     report = json_ready(report)
     path = atomic_write_json(out / "report.json", report)
-    from tasks.report import write_report
+    from tasks.report.build import write_report
 
     # report.html/.md and their figures; it adds its own "report" key to report.json
     write_report(out, reference=params.reference, checkpoints=params.checkpoints,

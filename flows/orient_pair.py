@@ -171,7 +171,7 @@ def pair_complete(out: str | Path) -> bool:
 @task(name="evaluate-dsm", cache_policy=NO_CACHE)
 def evaluate_dsm(params: PairParams, out: Path) -> Path:
     """The final DSM against the lidar (per class, LE68), with its mask and the GCPs."""
-    from tasks.evaluate import EvaluationOptions, evaluate_lidar, write_evaluation
+    from tasks.evaluation.lidar import EvaluationOptions, evaluate_lidar, write_evaluation
 
     options = EvaluationOptions(
         dem=out / "dsm.tif", lidar=Path(params.lidar), out=out / "eval.json",
@@ -195,10 +195,10 @@ def make_orthos(params: PairParams, out: Path, skipped: list[str]) -> dict[str, 
     import rasterio
 
     from core.ortho_compare import CompareConfig
-    from tasks.ortho import OrthoConfig, orthorectify, plan_ortho
-    from tasks.ortho_compare import compare_orthos, plan_compare
-    from tasks.ortho_io import describe_dem
-    from tasks.sensor_io import load_model
+    from tasks.ortho.orthorectify import OrthoConfig, orthorectify, plan_ortho
+    from tasks.ortho.compare import compare_orthos, plan_compare
+    from tasks.ortho.inputs import describe_dem
+    from tasks.io.sensors import load_model
 
     dem_path, vertical = _reference_of(params, out)
     dem = describe_dem(dem_path, vertical)
@@ -233,7 +233,7 @@ def make_orthos(params: PairParams, out: Path, skipped: list[str]) -> dict[str, 
 @task(name="write-stac", cache_policy=NO_CACHE, retries=1)
 def write_stac(out: Path, pair_id: str, rasters: dict[str, Path]) -> Path:
     """The STAC catalog of the pair's rasters."""
-    from tasks.stac import RasterProduct, write_catalog
+    from tasks.archive.stac import RasterProduct, write_catalog
 
     titles = {"dsm": "final DSM, WGS84 ellipsoidal heights",
               "dsm_egm96": "final DSM, EGM96 orthometric heights",
@@ -279,7 +279,7 @@ def _publish_artifacts(out: Path, pair_id: str) -> None:
 
 def _write_manifest(out: Path, params: PairParams, pair_id: str,
                     products: dict[str, str]) -> Path:
-    from tasks.raster_io import atomic_write_json, json_ready
+    from tasks.io.rasters import atomic_write_json, json_ready
 
     doc = {"format": FORMAT, "version": 1, "pair_id": pair_id,
            "params": json_ready({k: (str(v) if isinstance(v, Path) else v)
@@ -339,7 +339,7 @@ def orient_pair_flow(params: PairParams) -> PairOutcome:
         products["evaluation"] = "eval.json"
     done("evaluate")
 
-    from tasks.report import write_report
+    from tasks.report.build import write_report
 
     write_report(out, reference=params.reference, checkpoints=params.checkpoints,
                  evaluation=out / "eval.json" if params.lidar is not None else None,

@@ -8,8 +8,8 @@ from pathlib import Path
 from prefect import flow
 
 from core.geodesy import BBox
-from tasks.geoid import BUNDLED_SRTM_DIR
-from tasks.reference import ReferenceSummary, build_reference, locate_tiles, render_hillshade
+from tasks.io.geoid import BUNDLED_SRTM_DIR
+from tasks.io.reference import ReferenceSummary, build_reference, locate_tiles, render_hillshade
 
 
 @dataclass(frozen=True)

@@ -13,7 +13,7 @@ from prefect import flow
 
 from core.matching.tiepoints import TiePointConfig
 from core.orientation.relative import RelativeConfig
-from tasks.sensor_io import LoadedModel
+from tasks.io.sensors import LoadedModel
 
 
 @dataclass(frozen=True)
@@ -55,10 +55,10 @@ def relative_flow(params: RelativeParams) -> RelativeOutcome:
     from dataclasses import replace
 
     from core.matching.tiepoints import default_search_radius_m, ground_sampling_m
-    from tasks.dem_io import dem_datum, read_reference
-    from tasks.dense import scene_height_range
-    from tasks.reference import build_reference, locate_tiles
-    from tasks.relative import (
+    from tasks.io.dem import dem_datum, read_reference
+    from tasks.dense.dem import scene_height_range
+    from tasks.io.reference import build_reference, locate_tiles
+    from tasks.relative.orientation import (
         ReferenceUsed,
         check_overlap,
         load_pair,
@@ -67,7 +67,7 @@ def relative_flow(params: RelativeParams) -> RelativeOutcome:
         reference_box_heights,
         scene_height_m,
     )
-    from tasks.tiepoints import find_tie_points
+    from tasks.relative.tiepoints import find_tie_points
 
     out = Path(params.out)
     left, right = load_pair(params.left, params.right, params.left_model, params.right_model,

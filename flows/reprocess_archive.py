@@ -1,7 +1,7 @@
 """Flow ``reprocess-archive``: every stereo pair of a catalog through ``orient-pair``, pairs in
 parallel on Dask, resumable.
 
-catalog (``tasks.catalog``) -> pairs whose ``ROOT/<id>`` is already complete are skipped
+catalog (``tasks.archive.catalog``) -> pairs whose ``ROOT/<id>`` is already complete are skipped
 (:func:`flows.orient_pair.pair_complete`) -> the others run concurrently, one ``orient-pair``
 flow per pair inside a Dask task (prefect-dask's ``DaskTaskRunner``: a LocalCluster, or an
 existing cluster given its scheduler address) -> ``ROOT/summary.csv`` and ``ROOT/summary.json``
@@ -27,7 +27,7 @@ from typing import Self
 from prefect import flow, task
 from prefect.cache_policies import NO_CACHE
 
-from tasks.catalog import (
+from tasks.archive.catalog import (
     PairEntry,
     PairRow,
     load_catalog,
@@ -85,7 +85,7 @@ def process_pair(entry: PairEntry, out: Path, srtm_dir: Path | None, reference: 
     pairs). Any failure becomes the pair's reason instead of an exception."""
     from flows._env import one_line_errors
     from flows.orient_pair import PairParams, orient_pair_flow
-    from tasks.catalog import check_pair_inputs
+    from tasks.archive.catalog import check_pair_inputs
 
     try:
         check_pair_inputs(entry)
@@ -208,7 +208,7 @@ def reprocess_archive(catalog: Path, out: Path, srtm_dir: Path | None = None,
                       ) -> ArchiveOutcome:
     """Catalog -> skip complete pairs -> the rest on Dask -> summary.csv/json + artifacts.
 
-    ``catalog``: a folder of pair folders or a CSV/JSON list (``tasks.catalog``); ``out``: ROOT,
+    ``catalog``: a folder of pair folders or a CSV/JSON list (``tasks.archive.catalog``); ``out``: ROOT,
     one folder per pair id. ``srtm_dir`` or ``reference`` (its heights ``reference_vertical``):
     the ground every pair is oriented to.
     ``dask_address``: an existing scheduler (``tcp://HOST:PORT``), else a LocalCluster of

@@ -8,8 +8,8 @@ from pathlib import Path
 from prefect import flow
 
 from core.simulation.scene import ErrorConfig
-from tasks.geoid import BUNDLED_SRTM_DIR
-from tasks.simulate import (
+from tasks.io.geoid import BUNDLED_SRTM_DIR
+from tasks.simulate.scene import (
     SimulationSummary,
     build_radiance,
     build_truth_surface,

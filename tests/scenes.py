@@ -5,7 +5,7 @@ from __future__ import annotations
 from pathlib import Path
 
 from core.simulation.scene import ErrorConfig, SceneDef
-from tasks.geoid import BUNDLED_SRTM_DIR
+from tasks.io.geoid import BUNDLED_SRTM_DIR
 
 DEM = BUNDLED_SRTM_DIR / "N44E005.hgt"
 CENTRE = (5.25, 44.2)
@@ -15,8 +15,7 @@ def run_scene(out: Path, dem: Path = DEM, centre: tuple[float, float] | None = C
               seed: int = 11, lidar: bool = True, lens: bool = True, jitter: bool = True,
               **kw: object) -> SceneDef:
     """The simulator's tasks run directly (no Prefect flow): the tiny preset into ``out``."""
-    from tasks import simulate as S
-
+    from tasks.simulate import scene as S
     errors = ErrorConfig(lens=lens, jitter=jitter)
     scene = S.define_scene.fn(dem, out, "tiny", seed, errors, centre_lonlat=centre, **kw)
     S.write_spot_metadata.fn(scene, out)

@@ -46,19 +46,19 @@ from core.sensors.pushbroom import PushbroomModel
 from core.sensors.pushbroom_synthetic import SyntheticSpec, synthetic_pushbroom
 from core.sensors.rpc import RPCModel
 from core.sensors.spot import spot_scene_from_model
-from tasks.dem_io import check_reference, read_reference
-from tasks.dimap import dimap_xml, read_dimap
-from tasks.evaluate import read_gcps
-from tasks.lidar_io import inspect_lidar, lidar_chunks
-from tasks.orient import CSV_COLUMNS, read_checkpoints
-from tasks.sensor_io import (
+from tasks.io.dem import check_reference, read_reference
+from tasks.io.dimap import dimap_xml, read_dimap
+from tasks.evaluation.lidar import read_gcps
+from tasks.io.lidar import inspect_lidar, lidar_chunks
+from tasks.absolute.orientation import CSV_COLUMNS, read_checkpoints
+from tasks.io.sensors import (
     load_model,
     read_rpc,
     read_rpc_tags,
     rpc_from_dimap_file,
     rpc_from_geom_file,
 )
-from tasks.srtm import find_tiles
+from tasks.io.srtm import find_tiles
 
 DATA = Path(__file__).resolve().parent / "data"
 HGT = Path(__file__).resolve().parents[1] / "tasks" / "data" / "N44E005.hgt"
@@ -422,7 +422,7 @@ def test_truncated_files_are_refused(bench, name, data):
 
 
 # LAZ too: lazrs aborts the process on some damaged chunk tables (a failed allocation, SIGABRT)
-# or panics; tasks.lidar_io decodes LAZ in a child process, so that is one GcpFreeError here
+# or panics; tasks.io.lidar decodes LAZ in a child process, so that is one GcpFreeError here
 # (tests/tasks/test_lidar_damage.py pins such a file)
 @pytest.mark.parametrize("name", list(BY_NAME))
 @SETTINGS

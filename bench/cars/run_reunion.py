@@ -66,7 +66,7 @@ def run_ours(out: Path, tmp: Path) -> float:
 
 def roi_footprint(h_m: float) -> list[list[float]]:
     """The left ROI's corners on the ground at ellipsoidal height ``h_m`` (lon, lat)."""
-    from tasks.sensor_io import load_model
+    from tasks.io.sensors import load_model
 
     model = load_model(DATA / "img_01.tif").model
     c0, r0, w, h = ROI
@@ -95,7 +95,7 @@ def constant_dem(path: Path, corners: list[list[float]], value_m: float) -> None
 def run_cars(out_dir: Path, tmp: Path, corners: list[list[float]], elevation_m: float) -> float:
     dem = tmp / "initial_elevation.tif"
     constant_dem(dem, corners, elevation_m)
-    from tasks.crs import Projection
+    from tasks.io.crs import Projection
 
     # the ROI in UTM: CARS 1.3 fails ("math domain error") on a lon/lat ROI south of the
     # equator (its conversion of the resolution to the ROI's units goes negative)
@@ -136,7 +136,7 @@ def compare(ours: Path, cars: Path, corners: list[list[float]]) -> dict[str, flo
     from matplotlib.path import Path as Polygon
 
     from core.dem import sample_bilinear
-    from tasks.crs import Projection
+    from tasks.io.crs import Projection
 
     def horizontal_epsg(src: rasterio.io.DatasetReader) -> int | None:
         crs = pyproj.CRS.from_wkt(src.crs.to_wkt())  # UTM + EGM96 height: a compound CRS

@@ -1,7 +1,7 @@
 """SPOT 1-5 Level 1A geometry (DIMAP ``SPOTSCENE_1A``) -> the rigorous pushbroom model, and back.
 
 :class:`SpotScene` holds what a ``METADATA.DIM`` says about the geometry, as plain numbers
-(``tasks.dimap`` parses and writes the XML); :func:`spot_pushbroom` builds the
+(``tasks.io.dimap`` parses and writes the XML); :func:`spot_pushbroom` builds the
 :class:`~core.sensors.pushbroom.PushbroomModel`; :func:`spot_scene_from_model` expresses a
 model the other way, as a SPOT product states it (the simulator writes it).
 

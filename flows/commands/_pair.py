@@ -99,7 +99,7 @@ def check_orientation_arguments(args: argparse.Namespace, command: str,
 
     from core.errors import InputError
     from core.surface_match import SurfaceMatchConfig
-    from tasks.orient import read_checkpoints
+    from tasks.absolute.orientation import read_checkpoints
 
     if args.reference is None and args.srtm_dir is None:
         raise InputError(f"gcpfree {command} needs a reference DEM: give --srtm-dir or "
@@ -124,15 +124,15 @@ def _check_scene_size(args: argparse.Namespace, surface, left, right) -> None:
     from core.geodesy import metres_per_degree
     from core.sensors.viewing import pair_geometry
     from core.surface_match import scene_size_verdict
-    from tasks.relative import pair_box
+    from tasks.relative.orientation import pair_box
 
     box = pair_box(left, right, OVERLAP_HEIGHTS_M)
     if args.reference is not None:
-        from tasks.dem_io import read_reference
+        from tasks.io.dem import read_reference
 
         cell = read_reference(args.reference, box, "ellipsoidal").cell_size_m()
     else:
-        from tasks.srtm import find_tiles
+        from tasks.io.srtm import find_tiles
 
         tiles = find_tiles(args.srtm_dir, box, allow_missing=True)
         m_lon, m_lat = metres_per_degree(0.5 * (box.lat_min + box.lat_max))
@@ -154,8 +154,8 @@ def check_pair(args: argparse.Namespace):  # -> tuple[LoadedModel, LoadedModel]
     """Both models loaded and the reference checked before Prefect starts: bad input is one
     clean line (InputError)."""
     from core.errors import InputError
-    from tasks.dem_io import check_reference, dem_datum
-    from tasks.sensor_io import load_model
+    from tasks.io.dem import check_reference, dem_datum
+    from tasks.io.sensors import load_model
 
     for path in (args.left, args.right):
         if not Path(path).exists():
@@ -172,14 +172,14 @@ def check_pair(args: argparse.Namespace):  # -> tuple[LoadedModel, LoadedModel]
     h_range = getattr(args, "height_range", None) or OVERLAP_HEIGHTS_M
     _check_overlap(left, right, h_range)
     if args.reference is not None:  # CoverageError when it misses the pair altogether
-        from tasks.dem_io import read_reference
-        from tasks.relative import pair_box
+        from tasks.io.dem import read_reference
+        from tasks.relative.orientation import pair_box
 
         read_reference(args.reference, pair_box(left, right, h_range), "ellipsoidal")
     if args.srtm_dir is not None:  # the tiles that would be used: EGM96 as SRTM is
-        from tasks.dem_io import check_srtm_tiles
-        from tasks.relative import pair_box
-        from tasks.srtm import find_tiles
+        from tasks.io.dem import check_srtm_tiles
+        from tasks.relative.orientation import pair_box
+        from tasks.io.srtm import find_tiles
 
         check_srtm_tiles(find_tiles(args.srtm_dir, pair_box(left, right, h_range),
                                     allow_missing=True))
@@ -198,7 +198,7 @@ def _check_overlap(left, right, h_range: tuple[float, float]) -> None:  # Loaded
     import numpy as np
 
     from core.errors import GeometryError
-    from tasks.relative import check_overlap
+    from tasks.relative.orientation import check_overlap
 
     lo, hi = sorted(map(float, h_range))
     for h in np.linspace(lo, hi, 8):

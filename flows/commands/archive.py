@@ -64,8 +64,8 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
 def check_archive_args(args: argparse.Namespace) -> None:
     """Bad arguments refused in one line before Prefect starts."""
     from core.errors import InputError
-    from tasks.catalog import read_catalog
-    from tasks.dem_io import check_reference, dem_datum
+    from tasks.archive.catalog import read_catalog
+    from tasks.io.dem import check_reference, dem_datum
 
     read_catalog(args.catalog)
     if args.reference is not None:

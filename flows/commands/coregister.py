@@ -33,7 +33,7 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
 
 def run(args: argparse.Namespace) -> int:
     from core.errors import InputError
-    from tasks.coregister import coregister, datums
+    from tasks.evaluation.coregister import coregister, datums
 
     for path in (args.reference, args.dem):
         if not Path(path).is_file():

@@ -51,7 +51,7 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
 
 def run(args: argparse.Namespace) -> int:
     from core.errors import InputError
-    from tasks.dense_blocks import check_roi
+    from tasks.dense.blocks import check_roi
 
     left, _ = check_pair(args)
     check_roi(tuple(args.roi) if args.roi else None, left.size)

@@ -20,7 +20,7 @@ from flows._env import one_line_errors
 from flows.commands._pair import VERTICAL_HELP, VERTICALS
 
 if TYPE_CHECKING:
-    from tasks.void_fill import FillOptions, FillSummary
+    from tasks.evaluation.void_fill import FillOptions, FillSummary
 
 
 
@@ -30,7 +30,7 @@ def fill_voids_flow() -> Callable[[FillOptions], FillSummary]:
     light: fill and write the tile, then its summary."""
     from prefect import flow
 
-    from tasks.void_fill import FillOptions, FillSummary, fill_tile_voids, write_fill_report
+    from tasks.evaluation.void_fill import FillOptions, FillSummary, fill_tile_voids, write_fill_report
 
     def fill_voids(options: FillOptions) -> FillSummary:
         summary = fill_tile_voids(options)
@@ -87,8 +87,8 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
 
 def run(args: argparse.Namespace) -> int:
     from core.void_fill import FillConfig
-    from tasks.info import check_json_target
-    from tasks.void_fill import FillOptions, plan_fill
+    from tasks.io.sensor_info import check_json_target
+    from tasks.evaluation.void_fill import FillOptions, plan_fill
 
     options = FillOptions(
         srtm=args.srtm, dem=args.dem, out=args.out, srtm_vertical=args.srtm_vertical,
@@ -99,7 +99,7 @@ def run(args: argparse.Namespace) -> int:
     plan_fill(options)
     check_json_target(options.json_path)
     if args.geoid is not None:
-        from tasks.geoid import read_gtx
+        from tasks.io.geoid import read_gtx
         read_gtx(args.geoid)
     with one_line_errors():
         summary = fill_voids_flow()(options)

@@ -21,7 +21,7 @@ from flows._env import one_line_errors
 from flows.commands._pair import VERTICAL_HELP, VERTICALS
 
 if TYPE_CHECKING:
-    from tasks.ortho import OrthoOptions, OrthoSummary
+    from tasks.ortho.orthorectify import OrthoOptions, OrthoSummary
 
 RESAMPLINGS = ("nearest", "bilinear", "cubic")  # core.ortho.RESAMPLINGS, without importing it
 
@@ -32,9 +32,9 @@ def ortho_flow() -> Callable[[OrthoOptions], OrthoSummary]:
     read the model and the DEM, plan the grid, write the tiles."""
     from prefect import flow
 
-    from tasks.ortho import OrthoOptions, OrthoSummary, orthorectify, plan_ortho
-    from tasks.ortho_io import describe_dem
-    from tasks.sensor_io import load_model
+    from tasks.ortho.orthorectify import OrthoOptions, OrthoSummary, orthorectify, plan_ortho
+    from tasks.ortho.inputs import describe_dem
+    from tasks.io.sensors import load_model
 
     def ortho(options: OrthoOptions) -> OrthoSummary:
         loaded = load_model(options.image, model=options.model, band=options.band)
@@ -92,7 +92,7 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
 
 
 def options_from(args: argparse.Namespace) -> OrthoOptions:
-    from tasks.ortho import OrthoOptions
+    from tasks.ortho.orthorectify import OrthoOptions
 
     return OrthoOptions(
         image=args.image, dem=args.dem, out=args.out, model=args.model, band=args.band,
@@ -101,7 +101,7 @@ def options_from(args: argparse.Namespace) -> OrthoOptions:
 
 
 def run(args: argparse.Namespace) -> int:
-    from tasks.ortho import check_ortho_options
+    from tasks.ortho.orthorectify import check_ortho_options
 
     options = options_from(args)
     check_ortho_options(options)  # bad input is one line, before Prefect starts

@@ -23,7 +23,7 @@ from flows._env import one_line_errors
 
 if TYPE_CHECKING:
     from core.ortho_compare import CompareConfig
-    from tasks.ortho_compare import CompareSummary
+    from tasks.ortho.compare import CompareSummary
 
 
 @dataclass(frozen=True)
@@ -53,7 +53,7 @@ def ortho_compare_flow() -> Callable[[CompareOptions], CompareSummary]:
     """The Prefect flow ``ortho-compare``, built on first use."""
     from prefect import flow
 
-    from tasks.ortho_compare import CompareSummary, compare_orthos, plan_compare
+    from tasks.ortho.compare import CompareSummary, compare_orthos, plan_compare
 
     def ortho_compare(options: CompareOptions) -> CompareSummary:
         plan = plan_compare(options.left, options.right, options.config())
@@ -100,8 +100,8 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
 
 def run(args: argparse.Namespace) -> int:
     from core.errors import InputError
-    from tasks.info import check_json_target
-    from tasks.ortho_compare import plan_compare
+    from tasks.io.sensor_info import check_json_target
+    from tasks.ortho.compare import plan_compare
 
     options = CompareOptions(
         left=args.left, right=args.right, out=args.out, map=args.map, quiver=args.quiver,

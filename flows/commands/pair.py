@@ -53,11 +53,11 @@ def run(args: argparse.Namespace) -> int:
     if args.landcover is not None and args.lidar is None:
         raise InputError("--landcover classifies the lidar evaluation: give --lidar too")
     if args.lidar is not None:  # its header now, not after the orientation's minutes
-        from tasks.lidar_io import inspect_lidar
+        from tasks.io.lidar import inspect_lidar
 
         inspect_lidar(args.lidar, vertical=args.lidar_vertical)
     if args.landcover is not None:
-        from tasks.evaluation_rasters import open_raster
+        from tasks.io.rasters_at_points import open_raster
 
         with open_raster(args.landcover, "land cover"):
             pass

@@ -3,7 +3,7 @@ again (after the run, with a lidar evaluation or the check points added, or for 
 stopped on too flat a terrain).
 
 Writes ``OUT_DIR/report.html``, ``OUT_DIR/report.md``, the figures in ``OUT_DIR/report_files/``
-and the key ``report`` of ``OUT_DIR/report.json`` (:func:`tasks.report.make_report`). No flow:
+and the key ``report`` of ``OUT_DIR/report.json`` (:func:`tasks.report.build.make_report`). No flow:
 the report reads a few small products and draws eight figures, in seconds, so it runs without
 starting Prefect. Importing this module is light; :func:`run` checks the inputs first.
 """
@@ -65,13 +65,13 @@ def check_inputs(args: argparse.Namespace) -> None:
         raise InputError(f"{out} holds no gcpfree orient products (none of "
                          f"{', '.join(ORIENT_PRODUCTS)}); run gcpfree orient --out {out} first")
     if args.reference is not None:
-        from tasks.dem_io import check_reference, dem_datum
+        from tasks.io.dem import check_reference, dem_datum
 
         check_reference(args.reference)
         print(f"reference      {args.reference}: "
               f"{dem_datum(args.reference, args.reference_vertical).describe()}")
     if args.checkpoints is not None:
-        from tasks.orient import read_checkpoints
+        from tasks.absolute.orientation import read_checkpoints
 
         read_checkpoints(args.checkpoints)
     if args.evaluation is not None:
@@ -92,7 +92,7 @@ def run(args: argparse.Namespace) -> int:
     from dataclasses import replace
 
     from core.surface_match import SurfaceMatchConfig
-    from tasks.report import make_report
+    from tasks.report.build import make_report
 
     surface = replace(SurfaceMatchConfig(), radius_m=args.window_radius,
                       shift_max_arcsec=args.max_shift)

@@ -14,7 +14,7 @@ from scipy.ndimage import shift as nd_shift
 
 from core.coregister import Grid, metres_per_unit, nuth_kaab
 from core.errors import InputError, InsufficientDataError
-from tasks.geoid import BUNDLED_SRTM_DIR, load_geoid
+from tasks.io.geoid import BUNDLED_SRTM_DIR, load_geoid
 
 D = 1 / 1200
 

@@ -4,7 +4,7 @@ import pytest
 
 from core.errors import InputError
 from core.geoid import GeoidGrid
-from tasks.geoid import EGM96_GTX, load_geoid, read_gtx
+from tasks.io.geoid import EGM96_GTX, load_geoid, read_gtx
 
 
 @pytest.fixture(scope="module")

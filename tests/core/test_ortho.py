@@ -29,7 +29,7 @@ from core.ortho import (
 )
 from core.sensors.pushbroom_synthetic import SyntheticSpec, synthetic_pushbroom
 from core.sensors.rpc import RPCModel
-from tasks.geoid import load_geoid
+from tasks.io.geoid import load_geoid
 from tests.conftest import DATA
 
 LON0, LAT0 = 5.25, 44.2

@@ -19,9 +19,9 @@ from core.dem import sample_bilinear
 from core.errors import InputError
 from core.sensors.pushbroom import PushbroomModel
 from flows.commands import dsm
-from tasks.crs import Projection
-from tasks.geoid import BUNDLED_SRTM_DIR, load_geoid
-from tasks.sensor_io import LoadedModel
+from tasks.io.crs import Projection
+from tasks.io.geoid import BUNDLED_SRTM_DIR, load_geoid
+from tasks.io.sensors import LoadedModel
 from tests.scenes import dsm_against_truth
 
 SRTM = BUNDLED_SRTM_DIR / "N44E005.hgt"

@@ -18,9 +18,9 @@ from core.errors import InputError
 from core.evaluation import DzAccumulator, StatsConfig
 from core.grid_points import affine_nodes
 from flows.commands import dsm, fill_voids
-from tasks.crs import Projection
-from tasks.geoid import BUNDLED_SRTM_DIR, load_geoid
-from tasks.srtm import SRTM_VOID
+from tasks.io.crs import Projection
+from tasks.io.geoid import BUNDLED_SRTM_DIR, load_geoid
+from tasks.io.srtm import SRTM_VOID
 
 SRTM = BUNDLED_SRTM_DIR / "N44E005.hgt"
 N = 1201

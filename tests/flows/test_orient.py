@@ -21,8 +21,8 @@ from core.intersection import triangulate
 from core.points import control_points_from_dict
 from core.surface_match import SurfaceMatchConfig, WindowMatch, WindowStatus, relief_sufficiency
 from flows.commands import orient as orient_command
-from tasks.orient import read_checkpoints
-from tasks.sensor_io import load_model
+from tasks.absolute.orientation import read_checkpoints
+from tasks.io.sensors import load_model
 from tests.scenes import dsm_against_truth
 
 
@@ -262,7 +262,7 @@ def test_final_dsm_is_the_relative_one_put_in_place(oriented):
     DSM on the truth; the EGM96 twin is the same surface minus the geoid."""
     import rasterio
 
-    from tasks.geoid import load_geoid
+    from tasks.io.geoid import load_geoid
 
     scene, out, _outcome = oriented
     truth = scene / "truth" / "dsm.tif"
@@ -273,7 +273,7 @@ def test_final_dsm_is_the_relative_one_put_in_place(oriented):
         assert "ellipsoid" in a.tags()["vertical_datum"].lower()
         assert "egm96" in b.tags()["vertical_datum"].lower()
         za, zb, t, epsg = a.read(1), b.read(1), a.transform, a.crs.to_epsg()
-    from tasks.crs import Projection
+    from tasks.io.crs import Projection
 
     rows, cols = np.nonzero(np.isfinite(za) & np.isfinite(zb))
     pick = slice(None, None, max(1, rows.size // 500))

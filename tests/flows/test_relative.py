@@ -18,8 +18,8 @@ from core.orientation.relative import epipolar_fit
 from core.sensors.pushbroom import PushbroomModel
 from core.sensors.rpc import RPCModel
 from flows.relative import RelativeParams, relative_flow
-from tasks.geoid import BUNDLED_SRTM_DIR
-from tasks.sensor_io import load_model
+from tasks.io.geoid import BUNDLED_SRTM_DIR
+from tasks.io.sensors import load_model
 
 SRTM = BUNDLED_SRTM_DIR / "N44E005.hgt"
 DATA = Path(__file__).resolve().parents[1] / "data"

@@ -21,9 +21,9 @@ import rasterio
 from flows.commands import archive as archive_command
 from flows.commands import orient as orient_command
 from flows.commands import pair as pair_command
-from tasks.geoid import BUNDLED_SRTM_DIR
-from tasks.orient import read_checkpoints
-from tasks.sensor_io import load_model
+from tasks.io.geoid import BUNDLED_SRTM_DIR
+from tasks.absolute.orientation import read_checkpoints
+from tasks.io.sensors import load_model
 
 MADE = Path("relative") / "rel.reference.tif"  # where the orientation writes its reference
 

@@ -28,7 +28,7 @@ from rasterio.crs import CRS
 from rasterio.windows import Window
 
 from core.errors import GcpFreeError
-from tasks.geoid import BUNDLED_SRTM_DIR, load_geoid
+from tasks.io.geoid import BUNDLED_SRTM_DIR, load_geoid
 
 DATA = Path(__file__).resolve().parents[1] / "data"
 VENTOUX = DATA / "pleiades_ventoux"
@@ -261,7 +261,7 @@ def test_ortho_is_the_same_over_every_variant(dems, tmp_path, capsys):
 
 
 def test_fill_voids_reads_every_variant_of_the_tile_alike(dems, tmp_path):
-    from tasks.void_fill import read_tile
+    from tasks.evaluation.void_fill import read_tile
 
     tiles = {v: read_tile(dems[v]) for v in ("hgt", "srtm_named", "tagged", "compound",
                                              "ellipsoidal")}
@@ -271,7 +271,7 @@ def test_fill_voids_reads_every_variant_of_the_tile_alike(dems, tmp_path):
 
 
 def test_simulate_says_the_datum_of_its_dem(dems, tmp_path):
-    from tasks.simulate_io import read_dem_window
+    from tasks.simulate.io import read_dem_window
     from core.geodesy import BBox
 
     box = BBox(5.2, 44.15, 5.3, 44.25)

@@ -1,4 +1,4 @@
-"""A LAZ child (:mod:`tasks.laz_child`) that aborts, as lazrs does, after sending its first
+"""A LAZ child (:mod:`tasks.io.laz_child`) that aborts, as lazrs does, after sending its first
 chunk of points: ``tests/tasks/test_lidar_damage.py`` runs it in place of the real one to see a
 crash in the middle of a stream. Not a test module (pytest collects ``test_*.py`` only)."""
 
@@ -8,9 +8,7 @@ import os
 import sys
 from typing import BinaryIO
 
-from tasks import laz_child
-
-
+from tasks.io import laz_child
 class _AbortAfterFirstChunk:
     """Passes the frames on; once a chunk's points are written, flushes and aborts."""
 

@@ -11,7 +11,7 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
 from core.errors import GcpFreeError, InputError
-from tasks.catalog import (
+from tasks.archive.catalog import (
     FIELDS,
     Catalog,
     PairEntry,

@@ -17,10 +17,10 @@ from core.errors import GeometryError, InputError, InsufficientDataError
 from core.matching.grid import MASK_VALID, remove_offset_and_tilt
 from core.sensors.pushbroom import PushbroomModel
 from core.simulation.landcover import LandCover
-from tasks.dense import DenseConfig, grid_dem_cog, match_tiles, plan_dense
-from tasks.dense_blocks import check_roi, tile_boxes
-from tasks.geoid import BUNDLED_SRTM_DIR
-from tasks.sensor_io import LoadedModel, load_model
+from tasks.dense.dem import DenseConfig, grid_dem_cog, match_tiles, plan_dense
+from tasks.dense.blocks import check_roi, tile_boxes
+from tasks.io.geoid import BUNDLED_SRTM_DIR
+from tasks.io.sensors import LoadedModel, load_model
 
 SRTM = BUNDLED_SRTM_DIR / "N44E005.hgt"
 GSD_M = 40.0  # the tiny preset
@@ -161,9 +161,9 @@ def test_saved_matches_are_triangulated_again_with_other_models(tiny_clean_scene
     from core.intersection import triangulate
     from core.matching.dense import core_pixels
     from core.matching.rectify import TileRectification
-    from tasks.crs import Projection
-    from tasks.dense import retriangulate_tiles
-    from tasks.dense_blocks import tile_points_path
+    from tasks.io.crs import Projection
+    from tasks.dense.dem import retriangulate_tiles
+    from tasks.dense.blocks import tile_points_path
 
     scene_dir, _ = tiny_clean_scene
     left, right = truth_pair(scene_dir)

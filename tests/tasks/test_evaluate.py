@@ -1,4 +1,4 @@
-"""``tasks.evaluate`` on real and synthetic lidar: units and CRS proven on the Autzen tile
+"""``tasks.evaluation.lidar`` on real and synthetic lidar: units and CRS proven on the Autzen tile
 (feet) against a DSM gridded from its own ground points; known biases recovered per LAS class
 and per land-cover class through a UTM + EGM96 compound CRS and a feet + EGM96 (US feet)
 compound CRS; points off the DEM and on voids counted; the mask and GCP hooks; bad input.
@@ -24,16 +24,16 @@ from scipy.stats import binned_statistic_2d
 
 from core.errors import CoverageError, InputError, InsufficientDataError
 from core.evaluation import EvaluationReport, StatsConfig
-from tasks.evaluate import (
+from tasks.evaluation.lidar import (
     EvaluationOptions,
     evaluate_lidar,
     evaluate_plan,
     plan_evaluation,
     write_evaluation,
 )
-from tasks.evaluation_rasters import parse_landcover_names
-from tasks.geoid import EGM96_GTX
-from tasks.lidar_io import inspect_lidar
+from tasks.io.rasters_at_points import parse_landcover_names
+from tasks.io.geoid import EGM96_GTX
+from tasks.io.lidar import inspect_lidar
 
 DATA = Path(__file__).resolve().parents[1] / "data"
 AUTZEN = DATA / "lidar" / "autzen_trim.laz"

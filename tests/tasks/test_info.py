@@ -1,4 +1,4 @@
-"""tasks.info: the reference DEM reader, the report of one image (against GDAL's RPC
+"""tasks.io.sensor_info: the reference DEM reader, the report of one image (against GDAL's RPC
 transformer and real SPOT metadata) and of a real stereo pair."""
 
 import json
@@ -13,9 +13,9 @@ from rasterio.transform import RPCTransformer, from_origin
 from core.errors import CoverageError, InputError
 from core.geodesy import BBox
 from core.sensors.pushbroom_synthetic import SyntheticSpec, synthetic_pushbroom
-from tasks.dem_io import check_reference, read_reference
-from tasks.geoid import BUNDLED_SRTM_DIR, load_geoid
-from tasks.info import describe_image, gather_info, write_info_json
+from tasks.io.dem import check_reference, read_reference
+from tasks.io.geoid import BUNDLED_SRTM_DIR, load_geoid
+from tasks.io.sensor_info import describe_image, gather_info, write_info_json
 
 DATA = Path(__file__).resolve().parents[1] / "data"
 VENTOUX = DATA / "pleiades_ventoux"

@@ -5,7 +5,7 @@ it allocate tens of gigabytes and abort (SIGABRT), or panic (pyo3's ``PanicExcep
 ``BaseException``). The files here are the real Autzen tile with one byte changed, found by
 trying every single-byte change of the offset to its chunk table and of the table: the first
 test proves each still crashes laspy when read in place, the others that gcpfree turns each
-into one line naming the file, through ``tasks.lidar_io`` and through ``gcpfree evaluate``
+into one line naming the file, through ``tasks.io.lidar`` and through ``gcpfree evaluate``
 (in this process, which survives, and as the installed command).
 
 Damaged bytes that decode without error give wrong points: points outside the header's box and
@@ -32,9 +32,9 @@ from hypothesis import strategies as st
 from core.errors import GcpFreeError, InputError
 from core.evaluation import MAX_REFUSED_SHARE, EvaluationReport, refused_points
 from flows import cli
-from tasks import lidar_io
-from tasks.evaluate import EvaluationOptions, evaluate_plan, plan_evaluation
-from tasks.lidar_io import inspect_lidar, lidar_chunks
+from tasks.io import lidar as lidar_io
+from tasks.evaluation.lidar import EvaluationOptions, evaluate_plan, plan_evaluation
+from tasks.io.lidar import inspect_lidar, lidar_chunks
 from tests.tasks.test_evaluate import AUTZEN, write_las, write_raster
 
 # (byte offset, XOR mask) in autzen_trim.laz (point data at byte 2144, chunk table at 603333)

@@ -2,7 +2,7 @@
 
 A user names an image's model four ways: found beside the image, ``--left-model``/``--model``
 (:func:`load_model` with ``model=``), a catalog's ``left_model`` column (read by
-:func:`tasks.catalog.read_catalog`, loaded by :func:`tasks.relative.load_pair` as the flows
+:func:`tasks.archive.catalog.read_catalog`, loaded by :func:`tasks.relative.orientation.load_pair` as the flows
 do), or the model file alone. For every family and format (OSSIM ``.geom``, DIMAP v2 RPC XML,
 GeoTIFF RPC tags, SPOT ``.DIM``, gcpfree pushbroom and RPC ``.json``), on the uncropped raster
 and on a crop carrying its pixel offset in its geotransform, the ways must agree; and the
@@ -37,10 +37,10 @@ from core.sensors.linear_array import LookAngleTable
 from core.sensors.pushbroom_synthetic import SyntheticSpec, synthetic_pushbroom
 from core.sensors.rpc import RPCModel
 from core.sensors.spot import spot_pushbroom, spot_scene_from_model
-from tasks.catalog import read_catalog
-from tasks.dimap import read_dimap, write_dimap
-from tasks.relative import load_pair
-from tasks.sensor_io import load_model, rpc_from_dimap_file, rpc_from_geom_file
+from tasks.archive.catalog import read_catalog
+from tasks.io.dimap import read_dimap, write_dimap
+from tasks.relative.orientation import load_pair
+from tasks.io.sensors import load_model, rpc_from_dimap_file, rpc_from_geom_file
 
 DATA = Path(__file__).resolve().parents[1] / "data"
 VENTOUX = DATA / "pleiades_ventoux"

@@ -36,13 +36,13 @@ from core.matching.grid import GridSpec
 from core.ortho import OrthoConfig, tile_geometry
 from core.ortho_compare import CompareConfig
 from core.sensors.base import footprint_lonlat
-from tasks import ortho as T
-from tasks.crs import Projection
-from tasks.dem_io import read_reference
-from tasks.geoid import BUNDLED_SRTM_DIR
-from tasks.ortho_compare import compare_orthos, plan_compare
-from tasks.ortho_io import describe_dem, read_tile_dem
-from tasks.sensor_io import LoadedModel, load_model
+from tasks.ortho import orthorectify as T
+from tasks.io.crs import Projection
+from tasks.io.dem import read_reference
+from tasks.io.geoid import BUNDLED_SRTM_DIR
+from tasks.ortho.compare import compare_orthos, plan_compare
+from tasks.ortho.inputs import describe_dem, read_tile_dem
+from tasks.io.sensors import LoadedModel, load_model
 
 RES = 40.0  # the tiny scene's GSD
 

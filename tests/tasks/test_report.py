@@ -19,9 +19,9 @@ import numpy as np
 import pytest
 from PIL import Image
 
-from tasks.report import FIGURES_DIR, JSON_KEY, ReportOutcome, make_report, write_report
-from tasks.report_doc import MAX_INLINE, Table
-from tasks.report_tables import (
+from tasks.report.build import FIGURES_DIR, JSON_KEY, ReportOutcome, make_report, write_report
+from tasks.report.doc import MAX_INLINE, Table
+from tasks.report.tables import (
     EVAL_KEYS,
     SECTIONS,
     STATS,
@@ -53,7 +53,7 @@ def copy_orient_output(src: Path, dst: Path) -> Path:
 def evaluation(tiny_oriented, tmp_path_factory) -> Path:
     """``gcpfree evaluate`` of the final DSM against the scene's simulated lidar (LAS
     classes): a real eval.json."""
-    from tasks.evaluate import EvaluationOptions, evaluate_lidar, write_evaluation
+    from tasks.evaluation.lidar import EvaluationOptions, evaluate_lidar, write_evaluation
 
     scene, out, _ = tiny_oriented
     report = evaluate_lidar.fn(EvaluationOptions(dem=out / "dsm.tif",

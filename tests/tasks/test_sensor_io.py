@@ -13,7 +13,7 @@ from rasterio.windows import Window
 
 from core.errors import InputError
 from core.sensors.rpc import RPCModel
-from tasks.sensor_io import pixel_offset_of, read_rpc, rpc_from_dimap_file, rpc_from_geom_file
+from tasks.io.sensors import pixel_offset_of, read_rpc, rpc_from_dimap_file, rpc_from_geom_file
 
 DATA = Path(__file__).resolve().parents[1] / "data"
 VENTOUX = DATA / "pleiades_ventoux"
@@ -165,7 +165,7 @@ def spot_scene_files(tmp_path_factory):
     """A small SPOT-like model written as JSON and as METADATA.DIM, and a blank image."""
     from core.sensors.pushbroom_synthetic import SyntheticSpec, synthetic_pushbroom
     from core.sensors.spot import spot_scene_from_model
-    from tasks.dimap import write_dimap
+    from tasks.io.dimap import write_dimap
 
     d = tmp_path_factory.mktemp("spot")
     m = synthetic_pushbroom(SyntheticSpec(5.2, 44.2, n_cols=300, n_rows=200, gsd_m=20.0,
@@ -177,7 +177,7 @@ def spot_scene_files(tmp_path_factory):
 
 
 def test_imagery_tif_finds_metadata_dim_beside_it(spot_scene_files):
-    from tasks.sensor_io import load_model
+    from tasks.io.sensors import load_model
 
     d, m = spot_scene_files
     loaded = load_model(d / "scene" / "IMAGERY.TIF")
@@ -194,7 +194,7 @@ def test_imagery_tif_finds_metadata_dim_beside_it(spot_scene_files):
 
 
 def test_same_name_dim_json_then_rpc_and_errors(spot_scene_files, tmp_path):
-    from tasks.sensor_io import load_model
+    from tasks.io.sensors import load_model
 
     d, m = spot_scene_files
     img = tmp_path / "left.tif"

@@ -17,9 +17,9 @@ from core.errors import CoverageError, InputError
 from core.sensors.pushbroom import PushbroomModel
 from core.simulation.landcover import LandCover
 from core.simulation.scene import ErrorConfig
-from tasks import simulate as S
-from tasks.geoid import EGM96_GTX, load_geoid
-from tasks.simulate_io import check_dem
+from tasks.simulate import scene as S
+from tasks.io.geoid import EGM96_GTX, load_geoid
+from tasks.simulate.io import check_dem
 from tests.scenes import CENTRE, DEM, run_scene
 
 
@@ -57,7 +57,7 @@ def test_delivered_metadata_error_at_centre(scene_dir):
 def test_spot_metadata_beside_each_image_reads_back_as_the_delivered_model(scene_dir):
     """DIR/left.DIM (SPOT 1-4 style METADATA.DIM) is what the chain finds for DIR/left.tif, and
     it projects within 1e-3 px of the delivered JSON model over the scene and heights."""
-    from tasks.sensor_io import load_model
+    from tasks.io.sensors import load_model
 
     out, scene = scene_dir
     lo, hi = scene.dsm_range_m

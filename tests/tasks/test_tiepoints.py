@@ -1,4 +1,4 @@
-"""Tie points of whole pairs (tasks.tiepoints): a simulated tiny pair scored against its truth,
+"""Tie points of whole pairs (tasks.relative.tiepoints): a simulated tiny pair scored against its truth,
 and the real Pleiades pairs."""
 
 from __future__ import annotations
@@ -26,10 +26,10 @@ from core.sensors.base import localize_on_dem
 from core.sensors.pushbroom import PushbroomModel
 from core.sensors.pushbroom_synthetic import SyntheticSpec, synthetic_pushbroom
 from core.simulation.landcover import LandCover
-from tasks.geoid import BUNDLED_SRTM_DIR
-from tasks.reference import build_reference, locate_tiles
-from tasks.sensor_io import load_model
-from tasks.tiepoints import find_tie_points
+from tasks.io.geoid import BUNDLED_SRTM_DIR
+from tasks.io.reference import build_reference, locate_tiles
+from tasks.io.sensors import load_model
+from tasks.relative.tiepoints import find_tie_points
 
 DATA = Path(__file__).resolve().parents[1] / "data"
 SHARED = Path(os.environ.get("GCPFREE_SHARED_DATA", "/work/shared/data"))
@@ -173,7 +173,7 @@ def test_tiling_does_not_change_the_matches(clean):
 
 def _ellipsoidal_srtm() -> GeoDEM:
     """The bundled SRTM tile as a GeoDEM of ellipsoidal heights (h = H + N, EGM96)."""
-    from tasks.geoid import load_geoid
+    from tasks.io.geoid import load_geoid
 
     with rasterio.open(SRTM) as src:
         H = src.read(1).astype(np.float64)

@@ -16,10 +16,10 @@ import rasterio
 from core.errors import CoverageError, InputError
 from core.geodesy import metres_per_degree
 from core.void_fill import FillConfig
-from tasks.crs import Projection
-from tasks.geoid import BUNDLED_SRTM_DIR, load_geoid
-from tasks.srtm import SRTM_VOID
-from tasks.void_fill import (
+from tasks.io.crs import Projection
+from tasks.io.geoid import BUNDLED_SRTM_DIR, load_geoid
+from tasks.io.srtm import SRTM_VOID
+from tasks.evaluation.void_fill import (
     FillOptions,
     fill_tile_voids,
     plan_fill,
@@ -165,7 +165,7 @@ def test_an_egm96_dsm_gives_the_same_fill(tmp_path, dsm):
 def test_reading_the_dsm_in_row_blocks_changes_nothing(tmp_path, dsm, monkeypatch):
     tile, _, _ = tif_tile(tmp_path, "float32")
     fill_tile_voids.fn(FillOptions(tile, dsm, tmp_path / "one.tif"))
-    monkeypatch.setattr("tasks.void_fill.BLOCK_ROWS", 7)
+    monkeypatch.setattr("tasks.evaluation.void_fill.BLOCK_ROWS", 7)
     fill_tile_voids.fn(FillOptions(tile, dsm, tmp_path / "blocks.tif"))
     with rasterio.open(tmp_path / "one.tif") as a, rasterio.open(tmp_path / "blocks.tif") as b:
         np.testing.assert_allclose(a.read(1), b.read(1), rtol=0, atol=1e-4)

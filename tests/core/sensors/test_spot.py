@@ -26,7 +26,7 @@ from core.sensors.spot import (
     spot_scene_from_model,
 )
 from core.simulation.scene import PRESETS, ErrorConfig, scene_models
-from tasks.dimap import dimap_xml, parse_dimap, read_dimap
+from tasks.io.dimap import dimap_xml, parse_dimap, read_dimap
 
 SHARED = Path(__file__).resolve().parents[4] / "shared" / "data" / "spot_dimap"
 REAL = pytest.mark.skipif(not SHARED.is_dir(), reason="../shared/data/spot_dimap is absent")

@@ -1,0 +1,162 @@
+"""Tasks of step 4: the absolute orientation of both images on the simulated GCPs, check points
+and the products of ``gcpfree orient`` (oriented models, GCPs, report.json).
+
+The maths is :mod:`core.orientation.absolute` and :mod:`core.orientation.selfcal`; here the
+check points are read (the simulator's ``checkpoints.json`` or a CSV), the adjustment run and
+its products written atomically.
+"""
+
+from __future__ import annotations
+
+import csv
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+from prefect import task
+from prefect.cache_policies import NO_CACHE
+
+from core.errors import InputError
+from core.jsonio import parse_json
+from core.orientation.absolute import (
+    AbsoluteConfig,
+    AbsoluteOrientation,
+    Observations,
+    absolute_orientation,
+    check_point_stats,
+)
+from core.orientation.selfcal import SelfCalibration, self_calibrate
+from core.points import (
+    CheckPoint,
+    CheckPointSet,
+    ControlPoint,
+    ImagePoint,
+    control_points_to_dict,
+)
+from core.sensors.base import SensorModel
+from tasks.io.rasters import atomic_write_json
+from tasks.io.sensors import LoadedModel
+
+NAMES = ("left", "right")
+CSV_COLUMNS = ("id", "lon_deg", "lat_deg", "h_m", "left_col", "left_row", "right_col",
+               "right_row")
+
+
+def _checkpoints_csv(path: Path) -> CheckPointSet:
+    try:
+        with path.open(newline="", encoding="utf-8", errors="replace") as f:
+            rows = list(csv.DictReader(f))
+    except csv.Error as exc:
+        raise InputError(f"check point CSV {path} is not a readable CSV ({exc}); give "
+                         f"the columns {','.join(CSV_COLUMNS)}") from None
+    if not rows or any(c not in rows[0] for c in CSV_COLUMNS):
+        raise InputError(f"check point CSV {path} must have the columns {','.join(CSV_COLUMNS)}")
+    points = []
+    for k, r in enumerate(rows, start=2):
+        try:
+            points.append(CheckPoint(
+                id=int(r["id"]), lon_deg=float(r["lon_deg"]), lat_deg=float(r["lat_deg"]),
+                h_m=float(r["h_m"]), H_egm96_m=float("nan"), x_m=float("nan"),
+                y_m=float("nan"), land_cover=r.get("land_cover", "") or "",
+                image_points={n: ImagePoint(float(r[f"{n}_col"]), float(r[f"{n}_row"]))
+                              for n in NAMES}))
+        except (TypeError, ValueError, OverflowError) as exc:
+            raise InputError(f"check point CSV {path} line {k}: {exc}; every column must be a "
+                             "number (h_m WGS84 ellipsoidal, 0-based pixel centres)") from None
+    return CheckPointSet("EPSG:4326", NAMES, tuple(points))
+
+
+def read_checkpoints(path: str | Path) -> CheckPointSet:
+    """Check points from the simulator's ``truth/checkpoints.json`` or a CSV
+    ``id,lon_deg,lat_deg,h_m,left_col,left_row,right_col,right_row`` (heights WGS84
+    ellipsoidal, image coordinates 0-based with pixel centres at integers)."""
+    path = Path(path)
+    if not path.is_file():
+        raise InputError(f"check point file {path} does not exist")
+    if path.suffix.lower() == ".csv":
+        points = _checkpoints_csv(path)
+    else:
+        text = path.read_text(encoding="utf-8", errors="replace")
+        doc = parse_json(text, f"check point file {path}")
+        try:
+            if not isinstance(doc, dict):
+                raise InputError("it is not a JSON object")
+            points = CheckPointSet.from_dict(doc)
+        except InputError as exc:
+            raise InputError(f"check point file {path}: {exc}") from None
+        except (KeyError, TypeError, ValueError, AttributeError, OverflowError) as exc:
+            raise InputError(f"check point file {path} is malformed ({type(exc).__name__}: "
+                             f"{exc}); give the simulator's checkpoints.json or a CSV") from None
+    bad = [p.id for p in points.points if not np.isfinite(
+        [p.lon_deg, p.lat_deg, p.h_m, *(v for ip in p.image_points.values()
+                                          for v in (ip.col, ip.row))]).all()]
+    if bad:
+        raise InputError(f"check point file {path}: point {bad[0]} has a coordinate that is not a "
+                         "finite number")
+    missing = [n for n in NAMES if n not in points.images]
+    if missing or not points.points:
+        raise InputError(f"check point file {path} has no points measured in images "
+                         f"{', '.join(missing) or 'left, right'}")
+    return points
+
+
+def check_point_report(models: tuple[SensorModel, ...], points: CheckPointSet
+                       ) -> dict[str, dict[str, Any]]:
+    """The paper's Table 2 per image: the check points' residuals under ``models``."""
+    out = {}
+    for name, model in zip(NAMES, models, strict=True):
+        pts = [p for p in points.points if name in p.image_points]
+        if not pts:
+            continue
+        lon, lat, h, col, row = (np.array(v, dtype=float) for v in zip(
+            *[(p.lon_deg, p.lat_deg, p.h_m, p.image_points[name].col, p.image_points[name].row)
+              for p in pts], strict=True))
+        out[name] = check_point_stats(model, lon, lat, h, col, row, name).to_dict()
+    return out
+
+
+@dataclass(frozen=True, eq=False)
+class AbsoluteProducts:
+    """The oriented models, the adjustment and where they were written."""
+
+    models: tuple[SensorModel, ...]
+    adjustment: AbsoluteOrientation
+    self_calibration: SelfCalibration | None
+    model_paths: tuple[Path, ...]
+
+    def gcp_summary(self, gcps: tuple[ControlPoint, ...]) -> dict[str, Any]:
+        """GCPs used and rejected (ids and reasons), over the GCPs given."""
+        src = self.self_calibration or self.adjustment
+        inlier, reasons = src.inlier, src.reasons
+        return {"given": len(gcps), "used": int(inlier.sum()), "rejected": int((~inlier).sum()),
+                "rejected_ids": [{"id": gcps[int(i)].id, "reason": reasons[int(i)]}
+                                 for i in np.flatnonzero(~inlier)]}
+
+
+@task(name="absolute-orientation", cache_policy=NO_CACHE)
+def orient_absolute(left: LoadedModel, right: LoadedModel, gcps: tuple[ControlPoint, ...],
+                    out_dir: Path, corrections: str = "linear", lens: bool = False,
+                    config: AbsoluteConfig | None = None) -> AbsoluteProducts:
+    """Both models adjusted to the GCPs (``corrections``: ``offset`` or ``linear`` terms of
+    each model; ``lens``: lens self-calibration, kept only where significant), written as
+    ``out_dir/left.json`` and ``out_dir/right.json`` (gcpfree model files)."""
+    config = config or AbsoluteConfig()
+    models = (left.model.with_corrections(corrections),
+              right.model.with_corrections(corrections))
+    obs = Observations.from_control_points(gcps, NAMES)
+    calib = None
+    if lens:
+        calib = self_calibrate(models, obs, NAMES, config)
+        adj = calib.result
+    else:
+        adj = absolute_orientation(models, obs, NAMES, config)
+    paths = []
+    for name, model in zip(NAMES, adj.models, strict=True):
+        paths.append(atomic_write_json(Path(out_dir) / f"{name}.json",
+                                       model.to_dict()))  # type: ignore[attr-defined]
+    return AbsoluteProducts(tuple(adj.models), adj, calib, tuple(paths))
+
+
+def write_gcps(path: Path, gcps: tuple[ControlPoint, ...]) -> Path:
+    return atomic_write_json(path, control_points_to_dict(gcps))

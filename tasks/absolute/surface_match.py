@@ -1,0 +1,198 @@
+"""Tasks of step 3: windows of the relative DEM around tie points matched to the reference DEM,
+turned into simulated GCPs. The maths is :func:`core.surface_match.match_window`; here the
+windows are chosen, the relative DEM's cells read (rasterio windows, projected to lon/lat with
+pyproj) and the windows run on Dask threads."""
+
+from __future__ import annotations
+
+import contextlib
+import json
+import sys
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import dask
+import numpy as np
+import rasterio
+from dask.diagnostics import ProgressBar
+from prefect import task
+from prefect.cache_policies import NO_CACHE
+from rasterio.windows import Window
+
+from core.dem import GeoDEM
+from core.geodesy import geodetic_to_enu
+from core.matching.tiepoints import best_per_cell
+from core.points import ControlPoint, ImagePoint, control_points_to_dict
+from core.surface_match import (
+    SurfaceMatchConfig,
+    WindowMatch,
+    WindowStatus,
+    match_window,
+    shift_prior,
+)
+from tasks.io.crs import Projection
+from tasks.io.rasters import atomic_write_json
+
+
+@dataclass(frozen=True, eq=False)
+class TieGround:
+    """Tie points with their relative ground coordinates (the relative orientation's frame) and
+    their positions in both images."""
+
+    lon_deg: np.ndarray
+    lat_deg: np.ndarray
+    h_m: np.ndarray
+    left_col: np.ndarray
+    left_row: np.ndarray
+    right_col: np.ndarray
+    right_row: np.ndarray
+    score: np.ndarray
+
+    @classmethod
+    def from_tiepoints_json(cls, path: str | Path) -> TieGround:
+        """The inlier tie points of a ``rel.tiepoints.json``."""
+        doc = json.loads(Path(path).read_text())
+        g, tp = doc["relative_ground"], doc["tie_points"]
+        idx = np.asarray(g["index"], dtype=np.int64)
+        inl = np.asarray(g["inlier"], dtype=bool)
+
+        def col(name: str) -> np.ndarray:
+            return np.array([np.nan if v is None else v for v in tp[name]], dtype=float)[idx][inl]
+
+        return cls(np.asarray(g["lon_deg"])[inl], np.asarray(g["lat_deg"])[inl],
+                   np.asarray(g["h_m"])[inl], col("left_col"), col("left_row"),
+                   col("right_col"), col("right_row"), col("correlation"))
+
+
+def choose_windows(ties: TieGround, spacing_m: float) -> np.ndarray:
+    """One tie point per ``spacing_m`` ground cell (the best correlated): window centres that
+    spread over the overlap without overlapping much."""
+    origin = (float(np.median(ties.lon_deg)), float(np.median(ties.lat_deg)),
+              float(np.median(ties.h_m)))
+    e, n, _ = geodetic_to_enu(ties.lon_deg, ties.lat_deg, ties.h_m, origin)
+    return best_per_cell(e, n, ties.score, spacing_m)
+
+
+def read_window_cells(dem_path: str, lon: float, lat: float, radius_m: float
+                 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The relative DEM's cells within ``radius_m`` of (lon, lat): their lon, lat and height
+    (NaN where the DEM has none)."""
+    with rasterio.open(dem_path) as src:
+        proj = Projection(src.crs.to_epsg())
+        x, y = proj.to_xy(np.array([lon]), np.array([lat]))
+        t = src.transform
+        c0 = int(np.floor((x[0] - radius_m - t.c) / t.a))
+        c1 = int(np.ceil((x[0] + radius_m - t.c) / t.a))
+        r0 = int(np.floor((t.f - y[0] - radius_m) / -t.e))
+        r1 = int(np.ceil((t.f - y[0] + radius_m) / -t.e))
+        z = src.read(1, window=Window(c0, r0, c1 - c0, r1 - r0), boundless=True,
+                     fill_value=np.nan, masked=True).astype(np.float64).filled(np.nan)
+    cols = t.c + (np.arange(c0, c1) + 0.5) * t.a
+    rows = t.f + (np.arange(r0, r1) + 0.5) * t.e
+    xx, yy = np.meshgrid(cols, rows)
+    clon, clat = proj.to_lonlat(xx.ravel(), yy.ravel())
+    return clon, clat, z.ravel()
+
+
+def match_one(dem_path: str, lon: float, lat: float, reference: GeoDEM,
+              cfg: SurfaceMatchConfig, prior: tuple[float, float, float] | None = None
+              ) -> WindowMatch:
+    """One window: read its cells, match them (per-window function of the Dask graph)."""
+    clon, clat, h = read_window_cells(dem_path, lon, lat, cfg.radius_m)
+    return match_window(clon, clat, h, (lon, lat), reference, cfg, prior)
+
+
+def _match_all(dem_path: Path, ties: TieGround, idx: np.ndarray, reference: GeoDEM,
+               cfg: SurfaceMatchConfig, priors: np.ndarray | None = None,
+               progress: bool = False) -> list[WindowMatch]:
+    parts = [dask.delayed(match_one)(str(dem_path), float(ties.lon_deg[i]),
+                                     float(ties.lat_deg[i]), reference, cfg,
+                                     None if priors is None else tuple(map(float, priors[k])))
+             for k, i in enumerate(idx)]
+    with ProgressBar(out=sys.stderr, dt=1.0) if progress else contextlib.nullcontext():
+        return list(dask.compute(*parts, scheduler="threads"))
+
+
+FIRST_PASS = 24  # windows searched over the whole shift range before the others use a prior
+
+
+@dataclass(frozen=True, eq=False)
+class SurfaceMatchResult:
+    """The windows tried (centre tie point index and match) and the GCPs made from the good
+    ones."""
+
+    centres: np.ndarray
+    matches: tuple[WindowMatch, ...]
+    gcps: tuple[ControlPoint, ...]
+
+    def counts(self) -> dict[str, int]:
+        out: dict[str, int] = {}
+        for m in self.matches:
+            out[m.status.name] = out.get(m.status.name, 0) + 1
+        return out
+
+    def to_dict(self) -> dict[str, Any]:
+        return {"windows": [{"tie_point": int(c), **m.to_dict()}
+                            for c, m in zip(self.centres, self.matches, strict=True)],
+                "counts": self.counts(), "gcps": control_points_to_dict(self.gcps)}
+
+
+@task(name="surface-match", cache_policy=NO_CACHE)
+def match_surfaces(dem_path: Path, ties: TieGround, reference: GeoDEM,
+                   cfg: SurfaceMatchConfig = SurfaceMatchConfig(), spacing_m: float | None = None,
+                   names: tuple[str, str] = ("left", "right"),
+                   out: Path | None = None, progress: bool = False) -> SurfaceMatchResult:
+    """Match a window around each chosen tie point (``spacing_m`` apart, default the window
+    radius) and make a GCP of each good one: the tie point's relative ground coordinates moved
+    by the window's 3-D shift, with its image positions and the window's precision.
+    ``progress``: a progress bar over the windows on stderr."""
+    centres = choose_windows(ties, spacing_m or cfg.radius_m)
+    # a first pass over the whole shift range on windows spread over the scene, then the
+    # others searched around the shift those predict (an affine fit); a peak on the border
+    # of its prior box is searched again over the whole range
+    first = np.zeros(len(centres), dtype=bool)
+    first[np.unique(np.linspace(0, len(centres) - 1, min(FIRST_PASS, len(centres)))
+                    .round().astype(int))] = True
+    found: list[WindowMatch | None] = [None] * len(centres)
+    if progress:
+        print(f"surface matching: {len(centres)} windows ({int(first.sum())} searched over "
+              "the whole range first)", file=sys.stderr, flush=True)
+    for k, m in zip(np.flatnonzero(first), _match_all(dem_path, ties, centres[first],
+                                                        reference, cfg, progress=progress),
+                    strict=True):
+        found[k] = m
+    rest = np.flatnonzero(~first)
+    if rest.size:
+        fi = centres[first]
+        priors = shift_prior(ties.lon_deg[fi], ties.lat_deg[fi],
+                             [found[k] for k in np.flatnonzero(first)],
+                             ties.lon_deg[centres[rest]], ties.lat_deg[centres[rest]])
+        for k, m in zip(rest, _match_all(dem_path, ties, centres[rest], reference, cfg,
+                                         priors, progress), strict=True):
+            found[k] = m
+        again = [k for k in rest if priors is not None
+                 and found[k].status == WindowStatus.EDGE_PEAK]
+        if again:
+            for k, m in zip(again, _match_all(dem_path, ties, centres[again], reference, cfg),
+                            strict=True):
+                found[k] = m
+    matches = tuple(found)
+    gcps = []
+    for i, m in zip(centres, matches, strict=True):
+        if m.status != WindowStatus.OK:
+            continue
+        gcps.append(ControlPoint(
+            id=len(gcps) + 1,
+            lon_deg=float(ties.lon_deg[i] + m.shift_lon_arcsec / 3600.0),
+            lat_deg=float(ties.lat_deg[i] + m.shift_lat_arcsec / 3600.0),
+            h_m=float(ties.h_m[i] + m.shift_h_m),
+            image_points={names[0]: ImagePoint(float(ties.left_col[i]), float(ties.left_row[i])),
+                          names[1]: ImagePoint(float(ties.right_col[i]),
+                                               float(ties.right_row[i]))},
+            sigma_xy_m=m.precision_m, sigma_h_m=max(m.precision_h_m, 0.5),
+            source="srtm_surface_match", provenance={"tie_point": int(i), **m.to_dict()}))
+    result = SurfaceMatchResult(centres, matches, tuple(gcps))
+    if out is not None:
+        atomic_write_json(out, result.to_dict())
+    return result

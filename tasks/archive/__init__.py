@@ -1,0 +1,1 @@
+"""Many pairs: the catalog, the summary and the STAC catalogs."""

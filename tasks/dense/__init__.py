@@ -1,0 +1,1 @@
+"""Step 2: dense matching, tile by tile, into a DEM."""

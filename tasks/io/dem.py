@@ -1,0 +1,146 @@
+"""Reference DEMs read as WGS84 ellipsoidal heights on a lon/lat grid (:class:`core.dem.GeoDEM`).
+
+A window of any lon/lat GeoTIFF or SRTM ``.hgt`` around an area, with the vertical datum
+resolved (EGM96 orthometric heights converted with ``h = H + N``) and voids as NaN. Plain
+functions (no Prefect): the CLI checks inputs with them before any flow starts.
+"""
+
+from __future__ import annotations
+
+import warnings
+from pathlib import Path
+
+import numpy as np
+import pyproj
+import rasterio
+from rasterio.errors import NotGeoreferencedWarning, RasterioIOError, WindowError
+from rasterio.windows import Window, from_bounds
+
+from core.dem import GeoDEM
+from core.errors import CoverageError, InputError
+from core.geodesy import BBox
+from core.heights import VERTICAL_CHOICES, DatumDecision, decide_datum
+from tasks.io.vertical_crs import split_crs
+from tasks.io.geoid import load_geoid
+from tasks.io.srtm import SRTM_VOID, SrtmTile, parse_tile_name
+
+VERTICALS = VERTICAL_CHOICES
+
+
+def srtm_name(path: Path) -> str | None:
+    """The file's name when it is an SRTM tile by its name (a ``.hgt``, or named after its
+    tile: ``N44E005.tif``, ``n44_e005_1arc_v3.tif``), else None."""
+    if path.suffix.lower() == ".hgt" or parse_tile_name(path.name) is not None:
+        return path.name
+    return None
+
+
+def dem_datum(path: str | Path, given: str = "auto", *, what: str = "reference DEM",
+              option: str = "--reference-vertical") -> DatumDecision:
+    """The vertical datum of a DEM file, by the one rule of :func:`core.heights.decide_datum`
+    (the option given, the ``vertical_datum`` tag, the CRS's vertical part, an SRTM name, else
+    refused). Every command that reads a DEM decides with this function; ``what`` and
+    ``option`` name the file and the command-line option in the messages.
+
+    Raises:
+        InputError: the file cannot be read, or its datum cannot be told or converted.
+    """
+    path = Path(path)
+    label = f"{what} {path}"
+    if given != "auto":  # the option decides: no need to open the file
+        return decide_datum(label, option, given=given)
+    if not path.is_file():
+        raise InputError(f"{label} does not exist; give a GeoTIFF or .hgt file")
+    try:
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore", NotGeoreferencedWarning)
+            with rasterio.open(path) as src:
+                tags = {k.lower(): v for k, v in src.tags().items()}
+                crs = src.crs
+    except RasterioIOError as exc:
+        raise InputError(f"cannot read {label}: {exc}; give a GeoTIFF or .hgt file") from exc
+    if crs is None:
+        raise InputError(f"{label} has no CRS; give a georeferenced DEM (EPSG:4326 or a UTM "
+                         "zone), e.g. gdal_edit.py -a_srs EPSG:4326")
+    vert = None
+    if crs is not None:
+        try:
+            _, vert = split_crs(pyproj.CRS.from_wkt(crs.to_wkt()))
+        except InputError as exc:
+            raise InputError(f"{label}: {exc}") from None
+    return decide_datum(label, option, given=given, tag=tags.get("vertical_datum"),
+                        crs_datum=None if vert is None else vert.datum,
+                        crs_vertical_name=None if vert is None else vert.datum_name,
+                        srtm_name=srtm_name(path))
+
+
+def check_srtm_tiles(tiles: list[SrtmTile]) -> None:
+    """SRTM tiles are converted with h = H + N: refuse a tile whose own tag or CRS says its
+    heights are ellipsoidal (the one rule, :func:`dem_datum`)."""
+    for t in tiles:
+        decision = dem_datum(t.path, what="SRTM tile", option="--reference-vertical")
+        if decision.datum != "egm96":
+            raise InputError(f"SRTM tile {t.path} holds {decision.datum} heights "
+                             f"({decision.source}); prepare-reference converts EGM96 tiles: "
+                             "give the tiles as distributed, or this DEM as --reference")
+
+
+def check_reference(path: str | Path) -> None:
+    """Fail early, in one line, on a reference DEM that cannot be read as lon/lat heights."""
+    path = Path(path)
+    if not path.is_file():
+        raise InputError(f"reference DEM {path} does not exist; give a GeoTIFF or .hgt file "
+                         "in EPSG:4326")
+    try:
+        with warnings.catch_warnings():  # no georeferencing: refused below, in one line
+            warnings.simplefilter("ignore", NotGeoreferencedWarning)
+            with rasterio.open(path) as src:
+                crs = src.crs
+    except RasterioIOError as exc:
+        raise InputError(f"cannot read reference DEM {path}: {exc}; give a GeoTIFF or .hgt "
+                         "file") from exc
+    if crs is None or not crs.is_geographic:
+        raise InputError(f"reference DEM {path} is not in geographic coordinates (CRS {crs}); "
+                         "reproject it to EPSG:4326 (e.g. gdalwarp -t_srs EPSG:4326)")
+
+
+def read_reference(path: str | Path, box: BBox, vertical: str) -> GeoDEM:
+    """The part of a lon/lat DEM covering ``box``, as WGS84 ellipsoidal heights (NaN = void).
+
+    ``vertical`` is ``egm96`` (converted with ``h = H + N``) or ``ellipsoidal``.
+
+    Raises:
+        CoverageError: the DEM does not reach the box.
+    """
+    path = Path(path)
+    check_reference(path)
+    with rasterio.open(path) as src:
+        f = from_bounds(*box.as_tuple(), transform=src.transform)
+        c0, r0 = int(np.floor(f.col_off)) - 1, int(np.floor(f.row_off)) - 1  # one node more:
+        c1 = int(np.ceil(f.col_off + f.width)) + 1  # the nodes (pixel centres) span the box
+        r1 = int(np.ceil(f.row_off + f.height)) + 1
+        try:
+            win = Window(c0, r0, c1 - c0, r1 - r0).intersection(
+                Window(0, 0, src.width, src.height))
+        except WindowError:
+            win = None
+        if win is None or win.width < 2 or win.height < 2:
+            b = src.bounds
+            raise CoverageError(
+                f"reference DEM {path} (lon {b.left:.3f}..{b.right:.3f}, lat {b.bottom:.3f}.."
+                f"{b.top:.3f}) does not cover the image footprint (lon {box.lon_min:.3f}.."
+                f"{box.lon_max:.3f}, lat {box.lat_min:.3f}..{box.lat_max:.3f}); give a DEM "
+                "covering the scene")
+        try:
+            heights = src.read(1, window=win, masked=True).astype(np.float64).filled(np.nan)
+        except RasterioIOError as exc:
+            raise InputError(f"cannot read the heights of reference DEM {path}: {exc}; the "
+                             "file is damaged, give a whole GeoTIFF or .hgt") from None
+        tr = src.window_transform(win)
+    heights[heights <= SRTM_VOID + 0.5] = np.nan  # SRTM voids when no nodata is declared
+    if vertical == "egm96":
+        rows, cols = np.mgrid[0:heights.shape[0], 0:heights.shape[1]]
+        lon = tr.c + (cols + 0.5) * tr.a
+        lat = tr.f + (rows + 0.5) * tr.e
+        heights = load_geoid().orthometric_to_ellipsoidal(lon, lat, heights)
+    return GeoDEM.from_transform(heights, tuple(tr)[:6])

@@ -1,0 +1,1 @@
+"""Step 5: orthorectification and the comparison of two orthoimages."""

@@ -1,0 +1,1 @@
+"""Step 1: tie points and the relative orientation of a pair."""

@@ -1,0 +1,242 @@
+"""Task of step 1: tie points between the two images of a pair, tile by tile with Dask.
+
+The left image is cut into ``cfg.tile_px`` blocks; each block is one Dask task that reads its
+left window (with the template margin), finds interest points and their heights on the
+reference DEM, reads the right window holding their search areas, matches them
+(:mod:`core.matching.tiepoints`) and returns the small arrays of its matches. The best point per
+ground cell is then kept over the whole overlap. Nothing whole-image is held in memory: only
+windows, the reference DEM over the scene and the point arrays.
+"""
+
+from __future__ import annotations
+
+import json
+import warnings
+from dataclasses import dataclass, replace
+from pathlib import Path
+
+import cv2
+import dask
+import numpy as np
+import rasterio
+import rasterio.io
+from prefect import task
+from rasterio.errors import NotGeoreferencedWarning, RasterioIOError
+from rasterio.windows import Window, from_bounds
+
+from core.dem import GeoDEM
+from core.errors import CoverageError, GeometryError, InputError
+from core.matching.overlap import overlap_cell_m, overlap_cells
+from core.matching.tiepoint_results import TiePointResult, tiepoint_report
+from core.matching.tiepoints import (
+    HeightPrior,
+    Matches,
+    TiePointConfig,
+    cell_ids,
+    check_consistency,
+    detect_points,
+    ground_sampling_m,
+    ground_xy_m,
+    match_points,
+    predict_search,
+    search_windows,
+    select_tie_points,
+    valid_pixels,
+)
+from core.sensors.base import SensorModel, footprint_lonlat
+from tasks.io.rasters import atomic_write_text
+
+# margin (degrees) around the left footprint when reading the reference DEM: the search
+# radius and the parallax of the height range stay well inside it
+DEM_MARGIN_DEG = 0.03
+DEFAULT_CONFIG = TiePointConfig()
+
+
+@dataclass(frozen=True)
+class Block:
+    """A block of the left image: full-image pixels [row0:row1, col0:col1]."""
+
+    col0: int
+    row0: int
+    col1: int
+    row1: int
+
+
+def blocks(size: tuple[int, int], tile_px: int) -> list[Block]:
+    """The blocks tiling an image of ``size`` (cols, rows)."""
+    n_cols, n_rows = size
+    return [Block(c, r, min(c + tile_px, n_cols), min(r + tile_px, n_rows))
+            for r in range(0, n_rows, tile_px) for c in range(0, n_cols, tile_px)]
+
+
+# ---------------------------------------------------------------------------- reading
+
+
+def _open(path: str | Path) -> rasterio.io.DatasetReader:
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", NotGeoreferencedWarning)
+        return rasterio.open(path)
+
+
+def raster_info(path: str | Path) -> tuple[tuple[int, int], float | None]:
+    """(cols, rows) of a raster and the value of its saturated pixels (the maximum of an
+    integer type; None for floating-point images)."""
+    try:
+        with _open(path) as src:
+            dtype = np.dtype(src.dtypes[0])
+            sat = float(np.iinfo(dtype).max) if dtype.kind in "ui" else None
+            return (src.width, src.height), sat
+    except RasterioIOError as exc:
+        raise InputError(f"cannot open image {path}: {exc}; check the path") from exc
+
+
+def read_window(path: str | Path, col0: int, row0: int, col1: int, row1: int) -> np.ndarray:
+    """Pixels [row0:row1, col0:col1] of band 1; 0 (nodata) outside the raster."""
+    with _open(path) as src:
+        out = np.zeros((row1 - row0, col1 - col0), dtype=src.dtypes[0])
+        a0, a1 = max(row0, 0), min(row1, src.height)
+        b0, b1 = max(col0, 0), min(col1, src.width)
+        if a1 > a0 and b1 > b0:
+            out[a0 - row0:a1 - row0, b0 - col0:b1 - col0] = src.read(
+                1, window=Window(b0, a0, b1 - b0, a1 - a0))
+    return out
+
+
+def read_reference(path: str | Path, left_model: SensorModel, left_size: tuple[int, int]
+                   ) -> GeoDEM:
+    """The part of an ellipsoidal EPSG:4326 reference DEM (``gcpfree prepare-reference``) under
+    the left image over the DEM's own height range, with a margin."""
+    try:
+        src = rasterio.open(path)
+    except RasterioIOError as exc:
+        raise InputError(f"cannot open reference DEM {path}: {exc}; give the COG written by "
+                         "gcpfree prepare-reference") from exc
+    with src:
+        if src.crs is None or src.crs.to_epsg() != 4326:
+            raise InputError(f"reference DEM {path} is in {src.crs}, not EPSG:4326; give the COG "
+                             "written by gcpfree prepare-reference (ellipsoidal heights)")
+        heights: tuple[float, ...] = (0.0,)
+        for _ in range(3):
+            lon, lat = footprint_lonlat(left_model, *left_size, heights)
+            bounds = (np.nanmin(lon) - DEM_MARGIN_DEG, np.nanmin(lat) - DEM_MARGIN_DEG,
+                      np.nanmax(lon) + DEM_MARGIN_DEG, np.nanmax(lat) + DEM_MARGIN_DEG)
+            win = from_bounds(*bounds, transform=src.transform).round_offsets().round_lengths()
+            h = src.read(1, window=win, boundless=True, fill_value=np.nan, masked=True)
+            h = h.filled(np.nan).astype(np.float64)
+            if not np.isfinite(h).any():
+                raise CoverageError(
+                    f"reference DEM {path} does not cover the left image (lon {bounds[0]:.3f}.."
+                    f"{bounds[2]:.3f}, lat {bounds[1]:.3f}..{bounds[3]:.3f}); prepare it over "
+                    "the scene with gcpfree prepare-reference --bbox")
+            new = (float(np.nanmin(h)), float(np.nanmax(h)))
+            if heights == new:
+                break
+            heights = new
+        transform = src.window_transform(win)
+    return GeoDEM.from_transform(h, tuple(transform)[:6])
+
+
+# ---------------------------------------------------------------------------- per block
+
+
+def block_matches(block: Block, left_path: str, right_path: str, left_model: SensorModel,
+                  right_model: SensorModel, heights: HeightPrior, cfg: TiePointConfig,
+                  saturation: float | None) -> Matches:
+    """Matches of the interest points of one left block: read, detect, predict, read, match."""
+    cv2.setNumThreads(1)
+    t = cfg.template_half_px
+    img = read_window(left_path, block.col0 - t, block.row0 - t, block.col1 + t, block.row1 + t)
+    area = (block.col1 - block.col0) * (block.row1 - block.row0)
+    gsd_m = ground_sampling_m(left_model, 0.5 * (block.col0 + block.col1),
+                              0.5 * (block.row0 + block.row1), heights.typical_h_m)
+    col, row = detect_points(
+        img, valid_pixels(img, 0, saturation), max_points=cfg.max_points(area, gsd_m),
+        min_spacing_px=cfg.min_spacing_px, border_px=t, quality_level=cfg.quality_level,
+        region=(t, t, img.shape[1] - t, img.shape[0] - t))
+    del img
+    col, row = col + (block.col0 - t), row + (block.row0 - t)
+    h, h_lo, h_hi, g_col, g_row = heights.with_slopes(left_model, col, row, float(t))
+    prior = predict_search(left_model, right_model, col, row, h, h_lo, h_hi, cfg.pair_radius_m,
+                           dh_dcol=g_col, dh_drow=g_row)
+    windows = search_windows(col, row, prior, t)
+    if windows is None:
+        return match_points(np.zeros((1, 1)), (0, 0), np.zeros((1, 1)), (0, 0), col, row,
+                            prior, cfg)
+    lw, rw = windows
+    with _open(right_path) as src:  # the right window never exceeds the right image
+        rw = (max(rw[0], -t - 2), max(rw[1], -t - 2), min(rw[2], src.width + t + 2),
+              min(rw[3], src.height + t + 2))
+    if rw[2] <= rw[0] or rw[3] <= rw[1]:
+        rw = (0, 0, 1, 1)
+    left = read_window(left_path, *lw)
+    right = read_window(right_path, *rw)
+    return match_points(left, lw[:2], right, rw[:2], col, row, prior, cfg)
+
+
+# ---------------------------------------------------------------------------- task
+
+
+@task(name="find-tie-points")
+def find_tie_points(
+    left_image: str | Path,
+    right_image: str | Path,
+    left_model: SensorModel,
+    right_model: SensorModel,
+    reference: str | Path | GeoDEM | None = None,
+    cfg: TiePointConfig = DEFAULT_CONFIG,
+    *,
+    h_range_m: tuple[float, float] | None = None,
+    out: str | Path | None = None,
+    num_workers: int | None = None,
+) -> TiePointResult:
+    """Tie points of a stereo pair, one per ``cfg.cell_m`` ground cell, and their report.
+
+    A pair whose overlap holds fewer than ``cfg.min_cells_per_side`` squared cells of
+    ``cfg.cell_m`` (crops smaller than the cell) gets smaller cells, that many over the
+    overlap; the report states the cell used.
+
+    ``reference`` is the ellipsoidal reference DEM (the COG of ``gcpfree prepare-reference``,
+    or a :class:`GeoDEM`); without one, ``h_range_m`` (ellipsoidal metres) bounds the scene's
+    heights. The left image is processed in ``cfg.tile_px`` blocks by Dask threads
+    (``num_workers``, default one per core). With ``out``, the result is also written there as
+    JSON.
+    """
+    left_size, saturation = raster_info(left_image)
+    right_size, _ = raster_info(right_image)
+    if reference is None:
+        if h_range_m is None:
+            raise InputError("give a reference DEM or the scene's height range (h_range_m, "
+                             "ellipsoidal metres) to search tie points")
+        heights = HeightPrior.from_range(*h_range_m)
+    else:
+        dem = (reference if isinstance(reference, GeoDEM)
+               else read_reference(reference, left_model, left_size))
+        heights = HeightPrior.from_dem(dem, cfg.search_radius_m, cfg.height_margin_m)
+    c_mid, r_mid = (left_size[0] - 1) / 2.0, (left_size[1] - 1) / 2.0
+    h0 = float(np.nan_to_num(heights.heights(left_model, [c_mid], [r_mid])[0][0]))
+    lon0, lat0 = left_model.localize(c_mid, r_mid, h0)
+    origin = (float(lon0), float(lat0), h0)
+    cell_m = overlap_cell_m(left_model, right_model, left_size, right_size, heights, cfg.cell_m,
+                            cfg.min_cells_per_side)
+    if cell_m < cfg.cell_m:  # a crop smaller than the cell: cells cut to fit the overlap
+        cfg = replace(cfg, cell_m=cell_m)
+    overlap = overlap_cells(left_model, right_model, left_size, right_size, heights, origin,
+                            cfg.cell_m)
+    if overlap.size == 0:
+        raise GeometryError(
+            f"{Path(left_image).name} and {Path(right_image).name} do not overlap under their "
+            "sensor models; check that each model file belongs to its image")
+    parts = [dask.delayed(block_matches)(b, str(left_image), str(right_image), left_model,
+                                         right_model, heights, cfg, saturation)
+             for b in blocks(left_size, cfg.tile_px)]
+    matches = Matches.concat(list(dask.compute(*parts, scheduler="threads",
+                                               num_workers=num_workers)))
+    x, y = ground_xy_m(left_model, matches.left_col, matches.left_row, matches.h_m, origin)
+    matches = check_consistency(matches, x, y, cfg, heights_known=reference is not None)
+    tie_points = select_tie_points(matches, x, y, cfg.cell_m)
+    report = tiepoint_report(tie_points, matches.status,
+                             cell_ids(x, y, cfg.cell_m), overlap, cfg.cell_m)
+    result = TiePointResult(tie_points, report)
+    if out is not None:
+        atomic_write_text(out, json.dumps(result.to_dict()))
+    return result

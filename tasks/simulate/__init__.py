@@ -1,0 +1,1 @@
+"""The scene simulator's tasks: truth world, images, metadata, check points, lidar, reference."""

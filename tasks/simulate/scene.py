@@ -1,0 +1,434 @@
+"""Tasks of the scene simulator: scene, truth surface, radiance, rendering, check points, lidar.
+
+Every raster is computed block by block with Dask from the deterministic functions of
+:mod:`core.simulation` (no full-scene array), written as COG through a temporary file.
+The per-block functions only slice, call one core function and return arrays; reading
+raster windows, projections (pyproj) and writing stay here, the scene folder's layout and the
+reading of the DEM the world stands on are in :mod:`tasks.simulate.io`.
+"""
+
+from __future__ import annotations
+
+import json
+from dataclasses import dataclass, replace
+from datetime import date
+from functools import lru_cache, partial
+from pathlib import Path
+
+import dask.array as darr
+import laspy
+import numpy as np
+import pyproj
+import rasterio
+import rioxarray
+from prefect import task
+from rasterio.rpc import RPC
+
+from core.errors import InputError, InsufficientDataError
+from core.geodesy import metres_per_degree, utm_epsg
+from core.points import CheckPointSet, GeoPoint
+from core.sensors.pushbroom import PushbroomModel
+from core.sensors.rpcfit import fit_rpc
+from core.sensors.spot import spot_scene_from_model
+from core.simulation.checkpoints import select_checkpoints
+from core.simulation.hashing import derive_seed
+from core.simulation.landcover import LandCover
+from core.simulation.lidar import lidar_extent, lidar_tile
+from core.simulation.raycast import ray_levels
+from core.simulation.reference import ReferenceErrors, srtm_like
+from core.simulation.render import ground_radiance, render_dn
+from core.simulation.scene import (
+    PRESETS,
+    ErrorConfig,
+    SceneDef,
+    TruthGrid,
+    check_window_covers,
+    dem_window,
+    footprint_points,
+    scene_models,
+    terrain_levels,
+)
+from core.simulation.surface import SurfaceSpec, sample_surface, slope_deg
+from tasks.io.crs import Projection
+from tasks.io.dem import dem_datum
+from tasks.io.dimap import write_dimap
+from tasks.io.geoid import load_geoid
+from tasks.io.rasters import (
+    CogItem,
+    CogOptions,
+    atomic_write_text,
+    read_surface_window,
+    write_arrays_cog,
+)
+from tasks.simulate.io import ScenePaths, check_dem, load_surface_spec, read_dem_window
+
+CHUNK = 1024
+NOISE_DN = {8: 1.0, 12: 6.0}
+
+
+def _exist(*paths: Path) -> bool:
+    """Products of an earlier run of the same scene (written atomically, so complete)."""
+    return all(p.exists() for p in paths)
+
+
+def _spec(scene: SceneDef) -> SurfaceSpec:
+    return load_surface_spec(scene.to_json())
+
+
+@lru_cache(maxsize=8)
+def _model(text: str) -> PushbroomModel:
+    return PushbroomModel.from_json(text)
+
+
+# ---------------------------------------------------------------------------- A. scene
+
+
+@task(name="define-scene")
+def define_scene(
+    dem: Path, out: Path, preset_name: str, seed: int, errors: ErrorConfig,
+    relief_factor: float = 1.0, bits: int = 8, date_change: float = 0.0,
+    centre_lonlat: tuple[float, float] | None = None, dem_vertical: str = "auto",
+) -> SceneDef:
+    """Choose the scene, build truth and delivered models, save them with scene.json; the
+    DEM's heights are read in the datum the one rule gives (:func:`tasks.io.dem.dem_datum`,
+    ``dem_vertical`` as ``--dem-vertical``)."""
+    if preset_name not in PRESETS:
+        raise InputError(f"unknown preset {preset_name!r}; choose one of {sorted(PRESETS)}")
+    if not 0 < relief_factor <= 10:
+        raise InputError(f"--relief-factor must be in (0, 10], got {relief_factor}")
+    if not 0 <= date_change <= 1:
+        raise InputError(f"--date-change must be a fraction in [0, 1], got {date_change}")
+    if bits not in (8, 12):
+        raise InputError(f"--bits must be 8 or 12, got {bits}")
+    preset = PRESETS[preset_name]
+    paths = ScenePaths(Path(out))
+    dem = Path(dem)
+    check_dem(dem)
+    datum = dem_datum(dem, dem_vertical, what="DEM", option="--dem-vertical")
+    if centre_lonlat is None:
+        with rasterio.open(dem) as src:
+            b = src.bounds
+        centre_lonlat = (0.5 * (b.left + b.right), 0.5 * (b.bottom + b.top))
+    clon, clat = map(float, centre_lonlat)
+    H, tr, window = read_dem_window(dem, dem_window(preset, clon, clat), datum.datum)
+    levels = terrain_levels(H, tr, load_geoid(), clon, clat, relief_factor)
+    centre = GeoPoint(clon, clat, levels.h_centre_m)
+    models = scene_models(preset, centre, errors, seed)
+    lon, lat = footprint_points([m.truth for m in models.values()], levels.h_lo_m, levels.h_hi_m)
+    check_window_covers(window, lon, lat, dem.name)
+    epsg = utm_epsg(clon, clat)
+    x, y = Projection(epsg).to_xy(lon, lat)
+    res = preset.truth_res_m
+    scene = SceneDef(
+        preset=preset_name, seed=int(seed), dem_path=str(dem.resolve()), dem_window=window,
+        relief_factor=float(relief_factor), H_ref_m=levels.H_ref_m, centre=centre, epsg=epsg,
+        grid=TruthGrid.covering(x, y, res, 10 * res), water_level_m=levels.water_level_m,
+        bits=int(bits), date_change=float(date_change), errors=errors,
+        image_names=tuple(models), injected={n: m.injected for n, m in models.items()},
+        dem_vertical=datum.datum, dem_vertical_source=datum.source,
+    )
+    if paths.scene_json.exists():
+        try:
+            old = SceneDef.from_json(paths.scene_json.read_text())
+        except InputError as exc:
+            raise InputError(f"{paths.scene_json} is unreadable ({exc}); remove {paths.root} "
+                             "or choose another --out") from exc
+        if replace(old, dsm_range_m=None).to_json() == scene.to_json():
+            return old  # same scene: resume, keep the products already made
+        raise InputError(
+            f"{paths.root} already holds a different simulated scene; choose another --out "
+            "or remove that folder"
+        )
+    paths.truth.mkdir(parents=True, exist_ok=True)
+    for n, m in models.items():
+        atomic_write_text(paths.truth_model(n), m.truth.to_json(indent=1))
+        atomic_write_text(paths.delivered(n), m.delivered.to_json(indent=1))
+    atomic_write_text(paths.scene_json, scene.to_json())
+    return SceneDef.from_json(scene.to_json())  # the same value a resumed run reads back
+
+
+@task(name="spot-metadata")
+def write_spot_metadata(scene: SceneDef, out: Path) -> tuple[Path, ...]:
+    """Each delivered model also as SPOT Level 1A metadata (``DIR/<image>.DIM``, SPOT 1-4 style,
+    or SPOT 5 style for the hrs preset), so the chain reads simulated scenes as archive ones."""
+    paths = ScenePaths(Path(out))
+    preset = scene.preset_spec
+    for i, (name, spec) in enumerate(zip(scene.image_names, preset.images, strict=True)):
+        if _exist(paths.dimap(name)):
+            continue
+        delivered = PushbroomModel.from_json(paths.delivered(name).read_text())
+        spot = spot_scene_from_model(
+            delivered, mission_index=preset.spot_mission, instrument=preset.spot_instrument,
+            instrument_index=i + 1, dataset_name=(f"SIMULATED {scene.preset} {name} seed "
+                                                  f"{scene.seed} (gcpfree simulate)"),
+            sun_azimuth_deg=spec.sun_azimuth_deg, sun_elevation_deg=spec.sun_elevation_deg)
+        write_dimap(spot, paths.dimap(name), image_name=paths.image(name).name)
+    return tuple(paths.dimap(n) for n in scene.image_names)
+
+
+# ---------------------------------------------------------------------------- B. truth surface
+
+
+def truth_block(block: np.ndarray, scene: SceneDef, block_info: dict | None = None) -> np.ndarray:
+    """(3, h, w) float32: DTM, DSM, land cover of one block of the truth grid."""
+    (r0, r1), (c0, c1) = block_info[0]["array-location"][-2:]
+    xx, yy = scene.grid.cell_centres(r0, r1, c0, c1)
+    s = sample_surface(_spec(scene), xx, yy, Projection(scene.epsg).to_lonlat)
+    return np.stack([s.dtm_m, s.dsm_m, s.classes.astype(np.float64)]).astype(np.float32)
+
+
+def _georef(scene: SceneDef, **kw: object) -> CogOptions:
+    return CogOptions(transform=scene.grid.geotransform(), crs=f"EPSG:{scene.epsg}", **kw)
+
+
+@task(name="truth-surface")
+def build_truth_surface(scene: SceneDef, out: Path) -> SceneDef:
+    """Write the truth DTM, DSM (ellipsoidal, COG) and land cover; record the DSM range."""
+    paths = ScenePaths(Path(out))
+    if scene.dsm_range_m is not None and _exist(paths.dtm, paths.dsm, paths.landcover):
+        return scene
+    _spec(scene)  # read the DEM once here, before the Dask threads need it
+    base = darr.zeros(scene.grid.shape, chunks=CHUNK, dtype=np.float32)
+    stack = darr.map_blocks(truth_block, base, scene=scene, new_axis=0,
+                            chunks=((3,),) + base.chunks, dtype=np.float32)
+    tags = {"vertical_datum": "WGS84 ellipsoid", "units": "m", "seed": str(scene.seed)}
+    dsm = stack[1]
+    lo, hi = write_arrays_cog(
+        [
+            CogItem(stack[0], paths.dtm, _georef(scene, nodata=np.nan, tags=tags)),
+            CogItem(dsm, paths.dsm, _georef(scene, nodata=np.nan, tags=tags)),
+            CogItem(stack[2].astype(np.uint8), paths.landcover,
+                    _georef(scene, nodata=0, resampling="nearest",
+                            tags={c.name: str(int(c)) for c in LandCover})),
+        ],
+        extra=[darr.nanmin(dsm), darr.nanmax(dsm)],
+    )
+    scene = replace(scene, dsm_range_m=(float(lo), float(hi)))
+    atomic_write_text(paths.scene_json, scene.to_json())
+    return scene
+
+
+# ---------------------------------------------------------------------------- C. radiance
+
+
+def radiance_block(dsm: np.ndarray, classes: np.ndarray, scene: SceneDef, image_index: int,
+                   block_info: dict | None = None) -> np.ndarray:
+    """Ground radiance of one block; the block arrives with a 1-cell halo (map_overlap)."""
+    (r0, r1), (c0, c1) = block_info[0]["array-location"][-2:]
+    xx, yy = scene.grid.cell_centres(r0 - 1, r1 - 1, c0 - 1, c1 - 1)
+    sun = scene.preset_spec.images[image_index]
+    change = scene.date_change if image_index == 1 else 0.0  # the second date changed
+    return ground_radiance(xx, yy, classes, dsm, scene.grid.res_m, sun.sun_azimuth_deg,
+                           sun.sun_elevation_deg, scene.seed, change).astype(np.float32)
+
+
+@task(name="radiance")
+def build_radiance(scene: SceneDef, out: Path, image_index: int) -> Path:
+    """The ground radiance of one date on the truth grid (COG, kept for reruns)."""
+    paths = ScenePaths(Path(out))
+    name = scene.image_names[image_index]
+    if _exist(paths.radiance(name)):
+        return paths.radiance(name)
+    dsm = rioxarray.open_rasterio(paths.dsm, chunks=CHUNK, masked=True).squeeze("band", drop=True)
+    cls = rioxarray.open_rasterio(paths.landcover, chunks=CHUNK).squeeze("band", drop=True)
+    rad = darr.map_overlap(
+        radiance_block, dsm.data.astype(np.float64), cls.data, depth=1, boundary="nearest",
+        dtype=np.float32, scene=scene, image_index=image_index, trim=True,
+    )
+    write_arrays_cog([CogItem(rad, paths.radiance(name), _georef(scene, nodata=np.nan))])
+    return paths.radiance(name)
+
+
+# ---------------------------------------------------------------------------- D. rendering
+
+
+def render_block(block: np.ndarray, scene: SceneDef, model_json: str, image_index: int,
+                 dsm_path: str, radiance_path: str, block_info: dict | None = None) -> np.ndarray:
+    """DN of one image block (:func:`core.simulation.render.render_dn`)."""
+    (r0, r1), (c0, c1) = block_info[0]["array-location"]
+    return render_dn(
+        _model(model_json), np.arange(r0, r1), np.arange(c0, c1), ray_levels(scene.dsm_range_m),
+        Projection(scene.epsg).to_xy, partial(read_surface_window, dsm_path),
+        partial(read_surface_window, radiance_path), NOISE_DN[scene.bits], scene.bits,
+        derive_seed(scene.seed, "sensor-noise", image_index),
+    )
+
+
+@task(name="render-image")
+def render_image(scene: SceneDef, out: Path, image_index: int) -> Path:
+    """Render one image tile by tile and write it with the RPC of its delivered metadata."""
+    paths = ScenePaths(Path(out))
+    name = scene.image_names[image_index]
+    if _exist(paths.image(name)):
+        return paths.image(name)
+    truth_json = paths.truth_model(name).read_text()
+    delivered = PushbroomModel.from_json(paths.delivered(name).read_text())
+    truth = _model(truth_json)
+    dtype = np.uint8 if scene.bits == 8 else np.uint16
+    base = darr.zeros((truth.n_rows, truth.n_cols), chunks=CHUNK, dtype=dtype)
+    img = darr.map_blocks(
+        render_block, base, scene=scene, model_json=truth_json, image_index=image_index,
+        dsm_path=str(paths.dsm), radiance_path=str(paths.radiance(name)), dtype=dtype,
+    )
+    lo, hi = scene.dsm_range_m
+    rpc, report = fit_rpc(delivered, truth.n_cols, truth.n_rows, (lo - 100.0, hi + 100.0))
+    tags = {"rpc_fit_max_px": f"{report.max_px:.2e}", "rpc_fit_rms_px": f"{report.rms_px:.2e}",
+            "metadata": paths.delivered(name).name, "seed": str(scene.seed)}
+    write_arrays_cog([CogItem(img, paths.image(name), CogOptions(
+        rpcs=RPC.from_gdal(rpc.to_gdal_tags()), nodata=0, tags=tags))])
+    return paths.image(name)
+
+
+# ---------------------------------------------------------------------------- E. check points
+
+
+@task(name="check-points")
+def make_checkpoints(scene: SceneDef, out: Path, n_wanted: int = 100) -> Path:
+    """Independent check points on bare soil, visible in both images, with true image coords."""
+    paths = ScenePaths(Path(out))
+    if _exist(paths.checkpoints):
+        return paths.checkpoints
+    models = {
+        n: PushbroomModel.from_json(paths.truth_model(n).read_text()) for n in scene.image_names}
+    proj = Projection(scene.epsg)
+    points = select_checkpoints(
+        _spec(scene), models, scene.grid, np.random.default_rng(derive_seed(scene.seed,
+                                                                            "checkpoints")),
+        proj.to_lonlat, proj.to_xy, partial(read_surface_window, paths.dsm),
+        ray_levels(scene.dsm_range_m), n_wanted=n_wanted,
+    )
+    if len(points) < 50:
+        raise InsufficientDataError(
+            f"only {len(points)} visible bare-soil check points found in the overlap (50 "
+            "needed); the scene is mostly water, forest or town: choose another --center"
+        )
+    doc = CheckPointSet(f"EPSG:{scene.epsg}", scene.image_names, tuple(points))
+    atomic_write_text(paths.checkpoints, json.dumps(doc.to_dict(), indent=1))
+    return paths.checkpoints
+
+
+# ---------------------------------------------------------------------------- G. reference
+
+
+@task(name="srtm-like-reference")
+def make_reference(scene: SceneDef, out: Path, errors: ReferenceErrors | None = None) -> Path:
+    """``DIR/reference.tif``: the world's bare terrain as SRTM would show it (3" posting,
+    correlated noise, misregistration, voids on steep slopes; ellipsoidal heights, EPSG:4326),
+    the reference the chain should be tested against; the errors drawn go to
+    ``truth/reference_errors.json``."""
+    paths = ScenePaths(Path(out))
+    target = paths.root / "reference.tif"
+    if _exist(target):
+        return target
+    errors = errors or ReferenceErrors.drawn(derive_seed(scene.seed, "reference"))
+    d = 3.0 / 3600.0
+    w = scene.dem_window
+    lons = np.arange(np.ceil(w.lon_min / d), np.floor(w.lon_max / d) + 1) * d
+    lats = np.arange(np.floor(w.lat_max / d), np.ceil(w.lat_min / d) - 1, -1) * d
+    lon, lat = np.meshgrid(lons, lats)
+    m_lon, m_lat = metres_per_degree(lat)
+    seen_lon = lon - errors.shift_east_m / m_lon  # the node shows the terrain moved
+    seen_lat = lat - errors.shift_north_m / m_lat
+    proj = Projection(scene.epsg)
+    x, y = proj.to_xy(seen_lon.ravel(), seen_lat.ravel())
+    spec = _spec(scene)
+    s = sample_surface(spec, x, y, proj.to_lonlat)
+    h = srtm_like(s.dtm_m, x, y, slope_deg(spec, seen_lon.ravel(), seen_lat.ravel()),
+                  derive_seed(scene.seed, "reference"), errors).reshape(lon.shape)
+    tags = {"vertical_datum": "WGS84 ellipsoid", "units": "m",
+            "source": "SRTM-like reference of the simulated world (gcpfree simulate)"}
+    write_arrays_cog([CogItem(h.astype(np.float32), target, CogOptions(
+        transform=(d, 0.0, lons[0] - d / 2, 0.0, -d, lats[0] + d / 2), crs="EPSG:4326",
+        nodata=np.nan, tags=tags))])
+    atomic_write_text(paths.truth / "reference_errors.json", json.dumps(vars(errors), indent=1))
+    return target
+
+
+# ---------------------------------------------------------------------------- F. lidar
+
+
+def lidar_bounds(scene: SceneDef) -> tuple[float, float, float, float]:
+    """The lidar strip (x_min, y_min, x_max, y_max) in the truth grid's CRS."""
+    cx, cy = Projection(scene.epsg).to_xy(np.array([scene.centre.lon_deg]),
+                                          np.array([scene.centre.lat_deg]))
+    return lidar_extent(scene.grid.bounds_m(), float(cx[0]), float(cy[0]),
+                        scene.preset_spec.lidar_strip_m)
+
+
+@task(name="lidar")
+def make_lidar(scene: SceneDef, out: Path, tile_m: float = 1000.0) -> Path:
+    """Truth lidar as LAZ (LAS 1.4), tile by tile: heights EGM96 orthometric, LAS classes."""
+    paths = ScenePaths(Path(out))
+    if _exist(paths.lidar):
+        return paths.lidar
+    spec = _spec(scene)
+    xmin, ymin, xmax, ymax = lidar_bounds(scene)
+    crs = pyproj.CRS.from_user_input(f"EPSG:{scene.epsg}+5773")  # UTM + EGM96 height
+    header = laspy.LasHeader(point_format=6, version="1.4")
+    header.scales = np.array([0.001, 0.001, 0.001])
+    header.offsets = np.array([np.floor(xmin), np.floor(ymin), 0.0])
+    header.add_crs(crs)
+    header.creation_date = date.fromisoformat(scene.preset_spec.images[0].date)  # same bytes
+    header.system_identifier = "gcpfree simulate"
+    header.generating_software = "gcpfree"
+    tmp = paths.lidar.with_name(f".{paths.lidar.name}.tmp")
+    seed = derive_seed(scene.seed, "lidar")
+    to_lonlat = Projection(scene.epsg).to_lonlat
+    try:
+        # the temporary name ends in .tmp: say LAZ, or laspy writes an uncompressed LAS
+        with laspy.open(tmp, mode="w", header=header, do_compress=True) as writer:
+            for ty in np.arange(ymin, ymax, tile_m):
+                for tx in np.arange(xmin, xmax, tile_m):
+                    box = (tx, ty, min(tx + tile_m, xmax), min(ty + tile_m, ymax))
+                    tile = lidar_tile(spec, box, seed, scene.preset_spec.lidar_spacing_m,
+                                      to_lonlat)
+                    if tile is None:
+                        continue
+                    rec = laspy.ScaleAwarePointRecord.zeros(len(tile.returns), header=header)
+                    rec.x, rec.y, rec.z = tile.returns.x_m, tile.returns.y_m, tile.z_orthometric_m
+                    rec.classification = tile.returns.las_class
+                    writer.write_points(rec)
+        tmp.replace(paths.lidar)
+    finally:
+        tmp.unlink(missing_ok=True)
+    return paths.lidar
+
+
+@dataclass(frozen=True)
+class SimulationSummary:
+    """What ``simulate`` made, for printing."""
+
+    out: str
+    preset: str
+    seed: int
+    centre_error_m: dict[str, float]
+    images: tuple[str, ...]
+    checkpoints: int
+    lidar_points: int
+    dsm_range_m: tuple[float, float]
+
+    def lines(self) -> list[str]:
+        errs = ", ".join(f"{k} {v:.1f} m" for k, v in self.centre_error_m.items())
+        return [
+            f"simulated scene  {self.out} (preset {self.preset}, seed {self.seed})",
+            f"images           {', '.join(self.images)} (RPC tags inside, metadata .json beside)",
+            f"metadata error   at the scene centre: {errs}",
+            (f"truth            DSM/DTM {self.dsm_range_m[0]:.0f}..{self.dsm_range_m[1]:.0f} m "
+             f"ellipsoidal, {self.checkpoints} check points, {self.lidar_points} lidar points"),
+        ]
+
+
+@task(name="summarize-scene")
+def summarize(scene: SceneDef, out: Path) -> SimulationSummary:
+    paths = ScenePaths(Path(out))
+    n_cp = len(json.loads(paths.checkpoints.read_text())["points"])
+    n_lidar = 0
+    if paths.lidar.exists():
+        with laspy.open(paths.lidar) as f:
+            n_lidar = int(f.header.point_count)
+    return SimulationSummary(
+        out=str(paths.root), preset=scene.preset, seed=scene.seed,
+        centre_error_m={k: v.centre_error_m for k, v in scene.injected.items()},
+        images=tuple(str(paths.image(n)) for n in scene.image_names), checkpoints=n_cp,
+        lidar_points=n_lidar, dsm_range_m=scene.dsm_range_m,
+    )
