@@ -38,14 +38,15 @@ from pathlib import Path
 from flows._env import configure_environment
 configure_environment()
 from flows.dsm import DsmParams, dsm_flow
+from tasks.io.pair import PairInputs
 scene, out, roi, extra = sys.argv[1], sys.argv[2], json.loads(sys.argv[3]), json.loads(sys.argv[4])
 t0 = time.perf_counter()
 s = dsm_flow(DsmParams(
-    left=Path(scene) / "left.tif", right=Path(scene) / "right.tif",
-    left_model=Path(scene) / "truth" / "left_truth.json",
-    right_model=Path(scene) / "truth" / "right_truth.json",
-    reference=Path(extra["reference"]), orient=False, roi=tuple(roi) if roi else None,
-    progress=False, out=Path(out)))
+    pair=PairInputs(Path(scene) / "left.tif", Path(scene) / "right.tif",
+                    Path(scene) / "truth" / "left_truth.json",
+                    Path(scene) / "truth" / "right_truth.json",
+                    reference=Path(extra["reference"])),
+    orient=False, roi=tuple(roi) if roi else None, progress=False, out=Path(out)))
 dt = time.perf_counter() - t0
 print("RESULT " + json.dumps({"seconds": dt, "summary": s.to_dict()}))
 """

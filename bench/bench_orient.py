@@ -33,13 +33,13 @@ def steps_3_4(scene: Path, out: Path) -> None:
     """Surface matching of every window and the adjustment, timed in-process."""
     from dataclasses import replace
 
+    from core.matching.surface import SurfaceMatchConfig
     from core.sensors.pushbroom import PushbroomModel
-    from core.surface_match import SurfaceMatchConfig
-    from tasks.io.dem import read_reference
-    from tasks.dense.dem import pair_box
     from tasks.absolute.orientation import orient_absolute
-    from tasks.io.sensors import load_model
     from tasks.absolute.surface_match import TieGround, match_surfaces
+    from tasks.io.dem import read_reference
+    from tasks.io.sensors import load_model
+    from tasks.relative.orientation import pair_box
 
     left = load_model(scene / "left.tif")
     rel = json.loads((out / "relative" / "rel.json").read_text())

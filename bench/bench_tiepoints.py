@@ -88,12 +88,12 @@ def one_tile(scene: Path, ref: Path) -> float:
     """Seconds for the central 1024x1024 block alone, one thread."""
     from core.matching.tiepoints import HeightPrior, TiePointConfig
     from tasks.io.sensors import load_model
-    from tasks.relative.tiepoints import Block, block_matches, raster_info, read_reference
+    from tasks.relative.tiepoints import Block, block_matches, raster_info, reference_under
 
     cfg = TiePointConfig()
     left, right = load_model(scene / "left.tif"), load_model(scene / "right.tif")
     size, saturation = raster_info(scene / "left.tif")
-    heights = HeightPrior.from_dem(read_reference(ref, left.model, size), cfg.search_radius_m,
+    heights = HeightPrior.from_dem(reference_under(ref, left.model, size), cfg.search_radius_m,
                                    cfg.height_margin_m)
     c, r = size[0] // 2 - 512, size[1] // 2 - 512
     t0 = time.perf_counter()

@@ -1,17 +1,17 @@
 """Whole-DEM coregistration: the 3-D translation that aligns a DEM with a reference (Nuth & Kaab
 2011, plus a vertical bias).
 
-Both DEMs are regular north-up grids in one coordinate system, geographic (degrees) or
-projected (metres). The reference is sampled at the DEM's nodes moved by the current
-horizontal shift (cubic spline, so sub-pixel shifts are not blurred), and the height
-differences ``dh = ref - dem`` obey, to first order,
+Both DEMs are regular north-up grids in one coordinate system: two :class:`core.dem.GeoDEM`
+(degrees) or two :class:`core.dem.SurfaceGrid` (projected metres). The reference is sampled at
+the DEM's nodes moved by the current horizontal shift (cubic spline, so sub-pixel shifts are
+not blurred), and the height differences ``dh = ref - dem`` obey, to first order,
 
     dh / tan(slope) = e_east sin(aspect) + e_north cos(aspect) + dz / tan(slope)
 
 with the aspect the direction of steepest descent (clockwise from north) and ``e`` the shift
 still missing: a robust fit of the cosine gives ``e``, the shift is updated, and so on until it
 moves less than ``tol_px``. The vertical shift is then the robust mean of ``dh``. Convention
-(the same as :mod:`core.surface_match`): adding ``(dx, dy, dz)`` to the DEM's coordinates
+(the same as :mod:`core.matching.surface`): adding ``(dx, dy, dz)`` to the DEM's coordinates
 aligns it with the reference, ``ref(x + dx, y + dy) = dem(x, y) + dz``.
 """
 
@@ -24,45 +24,13 @@ import numpy as np
 from numpy.typing import NDArray
 from scipy.ndimage import map_coordinates, spline_filter
 
+from core.dem import GeoDEM, SurfaceGrid
 from core.errors import ConvergenceError, InputError, InsufficientDataError
-from core.geodesy import WGS84_A_M, WGS84_E2
+from core.geodesy import metres_per_degree
+from core.robust import nmad
 
 FloatArray = NDArray[np.float64]
-
-
-@dataclass(frozen=True, eq=False)
-class Grid:
-    """A north-up grid: ``z_m[i, j]`` at ``x0 + j dx``, ``y0 + i dy`` (cell centres; ``dy`` < 0
-    for north-up). ``geographic``: x, y are lon, lat degrees, else projected metres. NaN = void.
-    """
-
-    z_m: FloatArray
-    x0: float
-    y0: float
-    dx: float
-    dy: float
-    geographic: bool
-
-    def __post_init__(self) -> None:
-        z = np.asarray(self.z_m, dtype=np.float64)
-        if z.ndim != 2 or min(z.shape) < 4:
-            raise InputError(f"a DEM grid needs at least 4x4 cells, got {z.shape}")
-        if self.dx == 0 or self.dy == 0:
-            raise InputError("DEM grid spacings must be non-zero")
-        object.__setattr__(self, "z_m", z)
-
-    def nodes(self) -> tuple[FloatArray, FloatArray]:
-        i, j = np.mgrid[0:self.z_m.shape[0], 0:self.z_m.shape[1]]
-        return self.x0 + j * self.dx, self.y0 + i * self.dy
-
-
-def metres_per_unit(lat_deg: FloatArray | float) -> tuple[FloatArray, FloatArray]:
-    """Exact WGS84 metres per degree of longitude and latitude (radii of curvature)."""
-    phi = np.radians(lat_deg)
-    w = np.sqrt(1.0 - WGS84_E2 * np.sin(phi) ** 2)
-    n = WGS84_A_M / w
-    m = WGS84_A_M * (1.0 - WGS84_E2) / w**3
-    return np.radians(1.0) * n * np.cos(phi), np.radians(1.0) * m
+DemGrid = GeoDEM | SurfaceGrid
 
 
 @dataclass(frozen=True)
@@ -107,42 +75,45 @@ class CoregResult:
         return dict(vars(self))
 
 
-def _nmad(v: FloatArray) -> float:
-    return float(1.4826 * np.median(np.abs(v - np.median(v))))
-
-
 class _Sampler:
     """Cubic-spline samples of the reference (voids: NaN near them)."""
 
-    def __init__(self, ref: Grid) -> None:
-        z = ref.z_m
+    def __init__(self, ref: DemGrid) -> None:
+        z = np.asarray(ref.values, dtype=np.float64)
         self.void = ~np.isfinite(z)
         filled = np.where(self.void, np.nanmean(z) if np.isfinite(z).any() else 0.0, z)
         self.coeffs = spline_filter(filled, order=3, mode="mirror")
         self.ref = ref
 
     def __call__(self, x: FloatArray, y: FloatArray) -> FloatArray:
-        fj = (x - self.ref.x0) / self.ref.dx
-        fi = (y - self.ref.y0) / self.ref.dy
+        fi, fj = self.ref.indices(x, y)
         v = map_coordinates(self.coeffs, [fi.ravel(), fj.ravel()], order=3, mode="mirror",
                             prefilter=False).reshape(fi.shape)
         near_void = map_coordinates(self.void.astype(np.float64), [fi.ravel(), fj.ravel()],
                                     order=1, mode="constant", cval=1.0).reshape(fi.shape)
-        nr, nc = self.ref.z_m.shape
+        nr, nc = self.ref.shape
         inside = (fi >= 1) & (fi <= nr - 2) & (fj >= 1) & (fj <= nc - 2)
         return np.where(inside & (near_void == 0), v, np.nan)
 
 
-def nuth_kaab(reference: Grid, dem: Grid, config: CoregConfig = CoregConfig()) -> CoregResult:
-    """The translation aligning ``dem`` with ``reference`` (both geographic or both projected)."""
+def nuth_kaab(reference: DemGrid, dem: DemGrid, config: CoregConfig = CoregConfig()
+              ) -> CoregResult:
+    """The translation aligning ``dem`` with ``reference``: two :class:`~core.dem.GeoDEM`
+    (lon/lat degrees) or two :class:`~core.dem.SurfaceGrid` (projected metres), each of at
+    least 4x4 cells."""
     if reference.geographic != dem.geographic:
         raise InputError("the DEM and the reference must both be geographic or both projected; "
                          "reproject one onto the other's CRS first")
+    for g in (reference, dem):
+        if min(g.shape) < 4:
+            raise InputError(f"a DEM grid needs at least 4x4 cells, got {g.shape}")
     sample = _Sampler(reference)
     x, y = dem.nodes()
-    z = dem.z_m
+    z = np.asarray(dem.values, dtype=np.float64)
+    ref_dx, ref_dy = reference.axes[2:]
+    dem_dx, dem_dy = dem.axes[2:]
     if dem.geographic:
-        mx, my = metres_per_unit(y)
+        mx, my = metres_per_degree(y)
     else:
         mx, my = np.ones_like(x), np.ones_like(y)
     sx = sy = 0.0
@@ -152,7 +123,7 @@ def nuth_kaab(reference: Grid, dem: Grid, config: CoregConfig = CoregConfig()) -
         ref = sample(x + sx, y + sy)
         dh = ref - z
         # slope and aspect of the reference where the DEM lies, in metres
-        gy, gx = np.gradient(ref, dem.dy, dem.dx)  # per grid unit
+        gy, gx = np.gradient(ref, dem_dy, dem_dx)  # per grid unit
         ge, gn = gx / mx, gy / my  # dz/d(east), dz/d(north), per metre
         tan_slope = np.hypot(ge, gn)
         aspect = np.arctan2(-ge, -gn)  # direction of steepest descent, clockwise from north
@@ -164,7 +135,7 @@ def nuth_kaab(reference: Grid, dem: Grid, config: CoregConfig = CoregConfig()) -
                 f"only {int(ok.sum())} cells of the DEM overlap the reference on usable slopes "
                 f"({config.min_points} needed); check that the two DEMs cover the same area")
         d = dh[ok]
-        med, nm = float(np.median(d)), _nmad(d)
+        med, nm = float(np.median(d)), nmad(d)
         if nmad_before is None:
             nmad_before = nm
         keep = np.abs(d - med) < config.outlier_nmad * max(nm, 1e-6)
@@ -178,7 +149,7 @@ def nuth_kaab(reference: Grid, dem: Grid, config: CoregConfig = CoregConfig()) -
         ddx = de / float(np.median(mx[ok]))
         ddy = dn / float(np.median(my[ok]))
         sx, sy = sx + ddx, sy + ddy
-        step_px = max(abs(ddx / reference.dx), abs(ddy / reference.dy))
+        step_px = max(abs(ddx / ref_dx), abs(ddy / ref_dy))
         if step_px < config.tol_px:
             break
     else:
@@ -187,16 +158,16 @@ def nuth_kaab(reference: Grid, dem: Grid, config: CoregConfig = CoregConfig()) -
             f"{step_px:.2g} px); the DEMs may differ too much or be too flat")
     ref = sample(x + sx, y + sy)
     dh = (ref - z)[np.isfinite(ref - z)]
-    med, nm = float(np.median(dh)), _nmad(dh)
+    med, nm = float(np.median(dh)), nmad(dh)
     keep = np.abs(dh - med) < config.outlier_nmad * max(nm, 1e-6)
     dz = float(np.mean(dh[keep]))
     yc = float(np.median(y)) if dem.geographic else 0.0
     if dem.geographic:
-        me, mn = (float(v) for v in metres_per_unit(yc))
+        me, mn = (float(v) for v in metres_per_degree(yc))
     else:
         me = mn = 1.0
     return CoregResult(
         shift_x=float(sx), shift_y=float(sy), shift_east_m=float(sx * me),
-        shift_north_m=float(sy * mn), shift_up_m=dz, shift_col_px=float(sx / reference.dx),
-        shift_row_px=float(sy / reference.dy), n_iterations=iteration, n_points=int(dh.size),
-        nmad_before_m=float(nmad_before), nmad_after_m=_nmad(dh[keep]))
+        shift_north_m=float(sy * mn), shift_up_m=dz, shift_col_px=float(sx / ref_dx),
+        shift_row_px=float(sy / ref_dy), n_iterations=iteration, n_points=int(dh.size),
+        nmad_before_m=float(nmad_before), nmad_after_m=nmad(dh[keep]))

@@ -1,5 +1,6 @@
-"""Gridded surfaces: the one bilinear grid sampler, a lon/lat DEM value, and the one
-march-then-bisect search for where lines of sight first meet a surface.
+"""Gridded surfaces: the one bilinear grid sampler, the two height grids (lon/lat
+:class:`GeoDEM`, projected :class:`SurfaceGrid`) with one convention (:class:`RegularGrid`),
+and the one march-then-bisect search for where lines of sight first meet a surface.
 
 Used by the sensor models to intersect lines of sight with the terrain and by the scene
 simulator to ray-cast its truth surface. Heights are WGS84 ellipsoidal metres (convert SRTM
@@ -8,8 +9,9 @@ with the geoid first). No I/O here.
 
 from __future__ import annotations
 
-from collections.abc import Callable
-from dataclasses import dataclass
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass, fields, replace
+from typing import ClassVar, Self
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
@@ -41,13 +43,88 @@ def sample_bilinear(z: NDArray[np.floating], fi: ArrayLike, fj: ArrayLike) -> ND
     return out
 
 
-@dataclass(frozen=True, eq=False)
-class GeoDEM:
-    """Heights on a regular lon/lat grid; grid nodes are pixel centres.
+class RegularGrid:
+    """What the project's two height grids share, with ONE convention (GDAL's, the one
+    rasterio's transforms give): ``values[i, j]`` is the value at the node
+    ``(x0 + j dx, y0 + i dy)``; nodes are cell centres, ``(x0, y0)`` the centre of the top-left
+    cell, ``dx``/``dy`` signed steps: a north-up raster has ``dx > 0`` and ``dy < 0`` (its
+    transform's ``a`` and ``e``). NaN marks voids.
 
-    ``h_m[i, j]`` is the height at lon ``lon0_deg + j * dlon_deg`` and lat
-    ``lat0_deg + i * dlat_deg``. For a north-up raster ``dlat_deg`` is negative
-    and (lon0, lat0) is the centre of the top-left pixel. NaN marks voids.
+    :class:`GeoDEM` holds lon/lat degrees (``geographic``), :class:`SurfaceGrid` projected
+    metres, each under its own field names: the values first, then x0, y0, dx, dy (read as
+    :attr:`values` and :attr:`axes`). Both are made from a raster's affine by
+    :meth:`from_transform`.
+    """
+
+    geographic: ClassVar[bool] = False
+    what: ClassVar[str] = "surface grid"  # for messages
+
+    def __post_init__(self) -> None:
+        _, _, dx, dy = self.axes
+        if np.ndim(self.values) != 2 or min(np.shape(self.values)) < 2:
+            raise InputError(f"a {self.what} must be a 2-D array of at least 2x2 cells, got "
+                             f"{np.shape(self.values)}")
+        if dx == 0 or dy == 0:
+            raise InputError(f"{self.what} spacing must be non-zero in both directions")
+
+    @property
+    def values(self) -> NDArray[np.floating]:
+        return getattr(self, fields(self)[0].name)  # type: ignore[arg-type]
+
+    @property
+    def axes(self) -> tuple[float, float, float, float]:
+        """``(x0, y0, dx, dy)``: the top-left node and the signed steps."""
+        return tuple(getattr(self, f.name) for f in fields(self)[1:5])  # type: ignore
+
+    def with_values(self, values: NDArray) -> Self:
+        """The same grid holding other values (same shape)."""
+        if np.shape(values) != self.shape:
+            raise InputError(f"values of shape {np.shape(values)} for a grid of {self.shape}")
+        return replace(self, **{fields(self)[0].name: values})  # type: ignore[type-var]
+
+    @classmethod
+    def from_transform(cls, values: NDArray, transform: Sequence[float]) -> Self:
+        """From a GDAL/affine geotransform in ``affine.Affine`` order ``(a, b, c, d, e, f)`` =
+        ``(dx, 0, x_corner, 0, dy, y_corner)``, whose origin is the top-left pixel's corner."""
+        a, b, c, d, e, f = (float(v) for v in tuple(transform)[:6])
+        if b != 0 or d != 0:
+            raise InputError("rotated DEM geotransforms are not supported; warp the DEM north-up")
+        return cls(np.asarray(values), c + 0.5 * a, f + 0.5 * e, a, e)  # type: ignore[call-arg]
+
+    @property
+    def shape(self) -> tuple[int, int]:
+        return np.shape(self.values)  # type: ignore[return-value]
+
+    def indices(self, x: ArrayLike, y: ArrayLike) -> tuple[FloatArray, FloatArray]:
+        """Fractional (row, col) indices of points (x, y in the grid's units)."""
+        x0, y0, dx, dy = self.axes
+        return ((np.asarray(y, dtype=np.float64) - y0) / dy,
+                (np.asarray(x, dtype=np.float64) - x0) / dx)
+
+    def sample(self, x: ArrayLike, y: ArrayLike) -> FloatArray:
+        """Bilinear value at (x, y); NaN outside the grid or next to a void."""
+        fi, fj = self.indices(x, y)
+        return sample_bilinear(self.values, fi, fj)
+
+    def nodes(self) -> tuple[FloatArray, FloatArray]:
+        """(x, y) of every node, arrays of the grid's shape."""
+        x0, y0, dx, dy = self.axes
+        i, j = np.mgrid[0:self.shape[0], 0:self.shape[1]]
+        return x0 + j * dx, y0 + i * dy
+
+    def bounds(self) -> tuple[float, float, float, float]:
+        """(x_min, y_min, x_max, y_max) of the nodes."""
+        x0, y0, dx, dy = self.axes
+        xs = (x0, x0 + (self.shape[1] - 1) * dx)
+        ys = (y0, y0 + (self.shape[0] - 1) * dy)
+        return min(xs), min(ys), max(xs), max(ys)
+
+
+@dataclass(frozen=True, eq=False)
+class GeoDEM(RegularGrid):
+    """Heights on a regular lon/lat grid (:class:`RegularGrid`'s convention): ``h_m[i, j]`` at
+    lon ``lon0_deg + j * dlon_deg``, lat ``lat0_deg + i * dlat_deg``; north-up: ``dlat_deg``
+    negative and (lon0, lat0) the centre of the top-left pixel. NaN marks voids.
     """
 
     h_m: NDArray[np.float64]
@@ -56,58 +133,38 @@ class GeoDEM:
     dlon_deg: float
     dlat_deg: float
 
+    geographic: ClassVar[bool] = True
+    what: ClassVar[str] = "DEM"
+
     def __post_init__(self) -> None:
         h = np.asarray(self.h_m, dtype=np.float64)
-        if h.ndim != 2 or min(h.shape) < 2:
-            raise InputError(f"a DEM must be a 2-D array of at least 2x2 cells, got {h.shape}")
-        if self.dlon_deg == 0 or self.dlat_deg == 0:
-            raise InputError("DEM spacing must be non-zero in both directions")
-        h.setflags(write=False)
         object.__setattr__(self, "h_m", h)
-
-    @classmethod
-    def from_transform(cls, h_m: NDArray, transform: tuple[float, ...]) -> GeoDEM:
-        """From a GDAL/affine geotransform (a, b, c, d, e, f) whose origin is the pixel corner.
-
-        Accepts ``affine.Affine`` order (a, b, c, d, e, f) = (dlon, 0, lon_corner, 0, dlat, lat_corner).
-        """
-        a, b, c, d, e, f = (float(v) for v in tuple(transform)[:6])
-        if b != 0 or d != 0:
-            raise InputError("rotated DEM geotransforms are not supported; warp the DEM north-up")
-        return cls(np.asarray(h_m), c + 0.5 * a, f + 0.5 * e, a, e)
-
-    @property
-    def shape(self) -> tuple[int, int]:
-        return self.h_m.shape  # type: ignore[return-value]
+        super().__post_init__()
+        h.setflags(write=False)
 
     def bounds_deg(self) -> tuple[float, float, float, float]:
         """(lon_min, lat_min, lon_max, lat_max) of the node grid."""
-        lons = (self.lon0_deg, self.lon0_deg + (self.shape[1] - 1) * self.dlon_deg)
-        lats = (self.lat0_deg, self.lat0_deg + (self.shape[0] - 1) * self.dlat_deg)
-        return min(lons), min(lats), max(lons), max(lats)
+        return self.bounds()
 
     def height_range_m(self) -> tuple[float, float]:
         return float(np.nanmin(self.h_m)), float(np.nanmax(self.h_m))
 
     def height_m(self, lon_deg: ArrayLike, lat_deg: ArrayLike) -> NDArray[np.float64]:
         """Bilinear height at (lon, lat); NaN outside the grid or next to a void."""
-        fi = (np.asarray(lat_deg, dtype=np.float64) - self.lat0_deg) / self.dlat_deg
-        fj = (np.asarray(lon_deg, dtype=np.float64) - self.lon0_deg) / self.dlon_deg
-        return sample_bilinear(self.h_m, fi, fj)
+        return self.sample(lon_deg, lat_deg)
 
     def cell_size_m(self) -> float:
-        """Approximate smaller ground cell size in metres at the DEM centre."""
+        """The smaller ground cell size in metres at the DEM centre."""
         lat_c = self.lat0_deg + 0.5 * (self.shape[0] - 1) * self.dlat_deg
         m_lon, m_lat = metres_per_degree(lat_c)
         return float(min(abs(self.dlon_deg) * m_lon, abs(self.dlat_deg) * m_lat))
 
 
 @dataclass(frozen=True, eq=False)
-class SurfaceGrid:
-    """A north-up height grid in a projected frame (x east, y north, metres).
-
-    ``z_m[i, j]`` is the height at ``x0_m + j * dx_m``, ``y0_m - i * dy_m``: (x0, y0) is the
-    centre of the top-left cell. NaN marks voids.
+class SurfaceGrid(RegularGrid):
+    """Heights on a grid in a projected frame (x east, y north, metres), with
+    :class:`RegularGrid`'s convention: ``z_m[i, j]`` at ``(x0_m + j * dx_m, y0_m + i * dy_m)``,
+    (x0, y0) the centre of the top-left cell; north-up: ``dy_m`` negative. NaN marks voids.
     """
 
     z_m: NDArray[np.floating]
@@ -115,18 +172,6 @@ class SurfaceGrid:
     y0_m: float
     dx_m: float
     dy_m: float
-
-    def __post_init__(self) -> None:
-        if np.ndim(self.z_m) != 2 or min(np.shape(self.z_m)) < 2:
-            raise InputError(f"a surface grid needs at least 2x2 cells, got {np.shape(self.z_m)}")
-        if self.dx_m <= 0 or self.dy_m <= 0:
-            raise InputError("surface grid spacings must be positive")
-
-    def sample(self, x_m: FloatArray, y_m: FloatArray) -> FloatArray:
-        """Bilinear height; NaN outside the grid (or next to NaN cells)."""
-        fj = (np.asarray(x_m) - self.x0_m) / self.dx_m
-        fi = (self.y0_m - np.asarray(y_m)) / self.dy_m
-        return sample_bilinear(self.z_m, fi, fj)
 
 
 def march_levels(h_top_m: float, h_bottom_m: float, ground_move_per_m: float, cell_m: float,

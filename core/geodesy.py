@@ -1,7 +1,9 @@
-"""WGS84 geodesy: geodetic <-> ECEF, local East-North-Up frames, viewing angles, lon/lat boxes.
+"""WGS84 geodesy: geodetic <-> ECEF, local East-North-Up frames, metres per degree, where a
+line of sight meets a height above the ellipsoid, viewing angles, lon/lat boxes.
 
-Angles in degrees at the interface, heights in metres above the WGS84 ellipsoid.
-All functions are vectorised over NumPy arrays (scalars work too) and broadcast.
+Angles in degrees at the interface (:data:`ARCSEC` converts arcseconds), heights in metres
+above the WGS84 ellipsoid. All functions are vectorised over NumPy arrays (scalars work too)
+and broadcast.
 """
 
 from __future__ import annotations
@@ -11,13 +13,15 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from core.errors import InputError
+from core.errors import ConvergenceError, GeometryError, InputError
 
 WGS84_A_M = 6378137.0
 WGS84_F = 1.0 / 298.257223563
 WGS84_B_M = WGS84_A_M * (1.0 - WGS84_F)
 WGS84_E2 = WGS84_F * (2.0 - WGS84_F)  # first eccentricity squared
 WGS84_EP2 = WGS84_E2 / (1.0 - WGS84_E2)  # second eccentricity squared
+#: one arcsecond in degrees: ``shift_deg = shift_arcsec * ARCSEC``
+ARCSEC = 1.0 / 3600.0
 
 FloatArray = NDArray[np.float64]
 
@@ -86,16 +90,56 @@ def enu_rotation(lon_deg: ArrayLike, lat_deg: ArrayLike) -> FloatArray:
 
 
 def metres_per_degree(lat_deg: ArrayLike) -> tuple[FloatArray, FloatArray]:
-    """Approximate ground metres per degree of longitude and of latitude at ``lat_deg``.
+    """Ground metres per degree of longitude and of latitude at ``lat_deg`` on the WGS84
+    ellipsoid, exactly: the radii of curvature in the prime vertical (``N cos(lat)``) and in
+    the meridian (``M``) times one degree in radians.
 
-    ``111 320 cos(lat)`` and ``110 574``: WGS84's equatorial values, within 0.34 % of the true
-    east-west scale and 1.02 % of the north-south one anywhere (exact at the equator). For
-    step sizes, margins, windows and cell sizes only; measure distances in ECEF or
-    :func:`geodetic_to_enu`. (The scene simulator sizes its world with these values, so
-    changing them changes every simulated scene.)
+    The one conversion of the project between degree steps and metres (windows, margins, cell
+    sizes, shifts in metres). It is the local scale at the ellipsoid (a point ``h`` above it
+    moves ``(1 + h / R)`` times more): measure distances between points in ECEF or with
+    :func:`geodetic_to_enu`. (The scene simulator sizes its world with it, so changing it
+    changes every simulated scene.)
     """
-    lat = np.asarray(lat_deg, dtype=np.float64)
-    return 111_320.0 * np.cos(np.radians(lat)), np.full(lat.shape, 110_574.0)
+    phi = np.radians(np.asarray(lat_deg, dtype=np.float64))
+    w = np.sqrt(1.0 - WGS84_E2 * np.sin(phi) ** 2)
+    n = WGS84_A_M / w
+    m = WGS84_A_M * (1.0 - WGS84_E2) / w**3
+    return np.radians(1.0) * n * np.cos(phi), np.radians(1.0) * m
+
+
+def intersect_ellipsoid(
+    pos_m: FloatArray, u: FloatArray, h_m: FloatArray, *, tol_m: float = 1e-6, max_iter: int = 10
+) -> tuple[FloatArray, FloatArray]:
+    """First point of rays ``pos + s u`` (s > 0) at ellipsoidal height h: (lon, lat) degrees.
+
+    Starts from the ellipsoid inflated by h (a + h, b + h) and corrects along the ray by Newton
+    on the geodetic height (its gradient is the ellipsoid normal), so the result is exact at h.
+    """
+    scale = np.stack([WGS84_A_M + h_m, WGS84_A_M + h_m, WGS84_B_M + h_m], axis=1)
+    ps, us = pos_m / scale, u / scale
+    qa = np.sum(us * us, axis=1)
+    qb = 2.0 * np.sum(ps * us, axis=1)
+    qc = np.sum(ps * ps, axis=1) - 1.0
+    disc = qb * qb - 4.0 * qa * qc
+    if np.any(disc < 0) or np.any(qc <= 0):
+        bad = int(np.sum((disc < 0) | (qc <= 0)))
+        raise GeometryError(
+            f"{bad} lines of sight miss the Earth at the requested height (or start below it); "
+            "check the image coordinates, the heights and the attitude"
+        )
+    s = (-qb - np.sqrt(disc)) / (2.0 * qa)
+    for _ in range(max_iter):
+        x = pos_m + s[:, None] * u
+        lon, lat, h = ecef_to_geodetic(x[:, 0], x[:, 1], x[:, 2])
+        err = h - h_m
+        if not np.any(np.abs(err) > tol_m):  # NaN inputs give NaN outputs
+            return lon, lat
+        up = enu_rotation(lon, lat)[:, 2, :]  # ellipsoid normals
+        s = s - err / np.sum(up * u, axis=1)
+    raise ConvergenceError(
+        f"ray-height intersection did not reach {tol_m} m in {max_iter} iterations; "
+        "the line of sight is probably grazing the Earth"
+    )
 
 
 def utm_epsg(lon_deg: float, lat_deg: float) -> int:
@@ -172,30 +216,30 @@ class BBox:
         return (self.lon_min, self.lat_min, self.lon_max, self.lat_max)
 
 
-def geodetic_to_enu(
-    lon_deg: ArrayLike,
-    lat_deg: ArrayLike,
-    h_m: ArrayLike,
-    origin: tuple[float, float, float],
-) -> tuple[FloatArray, FloatArray, FloatArray]:
+#: a point (lon, lat degrees, ellipsoidal h metres): the origin of a local ENU frame
+Origin = tuple[float, float, float]
+
+
+def _local_frame(origin: Origin) -> tuple[FloatArray, FloatArray]:
+    """ECEF position (3,) of ``origin`` (lon, lat, h) and the ENU rotation there."""
+    return np.array(geodetic_to_ecef(*origin)), enu_rotation(origin[0], origin[1])
+
+
+def geodetic_to_enu(lon_deg: ArrayLike, lat_deg: ArrayLike, h_m: ArrayLike,
+                    origin: Origin) -> tuple[FloatArray, FloatArray, FloatArray]:
     """Geodetic points to East, North, Up metres in the local frame at ``origin`` (lon, lat, h)."""
     x, y, z = geodetic_to_ecef(lon_deg, lat_deg, h_m)
-    x0, y0, z0 = geodetic_to_ecef(*origin)
-    r = enu_rotation(origin[0], origin[1])
-    d = np.stack([x - x0, y - y0, z - z0])
+    o, r = _local_frame(origin)
+    d = np.stack([x - o[0], y - o[1], z - o[2]])
     e, n, u = np.tensordot(r, d, axes=1)
     return e, n, u
 
 
-def enu_to_geodetic(
-    e_m: ArrayLike,
-    n_m: ArrayLike,
-    u_m: ArrayLike,
-    origin: tuple[float, float, float],
-) -> tuple[FloatArray, FloatArray, FloatArray]:
+def enu_to_geodetic(e_m: ArrayLike, n_m: ArrayLike, u_m: ArrayLike,
+                    origin: Origin) -> tuple[FloatArray, FloatArray, FloatArray]:
     """East, North, Up metres in the local frame at ``origin`` (lon, lat, h) to geodetic."""
-    x0, y0, z0 = geodetic_to_ecef(*origin)
-    r = enu_rotation(origin[0], origin[1])
-    enu = np.stack(np.broadcast_arrays(*(np.asarray(v, dtype=np.float64) for v in (e_m, n_m, u_m))))
+    o, r = _local_frame(origin)
+    enu = np.stack(np.broadcast_arrays(*(np.asarray(v, dtype=np.float64)
+                                         for v in (e_m, n_m, u_m))))
     dx, dy, dz = np.tensordot(r.T, enu, axes=1)
-    return ecef_to_geodetic(x0 + dx, y0 + dy, z0 + dz)
+    return ecef_to_geodetic(o[0] + dx, o[1] + dy, o[2] + dz)

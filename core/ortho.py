@@ -103,15 +103,13 @@ class TileDEM:
 
     @property
     def z(self) -> NDArray[np.floating]:
-        return self.grid.h_m if isinstance(self.grid, GeoDEM) else self.grid.z_m
+        return self.grid.values
 
     def indices(self, lon: FloatArray, lat: FloatArray) -> tuple[FloatArray, FloatArray]:
         """Fractional (row, col) grid indices of ground points."""
-        g = self.grid
-        if isinstance(g, GeoDEM):
-            return (lat - g.lat0_deg) / g.dlat_deg, (lon - g.lon0_deg) / g.dlon_deg
-        x, y = self.from_lonlat(lon, lat)  # type: ignore[misc]
-        return (g.y0_m - np.asarray(y)) / g.dy_m, (np.asarray(x) - g.x0_m) / g.dx_m
+        if self.grid.geographic:
+            return self.grid.indices(lon, lat)
+        return self.grid.indices(*self.from_lonlat(lon, lat))  # type: ignore[misc]
 
     def undulation(self, lon: FloatArray, lat: FloatArray) -> FloatArray:
         """N to add to the grid's heights (zeros for an ellipsoidal grid)."""

@@ -3,8 +3,8 @@ a pair, on one lattice, correlated on a grid of windows; the shift of each windo
 statistics of the discrepancy.
 
 Each window of the left ortho (``window_px`` cells a side) is searched for in the right one
-within ``+-search_px`` cells by normalised cross-correlation (OpenCV's ``TM_CCOEFF_NORMED``);
-the integer peak is refined to sub-pixel by resampling the right ortho (cubic B-spline) at the
+within ``+-search_px`` cells by normalised cross-correlation (:func:`window_shift`, with the
+NCC, integer peak and quadratic of :mod:`core.matching.peaks`); the integer peak is refined to sub-pixel by resampling the right ortho (cubic B-spline) at the
 current shift and a quarter cell around it and fitting a quadratic to those 3x3 correlations,
 a few times over. The quadratic fit on whole-cell neighbours alone is biased towards whole
 cells ("pixel locking", and by the correlation peak's asymmetry); on close neighbours centred
@@ -23,18 +23,17 @@ from dataclasses import dataclass
 from enum import IntEnum
 from typing import Any
 
-import cv2
 import numpy as np
 from numpy.typing import NDArray
 from scipy.ndimage import map_coordinates, spline_filter
 
 from core.errors import InputError
-from core.matching.tiepoints import quadratic_peak
+from core.matching.peaks import integer_peak, ncc, ncc_surface, quadratic_peak
 
 FloatArray = NDArray[np.float64]
 
 
-class WindowStatus(IntEnum):
+class ShiftStatus(IntEnum):
     """Why a window has (or has no) shift."""
 
     OK = 0
@@ -81,7 +80,7 @@ class CompareConfig:
 @dataclass(frozen=True, eq=False)
 class WindowShifts:
     """Shifts of windows: ``dx_px`` east and ``dy_px`` north in cells (NaN unless ``OK``),
-    ``ncc`` the correlation at the shift, ``status`` a :class:`WindowStatus` code."""
+    ``ncc`` the correlation at the shift, ``status`` a :class:`ShiftStatus` code."""
 
     dx_px: FloatArray
     dy_px: FloatArray
@@ -100,35 +99,26 @@ def window_origins(first: int, last: int, cfg: CompareConfig) -> NDArray[np.intp
     return start + cfg.step_px * np.arange(n, dtype=np.intp)
 
 
-def _ncc(a: FloatArray, b: FloatArray) -> float:
-    a = a - a.mean()
-    b = b - b.mean()
-    den = math.sqrt(float((a * a).sum()) * float((b * b).sum()))
-    return float((a * b).sum()) / den if den > 0 else float("nan")
-
-
 _E = np.array([-1.0, 0.0, 1.0])
 REFINE_STEP_PX = 0.25  # spacing of the 3x3 correlations of a refinement round
 
-def match_window(template: FloatArray, search: FloatArray, cfg: CompareConfig
-                 ) -> tuple[float, float, float, WindowStatus]:
+
+def window_shift(template: FloatArray, search: FloatArray, cfg: CompareConfig
+                 ) -> tuple[float, float, float, ShiftStatus]:
     """Shift (d_col, d_row) of ``template`` (w x w) inside ``search`` ((w + 2 m) a side with
     ``m = cfg.margin_px``, centred on the template's place), its correlation and status."""
     w, m, s = template.shape[0], cfg.margin_px, cfg.search_px
     if not (np.isfinite(template).all() and np.isfinite(search).all()):
-        return math.nan, math.nan, math.nan, WindowStatus.NODATA
+        return math.nan, math.nan, math.nan, ShiftStatus.NODATA
     if float(template.std()) <= cfg.min_std:
-        return math.nan, math.nan, math.nan, WindowStatus.FLAT
-    area = search[m - s:m + s + w, m - s:m + s + w].astype(np.float32)
-    ncc = cv2.matchTemplate(area, template.astype(np.float32), cv2.TM_CCOEFF_NORMED)
-    ncc[~np.isfinite(ncc)] = -2.0
-    iy, ix = np.unravel_index(int(np.argmax(ncc)), ncc.shape)
-    peak = float(ncc[iy, ix])
+        return math.nan, math.nan, math.nan, ShiftStatus.FLAT
+    area = search[m - s:m + s + w, m - s:m + s + w]
+    ix, iy, peak, nb = integer_peak(ncc_surface(area, template))
     if peak < cfg.min_ncc:
-        return math.nan, math.nan, peak, WindowStatus.LOW_NCC
-    if not (0 < ix < ncc.shape[1] - 1 and 0 < iy < ncc.shape[0] - 1):
-        return math.nan, math.nan, peak, WindowStatus.AT_EDGE
-    dx, dy = quadratic_peak(ncc[iy - 1:iy + 2, ix - 1:ix + 2])
+        return math.nan, math.nan, peak, ShiftStatus.LOW_NCC
+    if nb is None:
+        return math.nan, math.nan, peak, ShiftStatus.AT_EDGE
+    dx, dy = quadratic_peak(nb)
     d = np.array([ix - s + dx[0], iy - s + dy[0]])
     coeffs = spline_filter(search.astype(np.float64), order=3)
     rr, cc = np.mgrid[0:w, 0:w].astype(np.float64) + m
@@ -139,19 +129,19 @@ def match_window(template: FloatArray, search: FloatArray, cfg: CompareConfig
             for b, ex in enumerate(_E):
                 patch = map_coordinates(coeffs, [rr + d[1] + h * ey, cc + d[0] + h * ex], order=3,
                                         prefilter=False, mode="nearest")
-                z[a, b] = _ncc(template, patch)
+                z[a, b] = ncc(template, patch)
         if not np.isfinite(z).all():
             break
         step_x, step_y = quadratic_peak(z)
         step = h * np.array([step_x[0], step_y[0]])
         d = d + step
         if abs(d[0]) > s or abs(d[1]) > s:
-            return math.nan, math.nan, peak, WindowStatus.AT_EDGE
+            return math.nan, math.nan, peak, ShiftStatus.AT_EDGE
         if float(np.abs(step).max()) < 1e-3:
             break
     patch = map_coordinates(coeffs, [rr + d[1], cc + d[0]], order=3, prefilter=False,
                             mode="nearest")
-    return float(d[0]), float(d[1]), _ncc(template, patch), WindowStatus.OK
+    return float(d[0]), float(d[1]), float(ncc(template, patch)), ShiftStatus.OK
 
 
 def match_windows(left: FloatArray, right: FloatArray, rows: NDArray[np.intp],
@@ -167,7 +157,7 @@ def match_windows(left: FloatArray, right: FloatArray, rows: NDArray[np.intp],
         for b, c in enumerate(cols):
             if r - m < 0 or c - m < 0 or r + w + m > left.shape[0] or c + w + m > left.shape[1]:
                 raise InputError("a correlation window and its search area leave the arrays")
-            dc, dr, v, st = match_window(left[r:r + w, c:c + w],
+            dc, dr, v, st = window_shift(left[r:r + w, c:c + w],
                                          right[r - m:r + w + m, c - m:c + w + m], cfg)
             dx[a, b], dy[a, b], ncc[a, b], status[a, b] = dc, -dr, v, st
     return WindowShifts(dx, dy, ncc, status)
@@ -197,7 +187,7 @@ class DiscrepancyStats:
 
 def discrepancy_stats(shifts: WindowShifts, cell_m: float) -> DiscrepancyStats:
     """:class:`DiscrepancyStats` of the ``OK`` windows (NaN figures when there is none)."""
-    ok = shifts.status == WindowStatus.OK
+    ok = shifts.status == ShiftStatus.OK
     dx, dy = shifts.dx_px[ok], shifts.dy_px[ok]
     norm = np.hypot(dx, dy)
     if norm.size == 0:

@@ -45,6 +45,7 @@ from core.errors import InputError
 from core.evaluation import DzAccumulator, DzStats, StatsConfig
 from core.geoid import GeoidGrid
 from core.heights import HeightFrame
+from core.robust import nmad
 
 FloatArray = NDArray[np.float64]
 BoolArray = NDArray[np.bool_]
@@ -207,9 +208,9 @@ def _ring_differences(srtm_m: FloatArray, dsm_m: FloatArray, void: BoolArray,
     if cfg.outlier_nmad > 0 and ring.any():
         d = delta[ring]
         med = float(np.median(d))
-        nmad = 1.4826 * float(np.median(np.abs(d - med)))
-        if nmad > 0:
-            keep &= np.abs(np.where(ring, delta, med) - med) <= cfg.outlier_nmad * nmad
+        spread = nmad(d, med)
+        if spread > 0:
+            keep &= np.abs(np.where(ring, delta, med) - med) <= cfg.outlier_nmad * spread
     return ring, delta, keep
 
 

@@ -1,4 +1,5 @@
-"""Flow and command ``gcpfree dsm``: a stereo pair's DSM by dense matching, on Dask tiles.
+"""Flow ``dsm`` (``gcpfree dsm``, :mod:`flows.commands.dsm`): a stereo pair's DSM by dense
+matching, on Dask tiles.
 
 relative orientation of the pair (``flows.relative``) -> tiles rectified and sized from the
 reference DEM -> each tile matched (SGM) and triangulated -> median per cell in the local UTM
@@ -12,8 +13,10 @@ from pathlib import Path
 
 from prefect import flow
 
-from core.matching.dense import MatchingConfig, TileStats
+from core.matching.dense import MatchingConfig
+from core.matching.dense_tile import TileStats
 from tasks.dense.dem import DemSummary, DenseConfig, DensePlan
+from tasks.io.pair import PairInputs
 from tasks.io.sensors import LoadedModel
 
 VERTICALS = ("ellipsoidal", "egm96")
@@ -21,7 +24,8 @@ VERTICALS = ("ellipsoidal", "egm96")
 
 @dataclass(frozen=True)
 class DsmParams:
-    """Parameters of :func:`dsm_flow` (see ``gcpfree dsm --help``).
+    """Parameters of :func:`dsm_flow` (see ``gcpfree dsm --help``): the pair (its reference
+    optional), the output DSM and the settings.
 
     ``orient``: orient the pair first (``flows.relative.relative_models``); without it the
     models are used as they are (consistent models, e.g. the simulator's truth or RPCs
@@ -29,17 +33,10 @@ class DsmParams:
     there is no reference DEM (default for RPCs: their height offset +- scale).
     """
 
-    left: Path
-    right: Path
+    pair: PairInputs
     out: Path
-    left_model: Path | None = None
-    right_model: Path | None = None
-    band: int | None = None
     roi: tuple[int, int, int, int] | None = None
     resolution_m: float | None = None
-    reference: Path | None = None
-    reference_vertical: str = "auto"
-    srtm_dir: Path | None = None
     height_range_m: tuple[float, float] | None = None
     vertical: str = "ellipsoidal"
     orient: bool = True
@@ -73,31 +70,25 @@ def oriented_pair(params: DsmParams) -> OrientedPair:
     """The pair relatively oriented by ``flows.relative.relative_models`` (its products in
     ``<out>_relative/``), or with ``orient=False`` the models as found; a reference prepared
     from ``srtm_dir`` when that is what was given."""
-    out = Path(params.out)
+    out, pair = Path(params.out), params.pair
     if params.orient:
         from flows.relative import relative_models
 
-        outcome = relative_models(
-            Path(params.left), Path(params.right), left_model=params.left_model,
-            right_model=params.right_model, band=params.band, reference=params.reference,
-            reference_vertical=params.reference_vertical, srtm_dir=params.srtm_dir,
-            out_dir=out.parent / f"{out.stem}_relative")
-        same = params.reference is not None and outcome.reference is not None and \
-            Path(outcome.reference).resolve() == Path(params.reference).resolve()
+        outcome = relative_models(pair, out.parent / f"{out.stem}_relative")
+        same = pair.reference is not None and outcome.reference is not None and \
+            Path(outcome.reference).resolve() == pair.reference.resolve()
         # a reference prepared from SRTM tiles says its datum in its own tag
         return OrientedPair(outcome.left, outcome.right, outcome.reference,
-                            params.reference_vertical if same else "auto")
-    from tasks.io.sensors import load_model
-
-    left = load_model(params.left, model=params.left_model, band=params.band)
-    right = load_model(params.right, model=params.right_model, band=params.band)
-    if params.srtm_dir is None:
-        return OrientedPair(left, right, params.reference, params.reference_vertical)
-    from tasks.dense.dem import pair_box
+                            pair.reference_vertical if same else "auto")
+    left, right = pair.load()
+    if pair.srtm_dir is None:
+        return OrientedPair(left, right, pair.reference, pair.reference_vertical)
+    from core.sensors.footprint import ANY_TERRAIN_H_M
     from tasks.io.reference import build_reference, locate_tiles
+    from tasks.relative.orientation import pair_box
 
-    box = pair_box(left, right, params.height_range_m or (-500.0, 9000.0))
-    tiles = locate_tiles(Path(params.srtm_dir), box, True)
+    box = pair_box(left, right, params.height_range_m or ANY_TERRAIN_H_M)
+    tiles = locate_tiles(pair.srtm_dir, box, True)
     ref = build_reference(tiles, box, out.with_name(out.stem + ".reference.tif"))
     return OrientedPair(left, right, Path(ref.path), "auto")
 

@@ -1,4 +1,5 @@
-"""Flow and command ``gcpfree relative``: tie points and the relative orientation of a pair.
+"""Flow ``relative-orientation`` (``gcpfree relative``, :mod:`flows.commands.relative`): tie
+points and the relative orientation of a pair.
 
 models of both images -> reference DEM (given, or prepared from SRTM tiles) -> tie points ->
 right model adjusted to the left -> rel.json, <rel>.tiepoints.json.
@@ -13,22 +14,18 @@ from prefect import flow
 
 from core.matching.tiepoints import TiePointConfig
 from core.orientation.relative import RelativeConfig
+from tasks.io.pair import PairInputs
 from tasks.io.sensors import LoadedModel
 
 
 @dataclass(frozen=True)
 class RelativeParams:
-    """Parameters of :func:`relative_flow` (see ``gcpfree relative --help``)."""
+    """Parameters of :func:`relative_flow` (see ``gcpfree relative --help``): the pair (its
+    reference optional: without one, the heights come from ``height_range_m``), where to
+    write ``rel.json``, and the settings."""
 
-    left: Path
-    right: Path
+    pair: PairInputs
     out: Path
-    left_model: Path | None = None
-    right_model: Path | None = None
-    band: int | None = None
-    reference: Path | None = None
-    reference_vertical: str = "auto"
-    srtm_dir: Path | None = None
     height_range_m: tuple[float, float] | None = None
     corrections: str = "linear"
     cell_m: float = 2000.0
@@ -55,8 +52,9 @@ def relative_flow(params: RelativeParams) -> RelativeOutcome:
     from dataclasses import replace
 
     from core.matching.tiepoints import default_search_radius_m, ground_sampling_m
-    from tasks.io.dem import dem_datum, read_reference
+    from core.sensors.footprint import ANY_TERRAIN_H_M
     from tasks.dense.dem import scene_height_range
+    from tasks.io.dem import dem_datum, read_reference
     from tasks.io.reference import build_reference, locate_tiles
     from tasks.relative.orientation import (
         ReferenceUsed,
@@ -69,21 +67,20 @@ def relative_flow(params: RelativeParams) -> RelativeOutcome:
     )
     from tasks.relative.tiepoints import find_tie_points
 
-    out = Path(params.out)
-    left, right = load_pair(params.left, params.right, params.left_model, params.right_model,
-                            params.band)
-    reference_path, vertical = params.reference, params.reference_vertical
-    first_range = params.height_range_m or (-500.0, 9000.0)
-    if reference_path is None and params.srtm_dir is not None:
+    out, pair = Path(params.out), params.pair
+    left, right = load_pair(pair)
+    reference_path, vertical = pair.reference, pair.reference_vertical
+    first_range = params.height_range_m or ANY_TERRAIN_H_M
+    if reference_path is None and pair.srtm_dir is not None:
         box = pair_box(left, right, first_range)
-        tiles = locate_tiles(Path(params.srtm_dir), box, True)
+        tiles = locate_tiles(pair.srtm_dir, box, True)
         reference_path = Path(build_reference(tiles, box, out.with_name(out.stem +
                                                                         ".reference.tif")).path)
         vertical = "auto"  # its own tag says ellipsoidal
     dem, used = None, None
     if reference_path is not None:
         used = ReferenceUsed(Path(reference_path), dem_datum(reference_path, vertical),
-                             None if params.reference is not None else params.srtm_dir)
+                             None if pair.reference is not None else pair.srtm_dir)
         dem = read_reference(used.path, pair_box(left, right, first_range), used.datum.datum)
         h_range = reference_box_heights(dem)
     else:
@@ -108,15 +105,9 @@ def relative_flow(params: RelativeParams) -> RelativeOutcome:
 
 
 @flow(name="relative-models")
-def relative_models(left: Path, right: Path, *, left_model: Path | None = None,
-                    right_model: Path | None = None, band: int | None = None,
-                    reference: Path | None = None, reference_vertical: str = "auto",
-                    srtm_dir: Path | None = None, out_dir: Path) -> RelativeOutcome:
+def relative_models(pair: PairInputs, out_dir: Path) -> RelativeOutcome:
     """The pair relatively oriented (for the steps that follow, e.g. ``gcpfree dsm``); writes
     ``out_dir/rel.json`` and its tie points."""
     out_dir = Path(out_dir)
     out_dir.mkdir(parents=True, exist_ok=True)
-    return relative_flow(RelativeParams(
-        left=Path(left), right=Path(right), out=out_dir / "rel.json", left_model=left_model,
-        right_model=right_model, band=band, reference=reference,
-        reference_vertical=reference_vertical, srtm_dir=srtm_dir))
+    return relative_flow(RelativeParams(pair=pair, out=out_dir / "rel.json"))

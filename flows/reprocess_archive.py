@@ -1,11 +1,12 @@
-"""Flow ``reprocess-archive``: every stereo pair of a catalog through ``orient-pair``, pairs in
-parallel on Dask, resumable.
+"""Flow ``reprocess-archive``: every stereo pair of a catalog through the ``pair`` flow, pairs
+in parallel on Dask, resumable.
 
 catalog (``tasks.archive.catalog``) -> pairs whose ``ROOT/<id>`` is already complete are skipped
-(:func:`flows.orient_pair.pair_complete`) -> the others run concurrently, one ``orient-pair``
-flow per pair inside a Dask task (prefect-dask's ``DaskTaskRunner``: a LocalCluster, or an
-existing cluster given its scheduler address) -> ``ROOT/summary.csv`` and ``ROOT/summary.json``
--> Prefect artifacts (the summary table, a markdown account).
+(:func:`tasks.archive.pair.pair_complete`) -> the others run concurrently, one ``pair`` flow
+per pair inside a Dask task (:func:`tasks.archive.runs.process_pair`, on prefect-dask's
+``DaskTaskRunner`` as :func:`tasks.scheduling.archive_task_runner` sizes it: a LocalCluster, or
+an existing cluster given its scheduler address) -> ``ROOT/summary.csv`` and
+``ROOT/summary.json`` -> Prefect artifacts (the summary table, a markdown account).
 
 A pair that fails (bad input, terrain too flat, any exception) is recorded with its one-line
 reason and never stops the others; a rerun processes only the pairs missing or failed. Only I/O
@@ -18,35 +19,26 @@ The flow takes flat, JSON-friendly parameters (not one parameter object) so that
 
 from __future__ import annotations
 
-import os
+import functools
 import sys
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Self
 
-from prefect import flow, task
-from prefect.cache_policies import NO_CACHE
+from prefect import flow
 
 from tasks.archive.catalog import (
     PairEntry,
     PairRow,
     load_catalog,
-    one_line,
     pair_row,
     publish_summary,
     write_summary,
 )
+from tasks.archive.pair import complete_pairs
+from tasks.archive.runs import PairResult, failure_reason, process_pair
 
 DEFAULT_DASHBOARD = ":8787"
-
-
-@dataclass(frozen=True)
-class PairResult:
-    """What happened to one pair processed in this run: ``done`` or ``failed`` (with why)."""
-
-    id: str
-    status: str
-    reason: str = ""
 
 
 @dataclass(frozen=True, eq=False)
@@ -71,47 +63,20 @@ class ArchiveOutcome:
         return out
 
 
-def _reason(exc: BaseException) -> str:
-    from core.errors import GcpFreeError
-
-    text = one_line(str(exc))
-    return text if isinstance(exc, GcpFreeError) and text else f"{type(exc).__name__}: {text}"
-
-
-@task(name="orient-pair-of-archive", cache_policy=NO_CACHE)  # no retries: deterministic
-def process_pair(entry: PairEntry, out: Path, srtm_dir: Path | None, reference: Path | None,
-                 self_calibrate: bool = False, reference_vertical: str = "auto") -> PairResult:
-    """One pair through ``orient-pair`` (single-threaded: the archive's parallelism is over
-    pairs). Any failure becomes the pair's reason instead of an exception."""
+def run_pair(entry: PairEntry, root: Path, srtm_dir: Path | None, reference: Path | None,
+             reference_vertical: str = "auto", self_calibrate: bool = False) -> None:
+    """One pair of the archive through the ``pair`` flow into ``root/<id>`` (one worker: the
+    archive's parallelism is over pairs); what :func:`tasks.archive.runs.process_pair` runs
+    in a Dask worker."""
     from flows._env import one_line_errors
-    from flows.orient_pair import PairParams, orient_pair_flow
-    from tasks.archive.catalog import check_pair_inputs
+    from flows.pair import PairParams, pair_flow
 
-    try:
-        check_pair_inputs(entry)
-        with one_line_errors():
-            orient_pair_flow(PairParams(
-                left=entry.left, right=entry.right, out=Path(out), left_model=entry.left_model,
-                right_model=entry.right_model, srtm_dir=srtm_dir, reference=reference,
-                reference_vertical=reference_vertical,
-                lidar=entry.lidar, landcover=entry.landcover, checkpoints=entry.checkpoints,
-                self_calibrate=self_calibrate, workers=1, progress=False, pair_id=entry.id))
-    except Exception as exc:  # noqa: BLE001 - a failing pair never stops the others
-        return PairResult(entry.id, "failed", _reason(exc))
-    return PairResult(entry.id, "done")
-
-
-def dask_task_runner(address: str | None, workers: int, processes: bool = True,
-                     dashboard_address: str = DEFAULT_DASHBOARD):
-    """prefect-dask's runner: the cluster at ``address``, or a LocalCluster of ``workers``
-    single-threaded workers (processes, or threads of this process)."""
-    from prefect_dask import DaskTaskRunner
-
-    if address:
-        return DaskTaskRunner(address=address)
-    return DaskTaskRunner(cluster_kwargs={
-        "n_workers": workers, "threads_per_worker": 1, "processes": processes,
-        "dashboard_address": dashboard_address})
+    with one_line_errors():
+        pair_flow(PairParams(
+            pair=entry.pair_inputs(reference, srtm_dir, reference_vertical),
+            out=Path(root) / entry.id, lidar=entry.lidar, landcover=entry.landcover,
+            checkpoints=entry.checkpoints, self_calibrate=self_calibrate, workers=1,
+            progress=False, pair_id=entry.id))
 
 
 def _dashboard_link() -> str | None:
@@ -138,9 +103,10 @@ def run_pairs(entries: list[PairEntry], root: Path, srtm_dir: Path | None = None
         print(f"Dask dashboard        {link}", flush=True)
         create_link_artifact(link, link_text="Dask dashboard", key="dask-dashboard",
                              description="the Dask cluster running the pairs")
-    futures = {process_pair.submit(e, Path(root) / e.id, srtm_dir, reference, self_calibrate,
-                                   reference_vertical): e
-               for e in entries}
+    run = functools.partial(run_pair, root=Path(root), srtm_dir=srtm_dir, reference=reference,
+                            reference_vertical=reference_vertical,
+                            self_calibrate=self_calibrate)
+    futures = {process_pair.submit(e, run): e for e in entries}
     results: dict[str, PairResult] = {}
     with _PairProgress(len(entries), progress) as bar:
         for future in as_completed(list(futures)):
@@ -148,7 +114,7 @@ def run_pairs(entries: list[PairEntry], root: Path, srtm_dir: Path | None = None
             try:
                 result = future.result()
             except Exception as exc:  # noqa: BLE001 - the task was lost (e.g. its workers died)
-                result = PairResult(entry.id, "failed", _reason(exc))
+                result = PairResult(entry.id, "failed", failure_reason(exc))
             results[entry.id] = result
             bar.advance(result)
     return [results[e.id] for e in entries], link
@@ -191,14 +157,6 @@ class _PairProgress:
             self._bar.__exit__(*exc)
 
 
-@task(name="find-complete-pairs", cache_policy=NO_CACHE)
-def complete_pairs(entries: tuple[PairEntry, ...], root: Path) -> frozenset[str]:
-    """Ids of the pairs whose ``ROOT/<id>`` already holds valid finished products."""
-    from flows.orient_pair import pair_complete
-
-    return frozenset(e.id for e in entries if pair_complete(Path(root) / e.id))
-
-
 @flow(name="reprocess-archive")
 def reprocess_archive(catalog: Path, out: Path, srtm_dir: Path | None = None,
                       reference: Path | None = None, dask_address: str | None = None,
@@ -208,30 +166,30 @@ def reprocess_archive(catalog: Path, out: Path, srtm_dir: Path | None = None,
                       ) -> ArchiveOutcome:
     """Catalog -> skip complete pairs -> the rest on Dask -> summary.csv/json + artifacts.
 
-    ``catalog``: a folder of pair folders or a CSV/JSON list (``tasks.archive.catalog``); ``out``: ROOT,
-    one folder per pair id. ``srtm_dir`` or ``reference`` (its heights ``reference_vertical``):
-    the ground every pair is oriented to.
+    ``catalog``: a folder of pair folders or a CSV/JSON list (``tasks.archive.catalog``);
+    ``out``: ROOT, one folder per pair id. ``srtm_dir`` or ``reference`` (its heights
+    ``reference_vertical``): the ground every pair is oriented to.
     ``dask_address``: an existing scheduler (``tcp://HOST:PORT``), else a LocalCluster of
     ``workers`` (default: one per core, at most one per pair) single-threaded workers, in
     processes unless ``processes`` is False.
     """
     from core.errors import InputError
+    from tasks.scheduling import archive_task_runner, schedule
 
     if (srtm_dir is None) == (reference is None):
         raise InputError("gcpfree archive needs the ground to orient every pair to: give "
                          "--srtm-dir or --reference (one of them)")
-    if workers is not None and workers < 1:
-        raise InputError(f"--workers must be at least 1 (got {workers})")
+    schedule(workers=workers)  # --workers checked before the catalog is read
     cat = load_catalog(Path(catalog))
     root = Path(out)
     root.mkdir(parents=True, exist_ok=True)
-    done_before = complete_pairs(cat.pairs, root)
+    done_before = complete_pairs(cat.ids, root)
     todo = [e for e in cat.pairs if e.id not in done_before]
     results: dict[str, PairResult] = {}
     link = None
     if todo:
-        n = min(workers or os.cpu_count() or 1, len(todo))
-        runner = dask_task_runner(dask_address, n, processes, dashboard_address)
+        runner = archive_task_runner(dask_address, len(todo), workers, processes,
+                                     dashboard_address)
         found, link = run_pairs.with_options(task_runner=runner)(
             todo, root, srtm_dir, reference, self_calibrate, progress,
             reference_vertical=reference_vertical)

@@ -73,11 +73,13 @@ def tiny_oriented(tiny_scene, tmp_path_factory, prefect_harness):
     check points): (scene_dir, out_dir, OrientOutcome). Tests only read its products; a test
     that writes copies the folder first."""
     from flows.orient import OrientParams, orient_flow
+    from tasks.io.pair import PairInputs
 
     scene, _ = tiny_scene
     out = tmp_path_factory.mktemp("orient")
     outcome = orient_flow(OrientParams(
-        left=scene / "left.tif", right=scene / "right.tif", out=out,
-        reference=scene / "reference.tif", checkpoints=scene / "truth" / "checkpoints.json",
-        self_calibrate=True, progress=False))
+        pair=PairInputs(scene / "left.tif", scene / "right.tif",
+                        reference=scene / "reference.tif"),
+        out=out, checkpoints=scene / "truth" / "checkpoints.json", self_calibrate=True,
+        progress=False))
     return scene, out, outcome

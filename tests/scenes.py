@@ -37,7 +37,7 @@ def dsm_against_truth(dsm_path: Path, truth_path: Path) -> tuple[float, float, i
     import rasterio
 
     from core.dem import sample_bilinear
-    from core.evaluation import NMAD_FACTOR
+    from core.robust import nmad
 
     with rasterio.open(dsm_path) as src:
         z, t = src.read(1).astype(np.float64), src.transform
@@ -47,5 +47,4 @@ def dsm_against_truth(dsm_path: Path, truth_path: Path) -> tuple[float, float, i
     x, y = t.c + (cols + 0.5) * t.a, t.f + (rows + 0.5) * t.e
     d = z[rows, cols] - sample_bilinear(truth, (tt.f - y) / -tt.e - 0.5, (x - tt.c) / tt.a - 0.5)
     d = d[np.isfinite(d)]
-    med = float(np.median(d))
-    return med, float(NMAD_FACTOR * np.median(np.abs(d - med))), int(d.size)
+    return float(np.median(d)), nmad(d), int(d.size)

@@ -42,15 +42,16 @@ from core.points import (
     ImagePoint,
     control_points_to_dict,
 )
+from core.sensors.dimap import dimap_xml
 from core.sensors.pushbroom import PushbroomModel
 from core.sensors.pushbroom_synthetic import SyntheticSpec, synthetic_pushbroom
 from core.sensors.rpc import RPCModel
 from core.sensors.spot import spot_scene_from_model
-from tasks.io.dem import check_reference, read_reference
-from tasks.io.dimap import dimap_xml, read_dimap
-from tasks.evaluation.lidar import read_gcps
-from tasks.io.lidar import inspect_lidar, lidar_chunks
 from tasks.absolute.orientation import CSV_COLUMNS, read_checkpoints
+from tasks.evaluation.lidar import read_gcps
+from tasks.io.dem import check_reference, read_reference
+from tasks.io.dimap import read_dimap
+from tasks.io.lidar import inspect_lidar, lidar_chunks
 from tasks.io.sensors import (
     load_model,
     read_rpc,
@@ -548,7 +549,7 @@ CLI_CASES = [
     ("sim-centre-off-dem", ["simulate", "--center", "100", "10", "--out", "{out}/s"],
      "does not cover the scene"),
     ("info-missing", ["info", "{missing}"], "does not exist"),
-    ("info-text-image", ["info", "{text}"], "cannot open raster"),
+    ("info-text-image", ["info", "{text}"], "cannot read image"),
     ("info-no-model", ["info", "{bare}"], "no sensor model found"),
     ("info-malformed-model", ["info", "{json}"], "not valid JSON"),
     ("info-dem-elsewhere", ["info", str(VENTOUX / "left_image.tif"), "--reference", "{far}"],
@@ -560,7 +561,7 @@ CLI_CASES = [
      "does not exist"),
     ("rel-text-image", ["relative", "--left", "{text}", "--right",
                         str(VENTOUX / "right_image.tif"), "--out", "{out}/r.json"],
-     "cannot open raster"),
+     "cannot read image"),
     ("rel-no-model", ["relative", "--left", "{bare}", "--right",
                       str(VENTOUX / "right_image.tif"), "--out", "{out}/r.json"],
      "no sensor model found"),
@@ -599,7 +600,7 @@ CLI_CASES = [
      "--resolution must be > 0"),
     ("dsm-no-overlap", ["dsm", *FAR_PAIR, "--out", "{out}/d.tif"], "do not overlap"),
     ("dsm-text-image", ["dsm", "--left", str(VENTOUX / "left_image.tif"), "--right", "{text}",
-                        "--out", "{out}/d.tif"], "cannot open raster"),
+                        "--out", "{out}/d.tif"], "cannot read image"),
     ("orient-malformed-json", ["orient", *PAIR, "--reference", str(HGT), "--checkpoints",
                                "{json}", "--out", "{out}/o"], "not valid JSON"),
     ("orient-json-not-object", ["orient", *PAIR, "--reference", str(HGT), "--checkpoints",
@@ -705,7 +706,7 @@ def test_argument_errors_are_one_line_and_exit_2(command, capsys):
 
 
 @pytest.mark.parametrize(("argv", "fragment"), [
-    (["info", "{text}"], "cannot open raster"),
+    (["info", "{text}"], "cannot read image"),
     (["orient", *PAIR, "--reference", str(HGT), "--checkpoints", "{json}", "--out", "{out}/o"],
      "not valid JSON"),
     (["evaluate", "--dem", "{utm}", "--lidar", "{laz}", "--out", "{out}/e.json"],

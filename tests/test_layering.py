@@ -122,3 +122,71 @@ def test_the_checker_sees_a_cycle_and_a_forbidden_import(tmp_path: Path):
     bad = tmp_path / "bad.py"
     bad.write_text("import numpy\nfrom rasterio import open as ropen\n")
     assert "rasterio" in _imports("core.bad", bad)
+
+
+# ------------------------------------------------------------------ the layout (issue 18)
+#: the longest a module may grow: past it, split it where it holds two subjects
+MAX_LINES = {"core": 600, "tasks": 500, "flows": 500}
+
+
+@pytest.mark.parametrize("name", sorted(MODULES))
+def test_modules_stay_small(name: str):
+    n = len(MODULES[name].read_text().splitlines())
+    limit = MAX_LINES[name.split(".")[0]]
+    assert n <= limit, f"{name} has {n} lines (> {limit}): split it where it has two subjects"
+
+
+#: modules every step uses that are neither I/O nor a step: where tile work is scheduled
+TASKS_SHARED = {"__init__.py", "scheduling.py"}
+
+
+def test_tasks_are_grouped_by_step():
+    """tasks/ holds packages (io/ and one per step of the chain), no loose module but the
+    scheduler every step uses."""
+    loose = sorted(p.name for p in (REPO / "tasks").glob("*.py") if p.name not in TASKS_SHARED)
+    assert not loose, f"modules directly in tasks/: {loose}; put each in tasks/io/ or its step"
+
+
+def _decorated(path: Path, decorator: str) -> list[tuple[str, bool]]:
+    """The functions of a file carrying ``@decorator`` (or ``@decorator(...)``): (name, whether
+    defined at module level)."""
+    tree = ast.parse(path.read_text(), str(path))
+    top = {id(n) for n in tree.body}
+    out = []
+    for node in ast.walk(tree):
+        if isinstance(node, (ast.FunctionDef, ast.AsyncFunctionDef)):
+            for d in node.decorator_list:
+                target = d.func if isinstance(d, ast.Call) else d
+                if isinstance(target, ast.Name) and target.id == decorator:
+                    out.append((node.name, id(node) in top))
+    return out
+
+
+def test_tasks_live_in_tasks_and_flows_in_flows():
+    """``@task`` only under tasks/, ``@flow`` only under flows/ (that flows are built at module
+    level is held by ``tests/flows/test_layout.py``)."""
+    misplaced = {name: f for name, path in MODULES.items()
+                 for f, _ in _decorated(path, "task") if not name.startswith("tasks")}
+    assert not misplaced, f"@task outside tasks/: {misplaced}"
+    outside = {name: f for name, path in MODULES.items()
+               for f, _ in _decorated(path, "flow") if not name.startswith("flows")}
+    assert not outside, f"@flow outside flows/: {outside}"
+
+
+#: the one strict JSON writer and reader (:mod:`core.jsonio`); files through tasks.io.rasters
+JSON_HOME = {"core.jsonio"}
+
+
+def test_json_is_written_and_parsed_in_one_place():
+    """No ``json.dumps``/``json.loads`` (nor ``dump``/``load``) outside :mod:`core.jsonio`:
+    every product is written by the strict writer (NaN as null) and read by ``parse_json``."""
+    found = {}
+    for name, path in MODULES.items():
+        if name in JSON_HOME:
+            continue
+        for node in ast.walk(ast.parse(path.read_text(), str(path))):
+            if (isinstance(node, ast.Call) and isinstance(node.func, ast.Attribute)
+                    and isinstance(node.func.value, ast.Name) and node.func.value.id == "json"
+                    and node.func.attr in {"dumps", "loads", "dump", "load"}):
+                found.setdefault(name, []).append(f"json.{node.func.attr} line {node.lineno}")
+    assert not found, f"JSON handled outside core.jsonio: {found}"

@@ -26,6 +26,7 @@ from scipy import ndimage
 
 from core.errors import InputError
 from core.matching.dense import PixelStatus
+from core.robust import nmad
 
 FloatArray = NDArray[np.float64]
 MASK_VALID, MASK_MISMATCH, MASK_OCCLUDED = 0, 1, 2
@@ -229,8 +230,8 @@ def remove_offset_and_tilt(dz_m: ArrayLike, x_m: ArrayLike, y_m: ArrayLike,
         coef, *_ = np.linalg.lstsq(design[use], dz[use], rcond=None)
         res = dz - design @ np.where(np.isfinite(coef), coef, 0.0)
         med = np.median(res[ok])
-        nmad = 1.4826 * np.median(np.abs(res[ok] - med))
-        new = ok & (np.abs(res - med) <= k_nmad * max(nmad, 1e-6))
+        spread = nmad(res[ok], med)
+        new = ok & (np.abs(res - med) <= k_nmad * max(spread, 1e-6))
         if (new == use).all():
             break
         use = new

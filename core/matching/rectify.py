@@ -43,12 +43,12 @@ from scipy.optimize import minimize_scalar
 from core.dem import GeoDEM
 from core.errors import GeometryError, InputError
 from core.sensors.base import SensorModel, localize_on_dem
+from core.sensors.footprint import PixelBox
 
 FloatArray = NDArray[np.float64]
-Box = tuple[int, int, int, int]  # (col0, row0, col1, row1), half-open, sensor pixels
 
 
-def _box_check(box: Box, what: str) -> None:
+def _box_check(box: PixelBox, what: str) -> None:
     c0, r0, c1, r1 = box
     if not (c1 > c0 and r1 > r0):
         raise InputError(f"{what} {box} is empty; give (col0, row0, col1, row1) with col1 > "
@@ -150,7 +150,7 @@ class TileRectification:
 
 
 def virtual_correspondences(
-    left: SensorModel, right: SensorModel, box: Box, heights_m: ArrayLike, n_side: int,
+    left: SensorModel, right: SensorModel, box: PixelBox, heights_m: ArrayLike, n_side: int,
     offset: float = 0.0,
 ) -> tuple[FloatArray, FloatArray, FloatArray, FloatArray, FloatArray]:
     """Left pixels of an ``n_side`` lattice over ``box`` (shifted by ``offset`` steps) at each
@@ -177,7 +177,7 @@ def _v_fit(theta: float, x: FloatArray, y: FloatArray, design: FloatArray
 
 
 def rectify_tile(
-    left: SensorModel, right: SensorModel, box: Box, h_range_m: tuple[float, float],
+    left: SensorModel, right: SensorModel, box: PixelBox, h_range_m: tuple[float, float],
     h_ref_m: float | None = None, config: RectifyConfig = RectifyConfig(),
 ) -> TileRectification:
     """The affine rectification of the left pixels ``box`` over the heights ``h_range_m``.
@@ -271,7 +271,7 @@ class TerrainSample:
         return TerrainSample(self.col[ok], self.row[ok], self.h_m[ok])
 
 
-def sample_terrain(left: SensorModel, box: Box, dem: GeoDEM | None,
+def sample_terrain(left: SensorModel, box: PixelBox, dem: GeoDEM | None,
                    h_range_m: tuple[float, float], step_px: float = 25.0) -> TerrainSample:
     """Reference heights under a lattice of the left pixels of ``box`` (spacing about
     ``step_px``): the lines of sight intersected with ``dem``, or without a DEM the two ends
@@ -303,12 +303,12 @@ class TilePlan:
     """
 
     index: int
-    core: Box
+    core: PixelBox
     rect: TileRectification
     window: tuple[int, int, int, int]
     n_disp: int
-    left_read: Box
-    right_read: Box
+    left_read: PixelBox
+    right_read: PixelBox
     d_pred_px: tuple[float, float]
     h_terrain_m: tuple[float, float]
 
@@ -335,7 +335,7 @@ class TilePlan:
                 "h_terrain_m": list(self.h_terrain_m), "rectification": self.rect.to_dict()}
 
 
-def _read_box(inverse: FloatArray, window: tuple[int, int, int, int], pad: int) -> Box:
+def _read_box(inverse: FloatArray, window: tuple[int, int, int, int], pad: int) -> PixelBox:
     u0, v0, w, h = window
     u = np.array([u0, u0 + w - 1, u0 + w - 1, u0], dtype=np.float64)
     v = np.array([v0, v0, v0 + h - 1, v0 + h - 1], dtype=np.float64)
@@ -345,7 +345,7 @@ def _read_box(inverse: FloatArray, window: tuple[int, int, int, int], pad: int) 
 
 
 def plan_tile(
-    index: int, left: SensorModel, right: SensorModel, core: Box, terrain: TerrainSample,
+    index: int, left: SensorModel, right: SensorModel, core: PixelBox, terrain: TerrainSample,
     margin_m: float, margin_px: int = 32, config: RectifyConfig = RectifyConfig(),
     max_disp: int = 4096, right_pad_px: int = 3,
 ) -> TilePlan:
@@ -460,7 +460,7 @@ def warp_to_window(image: NDArray, origin: tuple[int, int], affine: FloatArray,
 
 
 def plan_tile_on_dem(
-    index: int, left: SensorModel, right: SensorModel, core: Box, right_size: tuple[int, int],
+    index: int, left: SensorModel, right: SensorModel, core: PixelBox, right_size: tuple[int, int],
     dem: GeoDEM | None, h_range_m: tuple[float, float], margin_m: float, *,
     step_px: float = 25.0, margin_px: int = 32, right_pad_px: int = 3,
     config: RectifyConfig = RectifyConfig(), max_disp: int = 4096,

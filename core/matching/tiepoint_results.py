@@ -1,5 +1,6 @@
-"""Tie points as values: their status codes, the points (JSON round trip) and the report of
-the search (:mod:`core.matching.tiepoints` finds them)."""
+"""Tie points as values: their status codes, every searched point (:class:`Matches`), the tie
+points kept (JSON round trip) and the report of the search (:mod:`core.matching.tiepoints`
+finds them)."""
 
 from __future__ import annotations
 
@@ -30,6 +31,44 @@ class TiePointStatus(IntEnum):
     # codes from 16 on are set by the orientation steps
     ORIENTATION_OUTLIER = 16  # rejected by the relative orientation (residual over k sigma)
 
+
+
+@dataclass(frozen=True, eq=False)
+class Matches:
+    """Every searched point: positions in full-image pixels, the correlation at the sub-pixel
+    match, the back-match distance (left pixels), a :class:`TiePointStatus` code, the height
+    the search was centred on (metres, ellipsoidal), the right position predicted there and
+    the epipolar rate d(right col, row)/dh (pixels per metre)."""
+
+    left_col: FloatArray
+    left_row: FloatArray
+    right_col: FloatArray
+    right_row: FloatArray
+    correlation: FloatArray
+    back_error_px: FloatArray
+    status: NDArray[np.uint8]
+    h_m: FloatArray
+    pred_col: FloatArray
+    pred_row: FloatArray
+    epipolar_col: FloatArray
+    epipolar_row: FloatArray
+
+    def with_status(self, index: ArrayLike, code: int) -> Matches:
+        status = self.status.copy()
+        status[np.asarray(index)] = np.uint8(code)
+        return replace(self, status=status)
+
+    @property
+    def ok(self) -> NDArray[np.bool_]:
+        return self.status == TiePointStatus.OK
+
+    @classmethod
+    def concat(cls, parts: list[Matches]) -> Matches:
+        """The matches of several tiles as one set."""
+        names = [f.name for f in cls.__dataclass_fields__.values()]
+        if not parts:
+            return cls(*(np.empty(0, np.uint8 if k == "status" else np.float64) for k in names))
+        return cls(*(np.concatenate([getattr(p, k) for p in parts]) for k in names))
 
 
 @dataclass(frozen=True, eq=False)

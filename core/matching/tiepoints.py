@@ -10,11 +10,11 @@ is searched in the right image only around the position the models predict:
    (from a reference DEM) and projected into the right image; the 2x2 Jacobian of that
    left -> right mapping resamples the right image into left geometry; the search box covers
    the epipolar segment between h_lo and h_hi plus the metadata uncertainty on the ground.
-3. :func:`match_points`: normalised cross-correlation of the left template over the resampled
-   search box, integer peak, then sub-pixel by re-centred 2-D quadratic fits of the correlation
-   (the right image is resampled around the current estimate at shrinking steps, so the fit's
-   pixel-locking bias vanishes), then a right -> left back-match over the same box that must
-   return to the left point within a tolerance.
+3. :func:`core.matching.tiepoint_match.match_points`: normalised cross-correlation of the left
+   template over the resampled search box, integer peak, then sub-pixel by re-centred 2-D
+   quadratic fits of the correlation (the right image is resampled around the current estimate
+   at shrinking steps, so the fit's pixel-locking bias vanishes), then a right -> left
+   back-match over the same box that must return to the left point within a tolerance.
 4. :func:`check_consistency`: the offsets of good matches from their predictions agree with
    their neighbours' (the models' error is smooth, the reference DEM gives the relief).
 5. :func:`best_per_cell`: the best point per ground grid cell, so points cover the overlap.
@@ -27,7 +27,7 @@ Image coordinates are ``(col, row)``, 0-based, pixel centres at integers; arrays
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, replace
+from dataclasses import dataclass
 
 import cv2
 import numpy as np
@@ -35,10 +35,10 @@ from numpy.typing import ArrayLike, NDArray
 from scipy import ndimage
 from scipy.spatial import cKDTree
 
-from core.dem import GeoDEM, sample_bilinear
+from core.dem import GeoDEM
 from core.errors import GeometryError, InputError
 from core.geodesy import geodetic_to_enu, metres_per_degree
-from core.matching.tiepoint_results import TiePoints, TiePointStatus
+from core.matching.tiepoint_results import Matches, TiePoints, TiePointStatus
 from core.sensors.base import SensorModel, localize_on_dem
 
 FloatArray = NDArray[np.float64]
@@ -377,7 +377,8 @@ def _inv2(a: FloatArray) -> FloatArray:
 
 def search_windows(col: ArrayLike, row: ArrayLike, prior: SearchPrior, template_half_px: int
                    ) -> tuple[tuple[int, int, int, int], tuple[int, int, int, int]] | None:
-    """The (col0, row0, col1, row1) windows, end-exclusive, that :func:`match_points` reads for
+    """The (col0, row0, col1, row1) windows, end-exclusive, that
+    :func:`~core.matching.tiepoint_match.match_points` reads for
     these points: in the left image their templates and back-match boxes, in the right image
     their search boxes; None if no point has a prior."""
     ok = prior.valid
@@ -393,287 +394,6 @@ def search_windows(col: ArrayLike, row: ArrayLike, prior: SearchPrior, template_
                     int(np.ceil(np.max(c + hc))) + 1, int(np.ceil(np.max(r + hr))) + 1)
                    for c, r, hc, hr in boxes)
     return left, right
-
-
-# ---------------------------------------------------------------------------- matching
-
-
-@dataclass(frozen=True, eq=False)
-class Matches:
-    """Every searched point: positions in full-image pixels, the correlation at the sub-pixel
-    match, the back-match distance (left pixels), a :class:`TiePointStatus` code, the height
-    the search was centred on (metres, ellipsoidal), the right position predicted there and
-    the epipolar rate d(right col, row)/dh (pixels per metre)."""
-
-    left_col: FloatArray
-    left_row: FloatArray
-    right_col: FloatArray
-    right_row: FloatArray
-    correlation: FloatArray
-    back_error_px: FloatArray
-    status: NDArray[np.uint8]
-    h_m: FloatArray
-    pred_col: FloatArray
-    pred_row: FloatArray
-    epipolar_col: FloatArray
-    epipolar_row: FloatArray
-
-    def with_status(self, index: ArrayLike, code: int) -> Matches:
-        status = self.status.copy()
-        status[np.asarray(index)] = np.uint8(code)
-        return replace(self, status=status)
-
-    @property
-    def ok(self) -> NDArray[np.bool_]:
-        return self.status == TiePointStatus.OK
-
-    @classmethod
-    def concat(cls, parts: list[Matches]) -> Matches:
-        """The matches of several tiles as one set."""
-        names = [f.name for f in cls.__dataclass_fields__.values()]
-        if not parts:
-            return cls(*(np.empty(0, np.uint8 if k == "status" else np.float64) for k in names))
-        return cls(*(np.concatenate([getattr(p, k) for p in parts]) for k in names))
-
-
-@dataclass
-class _Raster:
-    """An image window ready for matching: float32 data (0 on nodata), float32 invalid mask,
-    float64 data with NaN on nodata (for exact bilinear sampling) and its origin."""
-
-    data: NDArray[np.float32]
-    invalid: NDArray[np.float32]
-    nan: FloatArray
-    col0: int
-    row0: int
-
-    @classmethod
-    def of(cls, image: ArrayLike, origin: tuple[float, float], nodata: float | None) -> _Raster:
-        a = np.asarray(image)
-        if a.ndim != 2:
-            raise InputError(f"matching needs 2-D image windows, got shape {a.shape}")
-        ok = valid_pixels(a, nodata)
-        data = np.where(ok, a, 0).astype(np.float32)
-        return cls(data, (~ok).astype(np.float32), np.where(ok, a, np.nan).astype(np.float64),
-                   int(origin[0]), int(origin[1]))
-
-    def crop(self, c0: int, r0: int, c1: int, r1: int
-             ) -> tuple[NDArray[np.float32], NDArray[np.float32]]:
-        """Data and invalid mask of local [r0:r1, c0:c1], padded as invalid outside."""
-        h, w = self.data.shape
-        if c0 >= 0 and r0 >= 0 and c1 <= w and r1 <= h:
-            return self.data[r0:r1, c0:c1], self.invalid[r0:r1, c0:c1]
-        d = np.zeros((r1 - r0, c1 - c0), np.float32)
-        m = np.ones((r1 - r0, c1 - c0), np.float32)
-        a0, a1, b0, b1 = max(r0, 0), min(r1, h), max(c0, 0), min(c1, w)
-        if a1 > a0 and b1 > b0:
-            d[a0 - r0:a1 - r0, b0 - c0:b1 - c0] = self.data[a0:a1, b0:b1]
-            m[a0 - r0:a1 - r0, b0 - c0:b1 - c0] = self.invalid[a0:a1, b0:b1]
-        return d, m
-
-
-def _masked_ncc(search: NDArray[np.float32], invalid: NDArray[np.float32],
-                template: NDArray[np.float32]) -> NDArray[np.float32]:
-    """TM_CCOEFF_NORMED of ``template`` over ``search``; -2 where the window touches nodata or
-    the correlation is undefined."""
-    ncc = cv2.matchTemplate(search, template, cv2.TM_CCOEFF_NORMED)
-    if invalid.any():
-        th, tw = template.shape
-        counts = cv2.boxFilter(invalid, -1, (tw, th), normalize=False,
-                               anchor=(0, 0), borderType=cv2.BORDER_CONSTANT)
-        ncc[counts[:ncc.shape[0], :ncc.shape[1]] > 1e-3] = -2.0
-    ncc[~np.isfinite(ncc)] = -2.0
-    return ncc
-
-
-_U3, _V3 = np.meshgrid([-1.0, 0.0, 1.0], [-1.0, 0.0, 1.0])
-_QUAD_PINV = np.linalg.pinv(np.stack([np.ones(9), _U3.ravel(), _V3.ravel(), _U3.ravel() ** 2,
-                                      _V3.ravel() ** 2, (_U3 * _V3).ravel()], axis=1))
-
-
-def quadratic_peak(z: ArrayLike) -> tuple[FloatArray, FloatArray]:
-    """Sub-pixel peak offsets (d_col, d_row) of 3x3 correlation neighbourhoods (n, 3, 3).
-
-    A 2-D quadratic is fitted by least squares; where it has no maximum, a parabola through
-    the three values on each axis. Offsets are clipped to +-1 px.
-    """
-    z = np.asarray(z, dtype=np.float64).reshape(-1, 9)
-    _, b, c, d, e, f = (_QUAD_PINV @ z.T)
-    det = 4.0 * d * e - f * f
-    with np.errstate(invalid="ignore", divide="ignore"):
-        good = (d < 0) & (det > 1e-12)
-        dx = np.where(good, (f * c - 2.0 * e * b) / det, np.nan)
-        dy = np.where(good, (f * b - 2.0 * d * c) / det, np.nan)
-        zz = z.reshape(-1, 3, 3)
-        den_x = zz[:, 1, 0] - 2.0 * zz[:, 1, 1] + zz[:, 1, 2]
-        den_y = zz[:, 0, 1] - 2.0 * zz[:, 1, 1] + zz[:, 2, 1]
-        px = np.where(den_x < 0, 0.5 * (zz[:, 1, 0] - zz[:, 1, 2]) / den_x, 0.0)
-        py = np.where(den_y < 0, 0.5 * (zz[:, 0, 1] - zz[:, 2, 1]) / den_y, 0.0)
-    dx = np.where(np.isfinite(dx), dx, px)
-    dy = np.where(np.isfinite(dy), dy, py)
-    return np.clip(np.nan_to_num(dx), -1.0, 1.0), np.clip(np.nan_to_num(dy), -1.0, 1.0)
-
-
-def _peak(ncc: NDArray[np.float32]) -> tuple[int, int, float, NDArray[np.float64] | None]:
-    """Integer peak (col, row), its value and its 3x3 neighbourhood (None on the border)."""
-    iy, ix = np.unravel_index(int(np.argmax(ncc)), ncc.shape)
-    h, w = ncc.shape
-    if 0 < ix < w - 1 and 0 < iy < h - 1:
-        nb = ncc[iy - 1:iy + 2, ix - 1:ix + 2].astype(np.float64)
-        return int(ix), int(iy), float(ncc[iy, ix]), (nb if np.all(nb > -1.5) else None)
-    return int(ix), int(iy), float(ncc[iy, ix]), None
-
-
-def _ncc(a: FloatArray, b: FloatArray) -> FloatArray:
-    """Normalised cross-correlation of stacks of equal patches (n, h, w) -> (n,)."""
-    a = a - a.mean(axis=(1, 2), keepdims=True)
-    b = b - b.mean(axis=(1, 2), keepdims=True)
-    num = np.einsum("nij,nij->n", a, b)
-    den = np.sqrt(np.einsum("nij,nij->n", a, a) * np.einsum("nij,nij->n", b, b))
-    with np.errstate(invalid="ignore", divide="ignore"):
-        return np.where(den > 0, num / den, np.nan)
-
-
-def _right_patches(right: _Raster, pc: FloatArray, pr: FloatArray, jac: FloatArray,
-                   du: FloatArray, dv: FloatArray, half: int) -> FloatArray:
-    """Right image resampled into left geometry (n, 2 half + 1, 2 half + 1) around the left
-    offsets (du, dv) from the predictions; exact bilinear, NaN off the window or on nodata."""
-    g = np.arange(-half, half + 1, dtype=np.float64)
-    u = du[:, None, None] + g[None, None, :]
-    v = dv[:, None, None] + g[None, :, None]
-    x = pc[:, None, None] + jac[:, 0, 0, None, None] * u + jac[:, 0, 1, None, None] * v
-    y = pr[:, None, None] + jac[:, 1, 0, None, None] * u + jac[:, 1, 1, None, None] * v
-    return sample_bilinear(right.nan, y - right.row0, x - right.col0)
-
-
-def _refine(right: _Raster, prior_c: FloatArray, prior_r: FloatArray, jac: FloatArray,
-            du: FloatArray, dv: FloatArray, templates: FloatArray, iterations: int,
-            ) -> tuple[FloatArray, FloatArray, FloatArray, FloatArray]:
-    """Re-centred sub-pixel fits: resample the right image around the current offsets at 3x3
-    shifts of 1, 1/2, 1/4... px, correlate, move to the quadratic peak. Once the shifts are
-    small the quadratic is a good model of the peak and the fit's pixel-locking bias is gone
-    (0.037 -> 0.0095 px RMS on synthetic images). Returns the offsets, the correlation there and
-    the right patches there (the back-match templates)."""
-    t = templates.shape[1] // 2
-    for k in range(iterations):
-        step = 0.5**k
-        z = np.stack([_ncc(_right_patches(right, prior_c, prior_r, jac, du + step * sx,
-                                          dv + step * sy, t), templates)
-                      for sy in (-1, 0, 1) for sx in (-1, 0, 1)], axis=1).reshape(-1, 3, 3)
-        dx, dy = quadratic_peak(np.nan_to_num(z, nan=-2.0))
-        du, dv = du + step * dx, dv + step * dy
-    p = _right_patches(right, prior_c, prior_r, jac, du, dv, t)
-    return du, dv, _ncc(p, templates), p
-
-
-def match_points(
-    left: ArrayLike,
-    left_origin: tuple[float, float],
-    right: ArrayLike,
-    right_origin: tuple[float, float],
-    left_col: ArrayLike,
-    left_row: ArrayLike,
-    prior: SearchPrior,
-    cfg: TiePointConfig,
-    *,
-    nodata: float | None = 0,
-) -> Matches:
-    """Match left points in the right image within their epipolar prior.
-
-    ``left``/``right`` are windows of the two images whose top-left pixels are the full-image
-    pixels ``left_origin``/``right_origin`` (col0, row0); ``left_col``/``left_row`` are
-    full-image pixel centres (rounded to integers: templates are not resampled). For each
-    point: the left ``(2 t + 1)``-square template is correlated (``TM_CCOEFF_NORMED``) over the
-    right image resampled into left geometry through the prior's Jacobian over the search box;
-    the integer peak is refined by re-centred quadratic fits (``cfg.refine_iterations``); then
-    the right patch at the match is searched back over the same box in the left image and must
-    land within ``cfg.back_match_tol_px`` of the left point. The windows must hold what
-    :func:`search_windows` says; what lies outside counts as nodata.
-    """
-    lc = np.rint(np.atleast_1d(np.asarray(left_col, dtype=np.float64)).ravel())
-    lr = np.rint(np.atleast_1d(np.asarray(left_row, dtype=np.float64)).ravel())
-    n = lc.size
-    if prior.h_m.size != n or lr.size != n:
-        raise InputError(f"match_points: {n} columns, {lr.size} rows and a prior of "
-                         f"{prior.h_m.size} points; give one prior per point")
-    L = _Raster.of(left, left_origin, nodata)
-    R = _Raster.of(right, right_origin, nodata)
-    t = cfg.template_half_px
-    status = np.full(n, TiePointStatus.NO_PRIOR, np.uint8)
-    du, dv = np.zeros(n), np.zeros(n)
-    corr, back = np.full(n, np.nan), np.full(n, np.nan)
-    templates = np.zeros((n, 2 * t + 1, 2 * t + 1))
-    for i in np.flatnonzero(prior.valid):
-        ci, ri = int(lc[i]) - L.col0, int(lr[i]) - L.row0
-        tpl, tinv = L.crop(ci - t, ri - t, ci + t + 1, ri + t + 1)
-        if tinv.any():
-            status[i] = TiePointStatus.OUTSIDE
-            continue
-        if not np.ptp(tpl) > 0:
-            status[i] = TiePointStatus.NO_TEXTURE
-            continue
-        ex, ey = math.ceil(prior.half_col_px[i]), math.ceil(prior.half_row_px[i])
-        u = np.arange(-(ex + t), ex + t + 1, dtype=np.float32)
-        v = np.arange(-(ey + t), ey + t + 1, dtype=np.float32)
-        j = prior.jacobian[i]
-        c0 = np.float32(prior.right_col[i] - R.col0)
-        r0 = np.float32(prior.right_row[i] - R.row0)
-        mx = c0 + np.float32(j[0, 0]) * u[None, :] + np.float32(j[0, 1]) * v[:, None]
-        my = r0 + np.float32(j[1, 0]) * u[None, :] + np.float32(j[1, 1]) * v[:, None]
-        s = cv2.remap(R.data, mx, my, cv2.INTER_LINEAR, borderMode=cv2.BORDER_CONSTANT,
-                      borderValue=0)
-        sinv = cv2.remap(R.invalid, mx, my, cv2.INTER_LINEAR, borderMode=cv2.BORDER_CONSTANT,
-                         borderValue=1)
-        ncc = _masked_ncc(s, sinv, tpl)
-        ix, iy, val, nb = _peak(ncc)
-        if val < -1.5:
-            status[i] = TiePointStatus.OUTSIDE
-            continue
-        if nb is None:
-            status[i] = TiePointStatus.EDGE_PEAK
-            continue
-        dx, dy = quadratic_peak(nb)
-        du[i], dv[i] = ix - ex + dx[0], iy - ey + dy[0]
-        templates[i] = tpl
-        status[i] = TiePointStatus.OK
-    idx = np.flatnonzero(status == TiePointStatus.OK)
-    rc, rr = np.full(n, np.nan), np.full(n, np.nan)
-    if idx.size:
-        d_u, d_v, c, g = _refine(R, prior.right_col[idx], prior.right_row[idx],
-                                 prior.jacobian[idx], du[idx], dv[idx], templates[idx],
-                                 cfg.refine_iterations)
-        jac = prior.jacobian[idx]
-        rc[idx] = prior.right_col[idx] + jac[:, 0, 0] * d_u + jac[:, 0, 1] * d_v
-        rr[idx] = prior.right_row[idx] + jac[:, 1, 0] * d_u + jac[:, 1, 1] * d_v
-        corr[idx] = c
-        bad = ~np.isfinite(c)
-        status[idx[bad]] = TiePointStatus.OUTSIDE
-        low = ~bad & (c < cfg.min_correlation)
-        status[idx[low]] = TiePointStatus.LOW_CORRELATION
-        for k in np.flatnonzero(~bad & ~low):
-            i = idx[k]
-            back[i] = _back_match(L, int(lc[i]), int(lr[i]), prior.half_col_px[i],
-                                  prior.half_row_px[i], g[k].astype(np.float32))
-            if not back[i] <= cfg.back_match_tol_px:
-                status[i] = TiePointStatus.BACK_MATCH
-    return Matches(lc, lr, rc, rr, corr, back, status, prior.h_m.copy(), prior.right_col.copy(),
-                   prior.right_row.copy(), prior.epipolar[:, 0].copy(),
-                   prior.epipolar[:, 1].copy())
-
-
-def _back_match(left: _Raster, col: int, row: int, half_col: float, half_row: float,
-                template: NDArray[np.float32]) -> float:
-    """Distance (left px) from (col, row) to the best match of a right template searched in
-    the left image over the search box; inf when the peak is on the box's border."""
-    t = template.shape[0] // 2
-    ex, ey = math.ceil(half_col), math.ceil(half_row)
-    ci, ri = col - left.col0, row - left.row0
-    s, sinv = left.crop(ci - ex - t, ri - ey - t, ci + ex + t + 1, ri + ey + t + 1)
-    ix, iy, val, nb = _peak(_masked_ncc(s, sinv, template))
-    if nb is None or val < -1.5:
-        return math.inf
-    dx, dy = quadratic_peak(nb)
-    return float(math.hypot(ix - ex + dx[0], iy - ey + dy[0]))
 
 
 # ---------------------------------------------------------------------------- ground cells

@@ -24,19 +24,19 @@ from numpy.typing import ArrayLike, NDArray
 from core.errors import ConvergenceError, GeometryError, InputError, InsufficientDataError
 from core.geodesy import geodetic_to_ecef
 from core.points import ControlPoint
+from core.robust import RobustAdjustment, huber_weights, nmad
 from core.sensors.base import SensorModel
 
 FloatArray = NDArray[np.float64]
 
 
 @dataclass(frozen=True)
-class AbsoluteConfig:
-    """Settings of :func:`absolute_orientation`: iterations, robust weighting (``huber_k``)
-    and rejection (``reject_k``) in normalised residuals, the matching precision of the image
-    measurements (px) and the fewest GCPs to solve with."""
+class AbsoluteConfig(RobustAdjustment):
+    """Settings of :func:`absolute_orientation`: the robust adjustment's
+    (:class:`~core.robust.RobustAdjustment`; ``huber_k`` and ``reject_k`` in normalised
+    residuals, wider than the relative orientation's, and a rejection round per blunder), the
+    matching precision of the image measurements (px) and the fewest GCPs to solve with."""
 
-    max_iterations: int = 30
-    tol_px: float = 1e-4
     huber_k: float = 2.0
     reject_k: float = 3.5
     max_rejection_rounds: int = 200
@@ -44,10 +44,9 @@ class AbsoluteConfig:
     min_gcps: int = 4
 
     def __post_init__(self) -> None:
-        if not (self.huber_k > 0 and self.reject_k > self.huber_k and self.tol_px > 0):
-            raise InputError("need huber_k > 0, reject_k > huber_k and tol_px > 0")
-        if self.matching_sigma_px <= 0 or self.min_gcps < 1 or self.max_iterations < 1:
-            raise InputError("need matching_sigma_px > 0, min_gcps >= 1, max_iterations >= 1")
+        super().__post_init__()
+        if self.matching_sigma_px <= 0 or self.min_gcps < 1:
+            raise InputError("need matching_sigma_px > 0 and min_gcps >= 1")
 
 
 @dataclass(frozen=True, eq=False)
@@ -249,7 +248,7 @@ def absolute_orientation(models: Sequence[SensorModel], obs: Observations,
             r = np.concatenate(res)
             w0 = np.concatenate(wts)
             z = np.abs(r) * np.sqrt(w0)
-            w = w0 / np.maximum(z / config.huber_k, 1.0)
+            w = w0 * huber_weights(z, config.huber_k)
             scale = np.sqrt(np.sum(a**2 * w[:, None], axis=0))
             scale = np.where(scale > 0, scale, 1.0)
             normal = (a / scale).T @ ((a / scale) * w[:, None])
@@ -316,7 +315,7 @@ def _sigma0(models: Sequence[SensorModel], obs: Observations, col: FloatArray, r
     zz = np.concatenate(z)
     if zz.size <= n_params:
         return 1.0
-    return float(1.4826 * np.median(np.abs(zz)) * np.sqrt(zz.size / (zz.size - n_params)))
+    return nmad(zz, centre=0.0) * float(np.sqrt(zz.size / (zz.size - n_params)))
 
 
 # ------------------------------------------------------------------------- check points

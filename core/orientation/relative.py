@@ -27,42 +27,39 @@ import scipy.linalg
 from numpy.typing import ArrayLike, NDArray
 
 from core.errors import ConvergenceError, InputError, InsufficientDataError
+from core.geodesy import ARCSEC
+from core.robust import RobustAdjustment, huber_weights, nmad
 from core.sensors.base import CORRECTION_KINDS, CorrectionKind, SensorModel
 
 FloatArray = NDArray[np.float64]
-ARCSEC_PER_RAD = 180.0 / np.pi * 3600.0
+ARCSEC_PER_RAD = np.degrees(1.0) / ARCSEC
 
 
 @dataclass(frozen=True)
-class RelativeConfig:
-    """Settings of :func:`relative_orientation`.
+class RelativeConfig(RobustAdjustment):
+    """Settings of :func:`relative_orientation`: the robust adjustment's
+    (:class:`~core.robust.RobustAdjustment`, its defaults), then what is adjusted.
 
     ``corrections``: ``"linear"`` (pushbroom attitude biases and rates, RPC affine: archive
-    attitudes drift, by ~2 px over a SPOT scene) or ``"offset"`` (biases only, RPC shift). ``huber_k`` and ``reject_k`` are in robust sigmas of the
-    y-parallax (never below ``sigma_floor_px``); ``min_observable`` is the smallest share of a
-    parameter direction's image motion that must lie across the epipolar lines for the tie
-    points to measure it.
+    attitudes drift, by ~2 px over a SPOT scene) or ``"offset"`` (biases only, RPC shift).
+    ``huber_k`` and ``reject_k`` are in robust sigmas of the y-parallax (never below
+    ``sigma_floor_px``); ``min_observable`` is the smallest share of a parameter direction's
+    image motion that must lie across the epipolar lines for the tie points to measure it.
     """
 
     corrections: CorrectionKind = "linear"
-    max_iterations: int = 30
-    tol_px: float = 1e-4
-    huber_k: float = 1.5
-    reject_k: float = 3.0
-    max_rejection_rounds: int = 10
     min_points: int = 6
     min_observable: float = 0.02
     sigma_floor_px: float = 0.05
     height_step_m: float = 10.0
 
     def __post_init__(self) -> None:
+        super().__post_init__()
         if self.corrections not in CORRECTION_KINDS:
             raise InputError(f"corrections must be one of {CORRECTION_KINDS}, got "
                              f"{self.corrections!r}")
-        if not (self.huber_k > 0 and self.reject_k > self.huber_k and self.tol_px > 0):
-            raise InputError("need huber_k > 0, reject_k > huber_k and tol_px > 0")
-        if self.min_points < 3 or not 0 < self.min_observable < 1 or self.max_iterations < 1:
-            raise InputError("need min_points >= 3, 0 < min_observable < 1, max_iterations >= 1")
+        if self.min_points < 3 or not 0 < self.min_observable < 1:
+            raise InputError("need min_points >= 3 and 0 < min_observable < 1")
 
 
 @dataclass(frozen=True, eq=False)
@@ -228,7 +225,7 @@ def relative_from_dict(d: dict[str, Any], right_model: SensorModel,
 
 
 def _robust_sigma(y: FloatArray, floor: float) -> float:
-    return max(float(1.4826 * np.median(np.abs(y - np.median(y)))), floor)
+    return max(nmad(y), floor)
 
 
 def _subspace_solve(a: FloatArray, j: FloatArray, w: FloatArray, y: FloatArray,
@@ -301,8 +298,7 @@ def relative_orientation(
             a = -np.einsum("ni,nip->np", fit.normal, jac)  # d(parallax)/dp
             y = fit.parallax_px
             sigma = _robust_sigma(y[inlier], config.sigma_floor_px)
-            u = np.abs(y) / (config.huber_k * sigma)
-            w = np.where(inlier, 1.0 / np.maximum(u, 1.0), 0.0)
+            w = np.where(inlier, huber_weights(y, config.huber_k * sigma), 0.0)
             dp, vec, share, normal_inv = _subspace_solve(a, jac, w, y, config.min_observable)
             model = model.with_params(model.params - dp)
             if np.max(np.abs(a[inlier] @ dp)) < config.tol_px:

@@ -93,3 +93,11 @@ def get_str_tuple(d: object, key: str, path: str) -> tuple[str, ...]:
     if not isinstance(v, list) or not all(isinstance(x, str) for x in v):
         raise _bad(path, key, "a list of strings", v)
     return tuple(v)
+
+
+def get_dict(d: object, key: str, path: str = "") -> dict:
+    """``d[key]`` that must be a JSON object."""
+    v = _need(d, key, path)
+    if not isinstance(v, dict):
+        raise _bad(path, key, "a JSON object", v)
+    return v

@@ -99,27 +99,6 @@ def numeric_jacobian(
     return out
 
 
-def footprint_lonlat(
-    model: SensorModel, n_cols: int, n_rows: int, heights_m: tuple[float, ...], n_side: int = 21,
-) -> tuple[FloatArray, FloatArray]:
-    """Ground (lon, lat) of ``n_side`` points along each image edge, at each of ``heights_m``.
-
-    The image spans columns 0..n_cols-1 and rows 0..n_rows-1 (pixel centres). The points of
-    every height are concatenated: their bounds hold the image's ground footprint over that
-    height range.
-    """
-    c = np.linspace(0, n_cols - 1, n_side)
-    r = np.linspace(0, n_rows - 1, n_side)
-    border_c = np.concatenate([c, c, np.zeros(n_side), np.full(n_side, n_cols - 1)])
-    border_r = np.concatenate([np.zeros(n_side), np.full(n_side, n_rows - 1), r, r])
-    lons, lats = [], []
-    for h in heights_m:
-        lo, la = model.localize(border_c, border_r, np.full(border_c.shape, h))
-        lons.append(lo)
-        lats.append(la)
-    return np.concatenate(lons), np.concatenate(lats)
-
-
 def ray_ground_move_per_m(model: SensorModel, col: FloatArray, row: FloatArray,
                           h_lo: float, h_hi: float) -> float:
     """Largest horizontal move (m) of the ground point per metre of height along the rays."""

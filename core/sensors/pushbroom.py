@@ -48,7 +48,6 @@ value of the wrong type raises :class:`~core.errors.InputError` naming the key p
 
 from __future__ import annotations
 
-import json
 from dataclasses import dataclass, field, fields, replace
 from typing import Literal
 
@@ -58,16 +57,13 @@ from numpy.typing import ArrayLike, NDArray
 from core.dem import GeoDEM
 from core.errors import ConvergenceError, GeometryError, InputError
 from core.geodesy import (
-    WGS84_A_M,
-    WGS84_B_M,
-    ecef_to_geodetic,
-    enu_rotation,
     geodetic_to_ecef,
     incidence_angles,
+    intersect_ellipsoid,
 )
-from core.jsonio import parse_json
+from core.jsonio import parse_json, to_json
 from core.sensors import base
-from core.sensors._dictio import get_float, get_int, get_str, get_str_tuple
+from core.sensors._dictio import get_dict, get_float, get_int, get_str, get_str_tuple
 from core.sensors.base import CORRECTION_KINDS
 from core.sensors.linear_array import (
     Camera,
@@ -174,41 +170,6 @@ def _rotation_axes(ang: FloatArray) -> tuple[FloatArray, FloatArray, FloatArray]
 def _flat(*arrays: ArrayLike) -> tuple[tuple[int, ...], list[FloatArray]]:
     b = np.broadcast_arrays(*(np.asarray(a, dtype=np.float64) for a in arrays))
     return b[0].shape, [np.ascontiguousarray(a).ravel() for a in b]
-
-
-def intersect_ellipsoid(
-    pos_m: FloatArray, u: FloatArray, h_m: FloatArray, *, tol_m: float = 1e-6, max_iter: int = 10
-) -> tuple[FloatArray, FloatArray]:
-    """First point of rays ``pos + s u`` (s > 0) at ellipsoidal height h: (lon, lat) degrees.
-
-    Starts from the ellipsoid inflated by h (a + h, b + h) and corrects along the ray by Newton
-    on the geodetic height (its gradient is the ellipsoid normal), so the result is exact at h.
-    """
-    scale = np.stack([WGS84_A_M + h_m, WGS84_A_M + h_m, WGS84_B_M + h_m], axis=1)
-    ps, us = pos_m / scale, u / scale
-    qa = np.sum(us * us, axis=1)
-    qb = 2.0 * np.sum(ps * us, axis=1)
-    qc = np.sum(ps * ps, axis=1) - 1.0
-    disc = qb * qb - 4.0 * qa * qc
-    if np.any(disc < 0) or np.any(qc <= 0):
-        bad = int(np.sum((disc < 0) | (qc <= 0)))
-        raise GeometryError(
-            f"{bad} lines of sight miss the Earth at the requested height (or start below it); "
-            "check the image coordinates, the heights and the attitude"
-        )
-    s = (-qb - np.sqrt(disc)) / (2.0 * qa)
-    for _ in range(max_iter):
-        x = pos_m + s[:, None] * u
-        lon, lat, h = ecef_to_geodetic(x[:, 0], x[:, 1], x[:, 2])
-        err = h - h_m
-        if not np.any(np.abs(err) > tol_m):  # NaN inputs give NaN outputs
-            return lon, lat
-        up = enu_rotation(lon, lat)[:, 2, :]  # ellipsoid normals
-        s = s - err / np.sum(up * u, axis=1)
-    raise ConvergenceError(
-        f"ray-height intersection did not reach {tol_m} m in {max_iter} iterations; "
-        "the line of sight is probably grazing the Earth"
-    )
 
 
 @dataclass(frozen=True, eq=False)
@@ -589,22 +550,11 @@ class PushbroomModel:
         )
 
     def to_json(self, indent: int | None = None) -> str:
-        return json.dumps(self.to_dict(), indent=indent)
+        return to_json(self.to_dict(), indent=indent)
 
     @classmethod
     def from_json(cls, text: str) -> PushbroomModel:
         return cls.from_dict(parse_json(text, "pushbroom model JSON"))
-
-
-def get_dict(d: object, key: str) -> dict:
-    """``d[key]`` that must be a JSON object."""
-    if not isinstance(d, dict):
-        raise InputError(f"a pushbroom model must be a JSON object, got {type(d).__name__}")
-    if key not in d:
-        raise InputError(f"pushbroom model: key '{key}' is missing; add it (format in pushbroom.py)")
-    if not isinstance(d[key], dict):
-        raise InputError(f"pushbroom model: key '{key}' must be a JSON object, got {d[key]!r:.80}")
-    return d[key]
 
 
 __all__ = [
@@ -622,5 +572,4 @@ __all__ = [
     "Orbit",
     "ParametricCamera",
     "PushbroomModel",
-    "intersect_ellipsoid",
 ]

@@ -16,8 +16,10 @@ import numpy as np
 from numpy.typing import NDArray
 
 from core.errors import ConvergenceError, InputError
+from core.geodesy import metres_per_degree
 from core.sensors.base import SensorModel
-from core.sensors.rpc import RPCModel, rational_functions
+from core.sensors.rpc import RPCModel
+from core.sensors.rpc00b import rational_functions
 
 FloatArray = NDArray[np.float64]
 
@@ -167,6 +169,7 @@ def check_rpc(
     ln, lt = rational_functions(coeffs, C, R, H)
     ilon = ln * rpc.lon_scale + rpc.lon_off
     ilat = lt * rpc.lat_scale + rpc.lat_off
-    d_m = np.hypot((ilon - lon) * 111_320.0 * np.cos(np.radians(lat)), (ilat - lat) * 110_574.0)
+    m_lon, m_lat = metres_per_degree(lat)
+    d_m = np.hypot((ilon - lon) * m_lon, (ilat - lat) * m_lat)
     return RPCFitReport(float(err.max()), float(np.sqrt(np.mean(err**2))), int(err.size),
                         float(d_m.max()))

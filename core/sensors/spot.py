@@ -189,34 +189,21 @@ class SpotScene:
 # ------------------------------------------------------------------------- rotations
 
 
-def _rx(a: FloatArray) -> FloatArray:
+def _rot(a: FloatArray, axis: int) -> FloatArray:
+    """Right-handed rotations by angles ``a`` (rad) about the x (0), y (1) or z (2) axis,
+    shape ``a.shape + (3, 3)``."""
     c, s = np.cos(a), np.sin(a)
+    i, j = (axis + 1) % 3, (axis + 2) % 3
     r = np.zeros(np.shape(a) + (3, 3))
-    r[..., 0, 0] = 1.0
-    r[..., 1, 1], r[..., 1, 2], r[..., 2, 1], r[..., 2, 2] = c, -s, s, c
-    return r
-
-
-def _ry(a: FloatArray) -> FloatArray:
-    c, s = np.cos(a), np.sin(a)
-    r = np.zeros(np.shape(a) + (3, 3))
-    r[..., 1, 1] = 1.0
-    r[..., 0, 0], r[..., 0, 2], r[..., 2, 0], r[..., 2, 2] = c, s, -s, c
-    return r
-
-
-def _rz(a: FloatArray) -> FloatArray:
-    c, s = np.cos(a), np.sin(a)
-    r = np.zeros(np.shape(a) + (3, 3))
-    r[..., 2, 2] = 1.0
-    r[..., 0, 0], r[..., 0, 1], r[..., 1, 0], r[..., 1, 1] = c, -s, s, c
+    r[..., axis, axis] = 1.0
+    r[..., i, i], r[..., i, j], r[..., j, i], r[..., j, j] = c, -s, s, c
     return r
 
 
 def spot_rotation(roll: ArrayLike, pitch: ArrayLike, yaw: ArrayLike) -> FloatArray:
     """Camera -> orbital rotation (..., 3, 3) in our frames from SPOT ROLL, PITCH, YAW (rad)."""
     roll, pitch, yaw = (np.asarray(a, dtype=np.float64) for a in (roll, pitch, yaw))
-    return _ry(-pitch) @ _rx(-roll) @ _rz(-yaw)
+    return _rot(-pitch, 1) @ _rot(-roll, 0) @ _rot(-yaw, 2)
 
 
 def rotation_to_rpy(r: FloatArray) -> tuple[FloatArray, FloatArray, FloatArray]:

@@ -103,7 +103,7 @@ def first_hit(
     xa, ya = rays.at(np.full(n, h_top_m))
     xb, yb = rays.at(np.full(n, h_bottom_m))
     move = np.nanmax(np.hypot(xa - xb, ya - yb)) / (h_top_m - h_bottom_m) if n else 0.0
-    levels = march_levels(h_top_m, h_bottom_m, move, min(surface.dx_m, surface.dy_m),
+    levels = march_levels(h_top_m, h_bottom_m, move, min(abs(surface.dx_m), abs(surface.dy_m)),
                           min_step_m=1e-3)
 
     def above(h: FloatArray, idx: NDArray[np.intp]) -> FloatArray:

@@ -9,7 +9,6 @@ at the scene centre and by attitude drifts, as archive SPOT metadata do.
 
 from __future__ import annotations
 
-import json
 from collections.abc import Mapping
 from dataclasses import asdict, dataclass, field, replace
 from typing import Any
@@ -21,9 +20,9 @@ from core.dem import GeoDEM
 from core.errors import CoverageError, InputError
 from core.geodesy import BBox, geodetic_to_ecef, metres_per_degree
 from core.geoid import GeoidGrid
-from core.jsonio import parse_json
+from core.jsonio import parse_json, to_json
 from core.points import GeoPoint
-from core.sensors.base import footprint_lonlat
+from core.sensors.footprint import footprint_lonlat
 from core.sensors.linear_array import LensDistortion
 from core.sensors.pushbroom import PushbroomModel
 from core.sensors.pushbroom_synthetic import SyntheticSpec, synthetic_pushbroom
@@ -352,7 +351,7 @@ class SceneDef:
         }
 
     def to_json(self) -> str:
-        return json.dumps(self.to_dict(), indent=1)
+        return to_json(self.to_dict(), indent=1)
 
     @classmethod
     def from_dict(cls, d: Mapping[str, Any]) -> SceneDef:

@@ -90,15 +90,16 @@ def add_run_arguments(p: argparse.ArgumentParser) -> None:
 
 
 def check_orientation_arguments(args: argparse.Namespace, command: str,
-                                pair=None):  # -> SurfaceMatchConfig
+                                checked=None):  # -> SurfaceMatchConfig
     """The reference, check points and window settings checked before Prefect starts;
-    returns the surface-matching settings they make. With ``pair`` (the two LoadedModels of
-    :func:`check_pair`), a scene too small for one surface-matching window is refused here,
-    in seconds, rather than after its matching."""
+    returns the surface-matching settings they make. With ``checked`` (what
+    :func:`check_pair` returned: the pair's inputs and its two models), a scene too small for
+    one surface-matching window is refused here, in seconds, rather than after its
+    matching."""
     from dataclasses import replace
 
     from core.errors import InputError
-    from core.surface_match import SurfaceMatchConfig
+    from core.matching.surface import SurfaceMatchConfig
     from tasks.absolute.orientation import read_checkpoints
 
     if args.reference is None and args.srtm_dir is None:
@@ -110,36 +111,37 @@ def check_orientation_arguments(args: argparse.Namespace, command: str,
         raise InputError("--min-windows must be at least 1")
     surface = replace(SurfaceMatchConfig(), radius_m=args.window_radius,
                       shift_max_arcsec=args.max_shift)
-    if pair is not None:
-        _check_scene_size(args, surface, *pair)
+    if checked is not None:
+        _check_scene_size(surface, *checked)
     return surface
 
 
-def _check_scene_size(args: argparse.Namespace, surface, left, right) -> None:
+def _check_scene_size(surface, pair, left, right) -> None:  # PairInputs, LoadedModel x 2
     """InsufficientDataError when the pair's overlap, at the height that makes it largest,
-    cannot hold one surface-matching window (:func:`core.surface_match.scene_size_verdict`)."""
+    cannot hold one surface-matching window (:func:`core.matching.relief.scene_size_verdict`)."""
     import numpy as np
 
     from core.errors import GeometryError, InsufficientDataError
     from core.geodesy import metres_per_degree
+    from core.matching.relief import scene_size_verdict
+    from core.sensors.footprint import ANY_TERRAIN_H_M
     from core.sensors.viewing import pair_geometry
-    from core.surface_match import scene_size_verdict
     from tasks.relative.orientation import pair_box
 
-    box = pair_box(left, right, OVERLAP_HEIGHTS_M)
-    if args.reference is not None:
+    box = pair_box(left, right, ANY_TERRAIN_H_M)
+    if pair.reference is not None:
         from tasks.io.dem import read_reference
 
-        cell = read_reference(args.reference, box, "ellipsoidal").cell_size_m()
+        cell = read_reference(pair.reference, box, "ellipsoidal").cell_size_m()
     else:
         from tasks.io.srtm import find_tiles
 
-        tiles = find_tiles(args.srtm_dir, box, allow_missing=True)
+        tiles = find_tiles(pair.srtm_dir, box, allow_missing=True)
         m_lon, m_lat = metres_per_degree(0.5 * (box.lat_min + box.lat_max))
         res = min(t.res_deg for t in tiles)
         cell = float(min(res * m_lon, res * m_lat))
     areas = []
-    for h in np.linspace(*OVERLAP_HEIGHTS_M, 20):
+    for h in np.linspace(*ANY_TERRAIN_H_M, 20):
         try:
             areas.append(pair_geometry(left.model, left.size, right.model, right.size,
                                        float(h)).overlap_area_m2)
@@ -150,45 +152,44 @@ def _check_scene_size(args: argparse.Namespace, surface, left, right) -> None:
         raise InsufficientDataError(refusal)
 
 
-def check_pair(args: argparse.Namespace):  # -> tuple[LoadedModel, LoadedModel]
-    """Both models loaded and the reference checked before Prefect starts: bad input is one
-    clean line (InputError)."""
+def check_pair(args: argparse.Namespace):  # -> tuple[PairInputs, LoadedModel, LoadedModel]
+    """The pair's inputs from the options (:class:`tasks.io.pair.PairInputs`), both models
+    loaded and the reference checked before Prefect starts: bad input is one clean line
+    (InputError). Returns the inputs, to be passed whole, and the two models."""
     from core.errors import InputError
     from tasks.io.dem import check_reference, dem_datum
-    from tasks.io.sensors import load_model
+    from tasks.io.pair import PairInputs
 
-    for path in (args.left, args.right):
-        if not Path(path).exists():
+    pair = PairInputs.from_args(args)
+    for path in (pair.left, pair.right):
+        if not path.exists():
             raise InputError(f"{path} does not exist; give the two images of the pair")
-    left = load_model(args.left, model=args.left_model, band=args.band)
-    right = load_model(args.right, model=args.right_model, band=args.band)
-    if args.reference is not None:
-        check_reference(args.reference)
+    left, right = pair.load()
+    if pair.reference is not None:
+        check_reference(pair.reference)
         # refused here in one line, or said before the long run starts
-        print(f"reference      {args.reference}: "
-              f"{dem_datum(args.reference, args.reference_vertical).describe()}")
-    if args.srtm_dir is not None and not Path(args.srtm_dir).is_dir():
-        raise InputError(f"SRTM directory {args.srtm_dir} does not exist")
-    h_range = getattr(args, "height_range", None) or OVERLAP_HEIGHTS_M
-    _check_overlap(left, right, h_range)
-    if args.reference is not None:  # CoverageError when it misses the pair altogether
-        from tasks.io.dem import read_reference
-        from tasks.relative.orientation import pair_box
+        print(f"reference      {pair.reference}: "
+              f"{dem_datum(pair.reference, pair.reference_vertical).describe()}")
+    if pair.srtm_dir is not None and not pair.srtm_dir.is_dir():
+        raise InputError(f"SRTM directory {pair.srtm_dir} does not exist")
+    from core.sensors.footprint import ANY_TERRAIN_H_M
+    from tasks.relative.orientation import pair_box
 
-        read_reference(args.reference, pair_box(left, right, h_range), "ellipsoidal")
-    if args.srtm_dir is not None:  # the tiles that would be used: EGM96 as SRTM is
+    h_range = getattr(args, "height_range", None) or ANY_TERRAIN_H_M
+    _check_overlap(left, right, h_range)
+    if pair.reference is not None:  # CoverageError when it misses the pair altogether
+        from tasks.io.dem import read_reference
+
+        read_reference(pair.reference, pair_box(left, right, h_range), "ellipsoidal")
+    if pair.srtm_dir is not None:  # the tiles that would be used: EGM96 as SRTM is
         from tasks.io.dem import check_srtm_tiles
-        from tasks.relative.orientation import pair_box
         from tasks.io.srtm import find_tiles
 
-        check_srtm_tiles(find_tiles(args.srtm_dir, pair_box(left, right, h_range),
+        check_srtm_tiles(find_tiles(pair.srtm_dir, pair_box(left, right, h_range),
                                     allow_missing=True))
-        print(f"reference      prepared from the SRTM tiles of {args.srtm_dir}: EGM96 "
+        print(f"reference      prepared from the SRTM tiles of {pair.srtm_dir}: EGM96 "
               "orthometric heights, converted with h = H + N")
-    return left, right
-
-
-OVERLAP_HEIGHTS_M = (-500.0, 9000.0)  # any terrain on Earth
+    return pair, left, right
 
 
 def _check_overlap(left, right, h_range: tuple[float, float]) -> None:  # LoadedModel x 2

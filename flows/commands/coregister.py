@@ -1,4 +1,7 @@
-"""``gcpfree coregister``: the 3-D translation between a DEM and a reference (Nuth & Kaab)."""
+"""``gcpfree coregister``: the 3-D translation between a DEM and a reference (Nuth & Kaab).
+
+No flow, by design: one in-memory adjustment of two DEMs (:func:`tasks.evaluation.coregister.
+coregister`), with no step to watch, retry or resume; Prefect's start would outlast it."""
 
 from __future__ import annotations
 

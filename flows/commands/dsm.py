@@ -53,7 +53,7 @@ def run(args: argparse.Namespace) -> int:
     from core.errors import InputError
     from tasks.dense.blocks import check_roi
 
-    left, _ = check_pair(args)
+    pair, left, _ = check_pair(args)
     check_roi(tuple(args.roi) if args.roi else None, left.size)
     out_dir = Path(args.out).resolve().parent
     if not out_dir.is_dir():
@@ -61,11 +61,8 @@ def run(args: argparse.Namespace) -> int:
     from flows.dsm import DsmParams, dsm_flow
 
     params = DsmParams(
-        left=args.left, right=args.right, out=args.out, left_model=args.left_model,
-        right_model=args.right_model, band=args.band,
-        roi=tuple(args.roi) if args.roi else None, resolution_m=args.resolution,
-        reference=args.reference, reference_vertical=args.reference_vertical,
-        srtm_dir=args.srtm_dir,
+        pair=pair, out=args.out, roi=tuple(args.roi) if args.roi else None,
+        resolution_m=args.resolution,
         height_range_m=tuple(args.height_range) if args.height_range else None,
         vertical=args.vertical, orient=not args.no_orient, margin_m=args.margin,
         tile_px=args.tile_px, min_match_rate=args.min_match_rate,

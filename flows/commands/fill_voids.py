@@ -1,45 +1,16 @@
-"""Flow and command ``gcpfree fill-voids``: an SRTM tile's voids filled from the oriented DSM.
-
-SRTM tile + DSM -> the DSM resampled onto the tile's nodes in orthometric heights -> each void
-filled with the DSM plus the SRTM-minus-DSM difference measured around it (delta surface) ->
-the tile in its own format and grid, ``OUT.json`` beside it.
+"""``gcpfree fill-voids``: an SRTM tile's voids filled from the oriented DSM (flow
+``fill-voids``, :mod:`flows.fill_voids`).
 
 Importing this module is light (no Prefect, rasterio or pyproj): :func:`run` checks the
-inputs, then builds and runs the Prefect flow (:func:`fill_voids_flow`).
+inputs, then runs the flow.
 """
 
 from __future__ import annotations
 
 import argparse
-import functools
-from collections.abc import Callable
 from pathlib import Path
-from typing import TYPE_CHECKING
 
-from flows._env import one_line_errors
 from flows.commands._pair import VERTICAL_HELP, VERTICALS
-
-if TYPE_CHECKING:
-    from tasks.evaluation.void_fill import FillOptions, FillSummary
-
-
-
-@functools.cache
-def fill_voids_flow() -> Callable[[FillOptions], FillSummary]:
-    """The Prefect flow ``fill-voids``, built on first use so importing this module stays
-    light: fill and write the tile, then its summary."""
-    from prefect import flow
-
-    from tasks.evaluation.void_fill import FillOptions, FillSummary, fill_tile_voids, write_fill_report
-
-    def fill_voids(options: FillOptions) -> FillSummary:
-        summary = fill_tile_voids(options)
-        write_fill_report(summary)
-        return summary
-
-    # the types themselves, not the postponed strings: Prefect validates parameters with them
-    fill_voids.__annotations__ = {"options": FillOptions, "return": FillSummary}
-    return flow(name="fill-voids", log_prints=True)(fill_voids)
 
 
 def add_parser(sub: argparse._SubParsersAction) -> None:
@@ -87,8 +58,8 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
 
 def run(args: argparse.Namespace) -> int:
     from core.void_fill import FillConfig
-    from tasks.io.sensor_info import check_json_target
     from tasks.evaluation.void_fill import FillOptions, plan_fill
+    from tasks.io.sensor_info import check_json_target
 
     options = FillOptions(
         srtm=args.srtm, dem=args.dem, out=args.out, srtm_vertical=args.srtm_vertical,
@@ -101,7 +72,8 @@ def run(args: argparse.Namespace) -> int:
     if args.geoid is not None:
         from tasks.io.geoid import read_gtx
         read_gtx(args.geoid)
-    with one_line_errors():
-        summary = fill_voids_flow()(options)
+    from flows.fill_voids import fill_voids_flow
+
+    summary = fill_voids_flow(options)
     print("\n".join(summary.lines()))
     return 0

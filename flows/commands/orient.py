@@ -37,15 +37,13 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    pair = check_pair(args)
-    surface = check_orientation_arguments(args, "orient", pair)
+    checked = check_pair(args)
+    surface = check_orientation_arguments(args, "orient", checked)
+    pair = checked[0]
     from flows.orient import OrientParams, orient_flow
 
     outcome = orient_flow(OrientParams(
-        left=args.left, right=args.right, out=args.out, left_model=args.left_model,
-        right_model=args.right_model, band=args.band, reference=args.reference,
-        reference_vertical=args.reference_vertical, srtm_dir=args.srtm_dir,
-        checkpoints=args.checkpoints, self_calibrate=args.self_calibrate,
+        pair=pair, out=args.out, checkpoints=args.checkpoints, self_calibrate=args.self_calibrate,
         corrections=args.corrections, spacing_m=args.window_spacing,
         min_windows=args.min_windows, workers=args.workers, progress=not args.no_progress,
         surface=surface))

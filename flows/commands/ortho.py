@@ -1,51 +1,22 @@
-"""Flow and command ``gcpfree ortho``: an image orthorectified on a DEM through its sensor model.
-
-image + model + DEM -> the output grid (local UTM zone or ``--crs``, cells of the image's GSD or
-``--resolution``, cut to the DEM) -> each 1024-cell tile: heights from the DEM, image positions
-from the model on a checked sparse lattice (< 0.01 px), the image resampled -> ``OUT`` (COG with
-nodata and overviews), ``OUT.json`` and the optional occlusion mask.
+"""``gcpfree ortho``: an image orthorectified on a DEM through its sensor model (flow
+``ortho``, :mod:`flows.ortho`).
 
 Importing this module is light (no Prefect, rasterio or pyproj): :func:`run` checks the inputs,
-then builds and runs the Prefect flow (:func:`ortho_flow`).
+then runs the flow.
 """
 
 from __future__ import annotations
 
 import argparse
-import functools
-from collections.abc import Callable
 from pathlib import Path
 from typing import TYPE_CHECKING
 
-from flows._env import one_line_errors
 from flows.commands._pair import VERTICAL_HELP, VERTICALS
 
 if TYPE_CHECKING:
-    from tasks.ortho.orthorectify import OrthoOptions, OrthoSummary
+    from tasks.ortho.orthorectify import OrthoOptions
 
 RESAMPLINGS = ("nearest", "bilinear", "cubic")  # core.ortho.RESAMPLINGS, without importing it
-
-
-@functools.cache
-def ortho_flow() -> Callable[[OrthoOptions], OrthoSummary]:
-    """The Prefect flow ``ortho``, built on first use so importing this module stays light:
-    read the model and the DEM, plan the grid, write the tiles."""
-    from prefect import flow
-
-    from tasks.ortho.orthorectify import OrthoOptions, OrthoSummary, orthorectify, plan_ortho
-    from tasks.ortho.inputs import describe_dem
-    from tasks.io.sensors import load_model
-
-    def ortho(options: OrthoOptions) -> OrthoSummary:
-        loaded = load_model(options.image, model=options.model, band=options.band)
-        dem = describe_dem(options.dem, options.dem_vertical)
-        plan = plan_ortho(loaded, dem, options.resolution_m, options.epsg,
-                          options.occlusion_mask is not None)
-        return orthorectify(plan, options.out, options.config, options.workers,
-                            options.occlusion_mask)
-
-    ortho.__annotations__ = {"options": OrthoOptions, "return": OrthoSummary}
-    return flow(name="ortho", log_prints=True)(ortho)
 
 
 def add_parser(sub: argparse._SubParsersAction) -> None:
@@ -105,7 +76,8 @@ def run(args: argparse.Namespace) -> int:
 
     options = options_from(args)
     check_ortho_options(options)  # bad input is one line, before Prefect starts
-    with one_line_errors():
-        summary = ortho_flow()(options)
+    from flows.ortho import ortho_flow
+
+    summary = ortho_flow(options)
     print("\n".join(summary.lines()))
     return 0

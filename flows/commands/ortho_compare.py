@@ -1,66 +1,14 @@
-"""Flow and command ``gcpfree ortho-compare``: the two orthos of a pair correlated on a grid of
-windows, the discrepancy reported (the quality control that needs no ground truth).
-
-two orthos on one lattice -> windows every STEP cells over the common area -> each searched for
-by normalised cross-correlation with a sub-pixel peak -> ``OUT`` (JSON: median and 95th
-percentile of the discrepancy in px and m, every window) and the optional map (COG) and quiver
-plot (PNG).
+"""``gcpfree ortho-compare``: the two orthos of a pair correlated on a grid of windows, the
+discrepancy reported (flow ``ortho-compare``, :mod:`flows.ortho`).
 
 Importing this module is light (no Prefect, rasterio or OpenCV): :func:`run` checks the
-inputs, then builds and runs the Prefect flow (:func:`ortho_compare_flow`).
+inputs, then runs the flow.
 """
 
 from __future__ import annotations
 
 import argparse
-import functools
-from collections.abc import Callable
-from dataclasses import dataclass
 from pathlib import Path
-from typing import TYPE_CHECKING
-
-from flows._env import one_line_errors
-
-if TYPE_CHECKING:
-    from core.ortho_compare import CompareConfig
-    from tasks.ortho.compare import CompareSummary
-
-
-@dataclass(frozen=True)
-class CompareOptions:
-    """Inputs of ``gcpfree ortho-compare`` (see its ``--help``)."""
-
-    left: Path
-    right: Path
-    out: Path
-    map: Path | None = None
-    quiver: Path | None = None
-    window_px: int = 64
-    step_px: int = 128
-    search_px: int = 8
-    min_ncc: float = 0.5
-    workers: int | None = None
-
-    def config(self) -> CompareConfig:
-        from core.ortho_compare import CompareConfig
-
-        return CompareConfig(window_px=self.window_px, step_px=self.step_px,
-                             search_px=self.search_px, min_ncc=self.min_ncc)
-
-
-@functools.cache
-def ortho_compare_flow() -> Callable[[CompareOptions], CompareSummary]:
-    """The Prefect flow ``ortho-compare``, built on first use."""
-    from prefect import flow
-
-    from tasks.ortho.compare import CompareSummary, compare_orthos, plan_compare
-
-    def ortho_compare(options: CompareOptions) -> CompareSummary:
-        plan = plan_compare(options.left, options.right, options.config())
-        return compare_orthos(plan, options.out, options.map, options.quiver, options.workers)
-
-    ortho_compare.__annotations__ = {"options": CompareOptions, "return": CompareSummary}
-    return flow(name="ortho-compare", log_prints=True)(ortho_compare)
 
 
 def add_parser(sub: argparse._SubParsersAction) -> None:
@@ -100,6 +48,7 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
 
 def run(args: argparse.Namespace) -> int:
     from core.errors import InputError
+    from flows.ortho import CompareOptions, ortho_compare_flow
     from tasks.io.sensor_info import check_json_target
     from tasks.ortho.compare import plan_compare
 
@@ -113,7 +62,6 @@ def run(args: argparse.Namespace) -> int:
         if path is not None and not Path(path).resolve().parent.is_dir():
             raise InputError(f"the folder of {what} ({Path(path).resolve().parent}) does not "
                              "exist; create it first")
-    with one_line_errors():
-        summary = ortho_compare_flow()(options)
+    summary = ortho_compare_flow(options)
     print("\n".join(summary.lines()))
     return 0

@@ -1,4 +1,5 @@
-"""``gcpfree pair``: the whole chain for one stereo pair (flow ``orient-pair``), resumable."""
+"""``gcpfree pair``: the whole chain for one stereo pair (flow ``pair``, :mod:`flows.pair`),
+resumable."""
 
 from __future__ import annotations
 
@@ -20,7 +21,7 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
         "pair",
         help="the whole chain for one pair: orient, orthos, lidar evaluation, report, STAC",
         description=(
-            "Everything gcpfree does for one stereo pair, as the Prefect flow orient-pair: "
+            "Everything gcpfree does for one stereo pair, as the Prefect flow pair: "
             "orientation without GCP (as gcpfree orient), the orthos of both images and their "
             "discrepancy, the final DSM against lidar per class (with --lidar), the report "
             "(report.html, report.md), a STAC catalog of the rasters (OUT/stac/catalog.json) "
@@ -45,7 +46,7 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
 def run(args: argparse.Namespace) -> int:
     from core.errors import InputError
 
-    pair = check_pair(args)
+    checked = check_pair(args)
     for name in ("lidar", "landcover"):
         path = getattr(args, name)
         if path is not None and not path.is_file():
@@ -57,20 +58,17 @@ def run(args: argparse.Namespace) -> int:
 
         inspect_lidar(args.lidar, vertical=args.lidar_vertical)
     if args.landcover is not None:
-        from tasks.io.rasters_at_points import open_raster
+        from tasks.io.rasters import open_raster
 
         with open_raster(args.landcover, "land cover"):
             pass
-    surface = check_orientation_arguments(args, "pair", pair)
-    from flows.orient_pair import PairParams, orient_pair_flow
+    surface = check_orientation_arguments(args, "pair", checked)
+    from flows.pair import PairParams, pair_flow
 
-    outcome = orient_pair_flow(PairParams(
-        left=args.left, right=args.right, out=args.out, left_model=args.left_model,
-        right_model=args.right_model, band=args.band, reference=args.reference,
-        reference_vertical=args.reference_vertical, srtm_dir=args.srtm_dir,
-        lidar=args.lidar, landcover=args.landcover, lidar_vertical=args.lidar_vertical,
-        checkpoints=args.checkpoints, self_calibrate=args.self_calibrate,
-        corrections=args.corrections, workers=args.workers, progress=not args.no_progress,
+    outcome = pair_flow(PairParams(
+        pair=checked[0], out=args.out, lidar=args.lidar, landcover=args.landcover,
+        lidar_vertical=args.lidar_vertical, checkpoints=args.checkpoints,
+        self_calibrate=args.self_calibrate, corrections=args.corrections, workers=args.workers, progress=not args.no_progress,
         pair_id=args.pair_id, surface=surface, spacing_m=args.window_spacing,
         min_windows=args.min_windows))
     print("\n".join(outcome.lines()))

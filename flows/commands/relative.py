@@ -41,13 +41,11 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    check_pair(args)
+    pair, _, _ = check_pair(args)
     from flows.relative import RelativeParams, relative_flow
 
     outcome = relative_flow(RelativeParams(
-        left=args.left, right=args.right, out=args.out, left_model=args.left_model,
-        right_model=args.right_model, band=args.band, reference=args.reference,
-        reference_vertical=args.reference_vertical, srtm_dir=args.srtm_dir,
+        pair=pair, out=args.out,
         height_range_m=tuple(args.height_range) if args.height_range else None,
         corrections=args.corrections, cell_m=args.cell_m,
         search_radius_m=args.search_radius_m))

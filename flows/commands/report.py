@@ -11,7 +11,6 @@ starting Prefect. Importing this module is light; :func:`run` checks the inputs 
 from __future__ import annotations
 
 import argparse
-import json
 from pathlib import Path
 
 from flows.commands._pair import VERTICAL_HELP, VERTICALS
@@ -56,6 +55,7 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
 def check_inputs(args: argparse.Namespace) -> None:
     """Bad input in one line (InputError) before anything is read or written."""
     from core.errors import InputError
+    from tasks.io.rasters import read_json
 
     out = Path(args.out_dir)
     if not out.is_dir():
@@ -75,11 +75,8 @@ def check_inputs(args: argparse.Namespace) -> None:
 
         read_checkpoints(args.checkpoints)
     if args.evaluation is not None:
-        try:
-            doc = json.loads(Path(args.evaluation).read_text())
-        except (OSError, ValueError) as exc:
-            raise InputError(f"cannot read the evaluation {args.evaluation} ({exc}); give the "
-                             "eval.json gcpfree evaluate wrote") from exc
+        doc = read_json(args.evaluation, "the evaluation",
+                        "give the eval.json gcpfree evaluate wrote")
         if not isinstance(doc, dict) or not isinstance(doc.get("classes"), dict):
             raise InputError(f"{args.evaluation} has no 'classes': not an eval.json of gcpfree "
                              "evaluate")
@@ -91,7 +88,7 @@ def run(args: argparse.Namespace) -> int:
     check_inputs(args)
     from dataclasses import replace
 
-    from core.surface_match import SurfaceMatchConfig
+    from core.matching.surface import SurfaceMatchConfig
     from tasks.report.build import make_report
 
     surface = replace(SurfaceMatchConfig(), radius_m=args.window_radius,

@@ -1,12 +1,11 @@
 """Tasks of step 3: windows of the relative DEM around tie points matched to the reference DEM,
-turned into simulated GCPs. The maths is :func:`core.surface_match.match_window`; here the
-windows are chosen, the relative DEM's cells read (rasterio windows, projected to lon/lat with
-pyproj) and the windows run on Dask threads."""
+turned into simulated GCPs. The maths, from the choice of the windows and their two-pass search
+to the GCPs, is :mod:`core.matching.surface`; here the tie points are read, the relative DEM's
+cells of each window read (rasterio windows, projected to lon/lat with pyproj), the windows run
+on Dask threads and the result written."""
 
 from __future__ import annotations
 
-import contextlib
-import json
 import sys
 from dataclasses import dataclass
 from pathlib import Path
@@ -15,24 +14,24 @@ from typing import Any
 import dask
 import numpy as np
 import rasterio
-from dask.diagnostics import ProgressBar
 from prefect import task
 from prefect.cache_policies import NO_CACHE
 from rasterio.windows import Window
 
 from core.dem import GeoDEM
-from core.geodesy import geodetic_to_enu
-from core.matching.tiepoints import best_per_cell
-from core.points import ControlPoint, ImagePoint, control_points_to_dict
-from core.surface_match import (
+from core.matching.surface import (
     SurfaceMatchConfig,
     WindowMatch,
-    WindowStatus,
+    choose_windows,
+    first_pass_mask,
+    gcps_from_windows,
     match_window,
-    shift_prior,
+    search_windows,
 )
+from core.points import ControlPoint, control_points_to_dict
 from tasks.io.crs import Projection
-from tasks.io.rasters import atomic_write_json
+from tasks.io.rasters import atomic_write_json, read_json
+from tasks.scheduling import compute
 
 
 @dataclass(frozen=True, eq=False)
@@ -52,7 +51,7 @@ class TieGround:
     @classmethod
     def from_tiepoints_json(cls, path: str | Path) -> TieGround:
         """The inlier tie points of a ``rel.tiepoints.json``."""
-        doc = json.loads(Path(path).read_text())
+        doc = read_json(path, "tie-point file")
         g, tp = doc["relative_ground"], doc["tie_points"]
         idx = np.asarray(g["index"], dtype=np.int64)
         inl = np.asarray(g["inlier"], dtype=bool)
@@ -63,15 +62,6 @@ class TieGround:
         return cls(np.asarray(g["lon_deg"])[inl], np.asarray(g["lat_deg"])[inl],
                    np.asarray(g["h_m"])[inl], col("left_col"), col("left_row"),
                    col("right_col"), col("right_row"), col("correlation"))
-
-
-def choose_windows(ties: TieGround, spacing_m: float) -> np.ndarray:
-    """One tie point per ``spacing_m`` ground cell (the best correlated): window centres that
-    spread over the overlap without overlapping much."""
-    origin = (float(np.median(ties.lon_deg)), float(np.median(ties.lat_deg)),
-              float(np.median(ties.h_m)))
-    e, n, _ = geodetic_to_enu(ties.lon_deg, ties.lat_deg, ties.h_m, origin)
-    return best_per_cell(e, n, ties.score, spacing_m)
 
 
 def read_window_cells(dem_path: str, lon: float, lat: float, radius_m: float
@@ -110,11 +100,7 @@ def _match_all(dem_path: Path, ties: TieGround, idx: np.ndarray, reference: GeoD
                                      float(ties.lat_deg[i]), reference, cfg,
                                      None if priors is None else tuple(map(float, priors[k])))
              for k, i in enumerate(idx)]
-    with ProgressBar(out=sys.stderr, dt=1.0) if progress else contextlib.nullcontext():
-        return list(dask.compute(*parts, scheduler="threads"))
-
-
-FIRST_PASS = 24  # windows searched over the whole shift range before the others use a prior
+    return compute(parts, progress=progress)
 
 
 @dataclass(frozen=True, eq=False)
@@ -147,52 +133,21 @@ def match_surfaces(dem_path: Path, ties: TieGround, reference: GeoDEM,
     radius) and make a GCP of each good one: the tie point's relative ground coordinates moved
     by the window's 3-D shift, with its image positions and the window's precision.
     ``progress``: a progress bar over the windows on stderr."""
-    centres = choose_windows(ties, spacing_m or cfg.radius_m)
-    # a first pass over the whole shift range on windows spread over the scene, then the
-    # others searched around the shift those predict (an affine fit); a peak on the border
-    # of its prior box is searched again over the whole range
-    first = np.zeros(len(centres), dtype=bool)
-    first[np.unique(np.linspace(0, len(centres) - 1, min(FIRST_PASS, len(centres)))
-                    .round().astype(int))] = True
-    found: list[WindowMatch | None] = [None] * len(centres)
+    centres = choose_windows(ties.lon_deg, ties.lat_deg, ties.h_m, ties.score,
+                             spacing_m or cfg.radius_m)
     if progress:
-        print(f"surface matching: {len(centres)} windows ({int(first.sum())} searched over "
-              "the whole range first)", file=sys.stderr, flush=True)
-    for k, m in zip(np.flatnonzero(first), _match_all(dem_path, ties, centres[first],
-                                                        reference, cfg, progress=progress),
-                    strict=True):
-        found[k] = m
-    rest = np.flatnonzero(~first)
-    if rest.size:
-        fi = centres[first]
-        priors = shift_prior(ties.lon_deg[fi], ties.lat_deg[fi],
-                             [found[k] for k in np.flatnonzero(first)],
-                             ties.lon_deg[centres[rest]], ties.lat_deg[centres[rest]])
-        for k, m in zip(rest, _match_all(dem_path, ties, centres[rest], reference, cfg,
-                                         priors, progress), strict=True):
-            found[k] = m
-        again = [k for k in rest if priors is not None
-                 and found[k].status == WindowStatus.EDGE_PEAK]
-        if again:
-            for k, m in zip(again, _match_all(dem_path, ties, centres[again], reference, cfg),
-                            strict=True):
-                found[k] = m
-    matches = tuple(found)
-    gcps = []
-    for i, m in zip(centres, matches, strict=True):
-        if m.status != WindowStatus.OK:
-            continue
-        gcps.append(ControlPoint(
-            id=len(gcps) + 1,
-            lon_deg=float(ties.lon_deg[i] + m.shift_lon_arcsec / 3600.0),
-            lat_deg=float(ties.lat_deg[i] + m.shift_lat_arcsec / 3600.0),
-            h_m=float(ties.h_m[i] + m.shift_h_m),
-            image_points={names[0]: ImagePoint(float(ties.left_col[i]), float(ties.left_row[i])),
-                          names[1]: ImagePoint(float(ties.right_col[i]),
-                                               float(ties.right_row[i]))},
-            sigma_xy_m=m.precision_m, sigma_h_m=max(m.precision_h_m, 0.5),
-            source="srtm_surface_match", provenance={"tie_point": int(i), **m.to_dict()}))
-    result = SurfaceMatchResult(centres, matches, tuple(gcps))
+        print(f"surface matching: {len(centres)} windows "
+              f"({int(first_pass_mask(len(centres)).sum())} searched over the whole range "
+              "first)", file=sys.stderr, flush=True)
+
+    def match(k: np.ndarray, priors: np.ndarray | None) -> list[WindowMatch]:
+        return _match_all(dem_path, ties, centres[k], reference, cfg, priors, progress)
+
+    matches = tuple(search_windows(ties.lon_deg[centres], ties.lat_deg[centres], match))
+    gcps = gcps_from_windows(centres, matches, ties.lon_deg, ties.lat_deg, ties.h_m,
+                             {names[0]: (ties.left_col, ties.left_row),
+                              names[1]: (ties.right_col, ties.right_row)})
+    result = SurfaceMatchResult(centres, matches, gcps)
     if out is not None:
         atomic_write_json(out, result.to_dict())
     return result

@@ -23,7 +23,7 @@ from __future__ import annotations
 
 import csv
 import io
-import json
+import math
 import re
 from dataclasses import asdict, dataclass, fields
 from pathlib import Path
@@ -33,6 +33,8 @@ from prefect import task
 from prefect.cache_policies import NO_CACHE
 
 from core.errors import GcpFreeError, InputError
+from core.jsonio import parse_json
+from tasks.io.pair import PairInputs
 from tasks.io.rasters import atomic_write_json, atomic_write_text
 
 REQUIRED = ("id", "left", "right")
@@ -58,6 +60,13 @@ class PairEntry:
     lidar: Path | None = None
     landcover: Path | None = None
     checkpoints: Path | None = None
+
+    def pair_inputs(self, reference: Path | None = None, srtm_dir: Path | None = None,
+                    reference_vertical: str = "auto") -> PairInputs:
+        """The pair's images and models with the ground the archive orients every pair to."""
+        return PairInputs(self.left, self.right, self.left_model, self.right_model,
+                          reference=reference, reference_vertical=reference_vertical,
+                          srtm_dir=srtm_dir)
 
 
 @dataclass(frozen=True)
@@ -157,10 +166,9 @@ def _csv_rows(path: Path) -> list[tuple[str, dict[str, Any]]]:
 
 def _json_rows(path: Path) -> list[tuple[str, dict[str, Any]]]:
     try:
-        doc = json.loads(_read_text(path))
-    except json.JSONDecodeError as exc:
-        raise InputError(f"catalog {path} is not valid JSON ({exc.msg} at line {exc.lineno}); "
-                         "give a list of pairs") from exc
+        doc = parse_json(_read_text(path), f"catalog {path}")
+    except InputError as exc:
+        raise InputError(f"{exc}; give a list of pairs") from None
     if isinstance(doc, dict) and "pairs" in doc:
         doc = doc["pairs"]
     if not isinstance(doc, list):
@@ -314,42 +322,36 @@ class PairRow:
 FIELDS = tuple(f.name for f in fields(PairRow))
 
 
-def _get(doc: Any, *keys: str) -> Any:
-    for k in keys:
-        if not isinstance(doc, dict) or k not in doc:
-            return None
-        doc = doc[k]
-    return doc
-
-
 def _number(v: Any) -> float | None:
-    return float(v) if isinstance(v, (int, float)) and not isinstance(v, bool) else None
-
-
-def _read_json(path: Path) -> Any:
-    try:
-        return json.loads(path.read_text())
-    except (OSError, ValueError):
-        return None
+    """A finite figure, or None (unknown)."""
+    return float(v) if isinstance(v, (int, float)) and math.isfinite(v) else None
 
 
 def pair_row(entry_id: str, status: str, out: Path, reason: str = "") -> PairRow:
-    """The summary line of a pair: its figures read from ``out/report.json`` and
-    ``out/eval.json`` when they exist (a failed pair reports only its reason)."""
+    """The summary line of a pair: its figures read from ``out/report.json``
+    (:func:`tasks.absolute.report.read_report`) and ``out/eval.json``
+    (:class:`core.evaluation_report.EvaluationReport`) when they read back; a failed pair
+    reports only its reason."""
+    from tasks.absolute.report import read_report
+    from tasks.archive.pair import read_evaluation_stats
+
     figures: dict[str, Any] = {}
     if status != "failed":
-        report = _read_json(Path(out) / "report.json")
-        used = _get(report, "gcps", "used")
-        figures["gcps"] = int(used) if _number(used) is not None else None
-        for side in ("left", "right"):
-            for axis in ("col", "row"):
-                figures[f"cp_{side}_rms_{axis}_px"] = _number(
-                    _get(report, "check_points", side, f"rms_{axis}_px"))
-                figures[f"gcp_{side}_rms_{axis}_px"] = _number(
-                    _get(report, "absolute", "images", side, f"rms_{axis}_px"))
-        ev = _read_json(Path(out) / "eval.json")
-        le68 = _get(ev, "all", "le68")
-        figures["le68_m"] = _number(le68 if le68 is not None else _get(ev, "all", "le68_m"))
+        try:
+            report = read_report(Path(out) / "report.json")
+        except GcpFreeError:
+            report = None
+        if report is not None:
+            figures["gcps"] = report.gcps.used
+            for side in ("left", "right"):
+                cp = (report.check_points or {}).get(side)
+                fit = report.absolute.images.get(side)
+                for axis in ("col", "row"):
+                    key = f"rms_{axis}_px"
+                    figures[f"cp_{side}_{key}"] = _number(getattr(cp, key, None))
+                    figures[f"gcp_{side}_{key}"] = _number(getattr(fit, key, None))
+        stats = read_evaluation_stats(Path(out) / "eval.json")
+        figures["le68_m"] = _number(stats["all"].le68_m) if stats is not None else None
     return PairRow(id=entry_id, status=status, reason=one_line(reason), out=str(out), **figures)
 
 

@@ -10,7 +10,6 @@ from __future__ import annotations
 
 import datetime as dt
 import itertools
-import json
 import shutil
 import tempfile
 from collections.abc import Mapping
@@ -24,6 +23,7 @@ from pystac.extensions.projection import ProjectionExtension
 from rasterio.warp import transform_bounds, transform_geom
 
 from core.errors import InputError
+from tasks.io.rasters import read_json
 
 MEDIA_COG = pystac.MediaType.COG
 
@@ -108,5 +108,5 @@ def write_catalog(run_dir: str | Path, run_id: str, products: list[RasterProduct
     finally:
         shutil.rmtree(tmp, ignore_errors=True)
     # the hrefs were computed for the temporary folder at the same depth: still valid
-    json.loads((final / "catalog.json").read_text())
+    read_json(final / "catalog.json", "STAC catalog")
     return final / "catalog.json"

@@ -10,54 +10,42 @@ only read, slice and call one core function, and hand freed memory back when don
 from __future__ import annotations
 
 import ctypes
-import json
 import math
 from dataclasses import replace
 from pathlib import Path
 
 import cv2
 import numpy as np
-from rasterio.windows import Window
 
 from core.errors import InputError
 from core.geoid import GeoidGrid
-from core.matching.dense import (
-    MatchingConfig,
-    PixelStatus,
-    TileMatches,
-    TileStats,
-    dense_tile,
-    retriangulate,
-)
+from core.jsonio import parse_json, to_json
+from core.matching.dense import MatchingConfig, PixelStatus
+from core.matching.dense_tile import TileMatches, TileStats, dense_tile, retriangulate
 from core.matching.grid import GridSpec, grid_dem
-from core.matching.rectify import Box, TilePlan, TileRectification
+from core.matching.rectify import TilePlan, TileRectification
 from core.sensors.base import SensorModel
+from core.sensors.footprint import PixelBox
 from tasks.io.crs import Projection
-from tasks.io.rasters import open_image
+from tasks.io.rasters import open_raster
+from tasks.io.rasters import read_window as read_raster_window
 
 # ---------------------------------------------------------------------------- reading
 
 
-def read_window(path: str | Path, box: Box) -> tuple[np.ndarray, float | None]:
-    """Sensor pixels ``box`` (col0, row0, col1, row1) of band 1 as float32, zeros (or the
-    nodata value) beyond the image; and the image's nodata value."""
-    c0, r0, c1, r1 = box
-    with open_image(path) as src:
+def read_window(path: str | Path, box: PixelBox) -> tuple[np.ndarray, float | None]:
+    """Sensor pixels ``box`` (col0, row0, col1, row1) of band 1 as float32, the nodata value
+    (or 0) beyond the image (:func:`tasks.io.rasters.read_window`); and the image's nodata
+    value."""
+    with open_raster(path, "image") as src:
         nodata = src.nodata
-        fill = 0.0 if nodata is None or math.isnan(nodata) else float(nodata)
-        out = np.full((r1 - r0, c1 - c0), fill, dtype=np.float32)
-        a0, b0 = max(r0, 0), max(c0, 0)
-        a1, b1 = min(r1, src.height), min(c1, src.width)
-        if a1 > a0 and b1 > b0:
-            out[a0 - r0:a1 - r0, b0 - c0:b1 - c0] = src.read(
-                1, window=Window(b0, a0, b1 - b0, a1 - a0)).astype(np.float32)
-    return out, nodata
+        return read_raster_window(src, box, what="image").astype(np.float32), nodata
 
 
 # ---------------------------------------------------------------------------- tiles
 
 
-def tile_boxes(roi: Box, tile_px: int) -> list[Box]:
+def tile_boxes(roi: PixelBox, tile_px: int) -> list[PixelBox]:
     """The ROI cut into tiles of about ``tile_px`` (equal sizes, none thinner than half)."""
     c0, r0, c1, r1 = roi
     nc = max(1, round((c1 - c0) / tile_px))
@@ -68,8 +56,10 @@ def tile_boxes(roi: Box, tile_px: int) -> list[Box]:
             for i in range(nr) for j in range(nc)]
 
 
-def check_roi(roi: tuple[int, int, int, int] | None, size: tuple[int, int]) -> Box:
-    """``(col, row, width, height)`` in the left image -> a box; the whole image for None."""
+def check_roi(roi: tuple[int, int, int, int] | None, size: tuple[int, int]) -> PixelBox:
+    """The command line's ``--roi COL ROW WIDTH HEIGHT`` in the left image -> the
+    :data:`~core.sensors.footprint.PixelBox` (col0, row0, col1, row1) every step uses after it
+    (``DensePlan.roi``, the ``roi`` of DEM.json); the whole image for None."""
     cols, rows = size
     if roi is None:
         return (0, 0, cols, rows)
@@ -117,7 +107,7 @@ def dense_block(plan: TilePlan, left_path: str, right_path: str, left: SensorMod
     m = res.matches
     np.savez(out, dx=(res.x_m - origin_m[0]).astype(np.float32),
              dy=(res.y_m - origin_m[1]).astype(np.float32), h=res.h_m, status=res.status,
-             d=m.d_px, rect=json.dumps(m.rect.to_dict()), window=np.array(m.window),
+             d=m.d_px, rect=to_json(m.rect.to_dict(), indent=None), window=np.array(m.window),
              core=np.array(m.core), d_range=np.array(m.d_range_px))
     stats = res.stats
     del res, lw, rw
@@ -132,7 +122,8 @@ def retriangulate_block(stats: TileStats, work_in: str, work_out: str, left: Sen
     a point file of the same layout in ``work_out``; the tile's figures with its new ground
     bounds and miss distance."""
     with np.load(tile_points_path(Path(work_in), stats.index)) as f:
-        matches = TileMatches(f["d"], TileRectification.from_dict(json.loads(str(f["rect"]))),
+        rect = parse_json(str(f["rect"]), "a tile's rectification")
+        matches = TileMatches(f["d"], TileRectification.from_dict(rect),
                               tuple(int(v) for v in f["window"]),
                               tuple(int(v) for v in f["core"]),
                               (float(f["d_range"][0]), float(f["d_range"][1])))

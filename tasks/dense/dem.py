@@ -5,7 +5,7 @@
    (:func:`core.matching.rectify.plan_tile_on_dem`, one Dask task per tile). Tiles the right
    image does not see are dropped; none left is "no overlap".
 2. :func:`match_tiles`: each tile reads its two sensor windows, runs
-   :func:`core.matching.dense.dense_tile` (rectify, pointing correction, SGM, left-right
+   :func:`core.matching.dense_tile.dense_tile` (rectify, pointing correction, SGM, left-right
    check, triangulation) and saves its ground points to a small file in a work folder. The
    overall match rate is checked here: a pair that does not correlate stops with one line.
 3. :func:`grid_dem_cog`: the DEM grid (local UTM zone) is computed block by block
@@ -26,40 +26,29 @@ are in :mod:`tasks.dense.blocks`.
 
 from __future__ import annotations
 
-import json
 import math
-import os
 import shutil
-import sys
-from dataclasses import asdict, dataclass, field, replace
+from collections.abc import Mapping
+from dataclasses import MISSING, asdict, dataclass, field, fields, replace
 from pathlib import Path
 from typing import Any
 
-import cv2
 import dask
 import dask.array as darr
 import numpy as np
-from dask.diagnostics import ProgressBar
 from prefect import task
 from prefect.cache_policies import NO_CACHE
 
 from core.dem import GeoDEM
 from core.errors import CoverageError, GeometryError, InputError, InsufficientDataError
-from core.geodesy import BBox, utm_epsg
-from core.matching.dense import MatchingConfig, TileStats
+from core.geodesy import utm_epsg
+from core.matching.dense import MatchingConfig
+from core.matching.dense_tile import TileStats
 from core.matching.grid import MASK_MISMATCH, MASK_VALID, GridSpec
-from core.matching.rectify import (
-    Box,
-    RectifyConfig,
-    TilePlan,
-    plan_tile_on_dem,
-    sample_terrain,
-)
+from core.matching.rectify import RectifyConfig, TilePlan, plan_tile_on_dem
 from core.sensors.base import SensorModel
-from core.sensors.rpc import RPCModel
+from core.sensors.footprint import PixelBox, footprint_box, scene_height_range_m
 from core.sensors.viewing import point_geometry
-from tasks.io.crs import Projection
-from tasks.io.dem import dem_datum, read_reference
 from tasks.dense.blocks import (
     check_roi,
     dense_block,
@@ -68,11 +57,13 @@ from tasks.dense.blocks import (
     tile_boxes,
     tile_points_path,
 )
+from tasks.io.crs import Projection
+from tasks.io.dem import dem_datum, read_reference
 from tasks.io.geoid import load_geoid
-from tasks.io.rasters import CogItem, CogOptions, atomic_write_text, write_arrays_cog
+from tasks.io.rasters import CHUNK, CogItem, CogOptions, atomic_write_json, write_arrays_cog
 from tasks.io.sensors import LoadedModel
+from tasks.scheduling import compute, threads
 
-CHUNK = 1024
 VERTICAL_DATUMS = ("ellipsoidal", "egm96")
 VERTICAL_TAGS = {"ellipsoidal": "WGS84 ellipsoid (EPSG:4979 heights)",
                  "egm96": "EGM96 geoid (EPSG:5773), H = h - N"}
@@ -129,7 +120,7 @@ class DensePlan:
 
     tiles: tuple[TilePlan, ...]
     n_tiles_roi: int
-    roi: Box
+    roi: PixelBox  # the --roi checked (check_roi): (col0, row0, col1, row1) of the left image
     epsg: int
     origin_m: tuple[float, float]
     resolution_m: float
@@ -151,7 +142,7 @@ class DemSummary:
     resolution_m: float
     width: int
     height: int
-    roi: tuple[int, int, int, int]
+    roi: PixelBox  # as DensePlan.roi
     n_tiles: int
     n_tiles_roi: int
     completeness_pct: float
@@ -171,6 +162,19 @@ class DemSummary:
 
     def to_dict(self) -> dict[str, Any]:
         return {"format": "gcpfree.dem", "version": 1, **asdict(self)}
+
+    @classmethod
+    def from_dict(cls, d: Mapping[str, Any]) -> DemSummary:
+        """The summary :meth:`to_dict` wrote (InputError naming what is missing)."""
+        if not isinstance(d, Mapping) or d.get("format") != "gcpfree.dem":
+            raise InputError("not a DEM summary of gcpfree (format 'gcpfree.dem')")
+        names = [f.name for f in fields(cls)]
+        missing = [n for n in names if n not in d and cls.__dataclass_fields__[n].default
+                   is MISSING]
+        if missing:
+            raise InputError(f"the DEM summary lacks {', '.join(missing)}")
+        tuples = ("roi", "pointing_dy_px", "n_disp_range", "tiles")
+        return cls(**{n: (tuple(d[n]) if n in tuples else d[n]) for n in names if n in d})
 
     def lines(self) -> list[str]:
         lo, hi = self.pointing_dy_px
@@ -197,46 +201,19 @@ class DemSummary:
 def scene_height_range(left: LoadedModel, right: LoadedModel,
                        given: tuple[float, float] | None, reference: Path | None
                        ) -> tuple[float, float]:
-    """Ellipsoidal heights to assume where the reference has none (or when there is none):
-    the range given, else the RPCs' own (height offset +- scale); with a reference the plan
-    takes its range and this is only a fallback. The relative orientation uses it too (with
-    no reference), so both steps read the scene's heights the same way."""
-    if given is not None:
-        lo, hi = map(float, given)
-        if not hi > lo:
-            raise InputError(f"height range {given} is empty; give --height-range MIN MAX")
-        return lo, hi
-    rpcs = [m.model for m in (left, right) if isinstance(m.model, RPCModel)]
-    if rpcs:
-        return (float(min(r.alt_off - r.alt_scale for r in rpcs)),
-                float(max(r.alt_off + r.alt_scale for r in rpcs)))
-    if reference is not None:
-        return (-500.0, 9000.0)
-    raise InputError("a rigorous (pushbroom) model states no terrain heights: give "
-                     "--reference REF.tif, --srtm-dir DIR or --height-range MIN MAX")
+    """Ellipsoidal heights to assume where the reference has none (or when there is none), by
+    the one rule of :func:`core.sensors.footprint.scene_height_range_m`: the range given,
+    else the RPCs' own; with a reference the plan takes its range and this is only a
+    fallback (any terrain), without one a rigorous pair needs heights given. The relative
+    orientation uses it too, so both steps read the scene's heights the same way."""
+    return scene_height_range_m([left.model, right.model], given,
+                                any_terrain=reference is not None)
 
 
-def pair_box(left: LoadedModel, right: LoadedModel, h_range_m: tuple[float, float]) -> BBox:
-    """The lon/lat box of both images' footprints over a height range, with a small margin."""
-    lons, lats = [], []
-    for m in (left, right):
-        border = sample_terrain(m.model, (0, 0, *m.size), None, h_range_m,
-                                step_px=max(m.size) / 8.0)
-        lon, lat = m.model.localize(border.col, border.row, border.h_m)
-        lons.append(lon)
-        lats.append(lat)
-    lon, lat = np.concatenate(lons), np.concatenate(lats)
-    return BBox(float(lon.min()), float(lat.min()), float(lon.max()),
-                float(lat.max())).expanded(0.01)
-
-
-def _reference_dem(reference: Path, datum: str, model: SensorModel, roi: Box,
+def _reference_dem(reference: Path, datum: str, model: SensorModel, roi: PixelBox,
                    h_range: tuple[float, float]) -> GeoDEM:
-    border = sample_terrain(model, roi, None, h_range, step_px=max(roi[2] - roi[0],
-                                                                   roi[3] - roi[1]) / 8.0)
-    lon, lat = model.localize(border.col, border.row, border.h_m)
-    box = BBox(float(lon.min()), float(lat.min()), float(lon.max()), float(lat.max()))
-    dem = read_reference(reference, box.expanded(0.005), datum)
+    box = footprint_box([(model, roi)], h_range)
+    dem = read_reference(reference, box, datum)
     if not np.isfinite(dem.h_m).any():
         raise CoverageError(f"reference DEM {reference} has no height over the region of "
                             "interest; give a DEM covering the scene")
@@ -266,8 +243,7 @@ def plan_dense(left: LoadedModel, right: LoadedModel, roi: tuple[int, int, int, 
     parts = [dask.delayed(plan_tile_on_dem)(
         i, left.model, right.model, b, right.size, dem, (lo, hi), cfg.margin_m,
         right_pad_px=pad, config=cfg.rectify) for i, b in enumerate(boxes)]
-    plans = [p for p in dask.compute(*parts, scheduler="threads", num_workers=cfg.num_workers)
-             if p is not None]
+    plans = [p for p in compute(parts, workers=cfg.num_workers) if p is not None]
     if not plans:
         raise GeometryError(
             f"the right image {right.image or right.source} sees no part of the left region "
@@ -292,18 +268,10 @@ def plan_dense(left: LoadedModel, right: LoadedModel, roi: tuple[int, int, int, 
 
 
 def _compute(parts: list[Any], cfg: DenseConfig, label: str) -> list[Any]:
-    workers = cfg.num_workers or os.cpu_count() or 1
-    processes = cfg.processes if cfg.processes is not None else len(parts) >= 8
-    scheduler = "processes" if processes and workers > 1 else "threads"
-    threads = cv2.getNumThreads()
-    try:
-        if cfg.progress:
-            print(f"{label}: {len(parts)} tiles", file=sys.stderr, flush=True)
-            with ProgressBar(out=sys.stderr, dt=1.0):
-                return list(dask.compute(*parts, scheduler=scheduler, num_workers=workers))
-        return list(dask.compute(*parts, scheduler=scheduler, num_workers=workers))
-    finally:
-        cv2.setNumThreads(threads)
+    """The tiles as :func:`tasks.scheduling.schedule` runs them (processes from 8 tiles on,
+    unless ``cfg.processes`` says)."""
+    return compute(parts, workers=cfg.num_workers, processes=cfg.processes,
+                   progress=cfg.progress, label=label)
 
 
 @task(name="match-dense-tiles", cache_policy=NO_CACHE)
@@ -398,7 +366,7 @@ def grid_dem_cog(plan: DensePlan, stats: tuple[TileStats, ...], work: Path, out:
             "long_name": "height" if cfg.vertical == "ellipsoidal" else "orthometric height",
             "software": "gcpfree dsm"}
     counts = [(mask == v).sum() for v in (MASK_VALID, MASK_MISMATCH)] + [overlap.sum()]
-    with dask.config.set(num_workers=cfg.num_workers):
+    with threads(cfg.num_workers):
         n_ok, n_mis, n_overlap, zmin, zmax = write_arrays_cog(
             [CogItem(z, out, CogOptions(nodata=np.nan, tags=tags, **georef)),
              CogItem(mask, mask_path, CogOptions(
@@ -408,7 +376,7 @@ def grid_dem_cog(plan: DensePlan, stats: tuple[TileStats, ...], work: Path, out:
     n_cells = spec.n_rows * spec.n_cols
     summary = _summary(plan, stats, spec, out, mask_path, cfg.vertical, n_cells,
                        (int(n_ok), int(n_mis), int(n_overlap)), (float(zmin), float(zmax)))
-    atomic_write_text(out.with_suffix(".json"), json.dumps(summary.to_dict(), indent=1))
+    atomic_write_json(out.with_suffix(".json"), summary.to_dict())
     if not keep_work:
         shutil.rmtree(work, ignore_errors=True)
     return summary

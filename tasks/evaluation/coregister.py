@@ -8,51 +8,34 @@ they differ, the DEM's heights are brought to the reference's datum with the EGM
 
 from __future__ import annotations
 
-import json
-import warnings
-from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
 import pyproj
 import rasterio
-from rasterio.errors import NotGeoreferencedWarning, RasterioIOError
 from rasterio.warp import Resampling, reproject
 
-from core.coregister import CoregConfig, CoregResult, Grid, nuth_kaab
+from core.coregister import CoregConfig, CoregResult, DemGrid, nuth_kaab
+from core.dem import GeoDEM, SurfaceGrid
 from core.errors import InputError
 from core.heights import DatumDecision
 from tasks.io.dem import dem_datum
 from tasks.io.geoid import load_geoid
-from tasks.io.rasters import atomic_write_text
+from tasks.io.rasters import atomic_write_json, open_raster, read_window
 from tasks.io.srtm import SRTM_VOID
 
-
-def _open(path: Path) -> rasterio.io.DatasetReader:
-    """The raster opened; InputError when it cannot be (a raster with no georeferencing opens,
-    quietly: the caller refuses it in one line)."""
-    try:
-        with warnings.catch_warnings():
-            warnings.simplefilter("ignore", NotGeoreferencedWarning)
-            return rasterio.open(path)
-    except RasterioIOError as exc:
-        raise InputError(f"cannot read DEM {path}: {exc}; give a GeoTIFF or .hgt") from None
+HINT = "give a GeoTIFF or .hgt"
 
 
 def read_grid(path: str | Path, crs: object | None = None,
-              like: rasterio.io.DatasetReader | None = None) -> tuple[Grid, object]:
-    """A DEM raster as a :class:`Grid` (NaN voids), reprojected onto ``like``'s CRS and grid
-    when given and different."""
+              like: rasterio.io.DatasetReader | None = None) -> tuple[DemGrid, object]:
+    """A DEM raster as a grid (:class:`~core.dem.GeoDEM` or :class:`~core.dem.SurfaceGrid`,
+    NaN voids), reprojected onto ``like``'s CRS and grid when given and different."""
     path = Path(path)
-    src = _open(path)
-    with src:
+    with open_raster(path, "DEM", HINT) as src:
         if src.crs is None:
             raise InputError(f"DEM {path} has no CRS; give a georeferenced DEM")
-        try:
-            z = src.read(1, masked=True).astype(np.float64).filled(np.nan)
-        except RasterioIOError as exc:
-            raise InputError(f"cannot read the heights of DEM {path}: {exc}; the file is "
-                             "damaged, give a whole GeoTIFF or .hgt") from None
+        z = read_window(src, (0, 0, src.width, src.height), nan_masked=True, what="DEM")
         z[z <= SRTM_VOID + 0.5] = np.nan
         transform, src_crs = src.transform, src.crs
     if like is not None and (src_crs != like.crs):
@@ -63,8 +46,7 @@ def read_grid(path: str | Path, crs: object | None = None,
         z, transform, src_crs = out, like.transform, like.crs
     if transform.b != 0 or transform.d != 0:
         raise InputError(f"DEM {path} is rotated; warp it north-up first")
-    grid = Grid(z, transform.c + 0.5 * transform.a, transform.f + 0.5 * transform.e,
-                transform.a, transform.e, bool(src_crs.is_geographic))
+    grid = (GeoDEM if src_crs.is_geographic else SurfaceGrid).from_transform(z, transform)
     return grid, src_crs
 
 
@@ -76,7 +58,7 @@ def datums(reference: str | Path, dem: str | Path, reference_vertical: str = "au
             dem_datum(dem, dem_vertical, what="DEM", option="--dem-vertical"))
 
 
-def _to_datum(grid: Grid, crs: object, src: str, dst: str) -> Grid:
+def _to_datum(grid: DemGrid, crs: object, src: str, dst: str) -> DemGrid:
     """The grid's heights brought from datum ``src`` to ``dst`` with the EGM96 geoid."""
     if src == dst:
         return grid
@@ -86,8 +68,8 @@ def _to_datum(grid: Grid, crs: object, src: str, dst: str) -> Grid:
                                         always_xy=True)
         x, y = t.transform(x, y)
     n_m = load_geoid().undulation_m(x, y)
-    z = grid.z_m + n_m if src == "egm96" else grid.z_m - n_m
-    return replace(grid, z_m=z)
+    z = grid.values + n_m if src == "egm96" else grid.values - n_m
+    return grid.with_values(z)
 
 
 def coregister(reference: str | Path, dem: str | Path, out: str | Path | None = None,
@@ -98,7 +80,7 @@ def coregister(reference: str | Path, dem: str | Path, out: str | Path | None = 
     given."""
     ref_datum, dem_d = datums(reference, dem, reference_vertical, dem_vertical)
     ref, crs = read_grid(reference)
-    with _open(Path(reference)) as like:
+    with open_raster(reference, "reference DEM", HINT) as like:
         grid, grid_crs = read_grid(dem, like=like)
     grid = _to_datum(grid, grid_crs, dem_d.datum, ref_datum.datum)
     result = nuth_kaab(ref, grid, config)
@@ -110,5 +92,5 @@ def coregister(reference: str | Path, dem: str | Path, out: str | Path | None = 
                "convention": "adding the shift to the DEM's coordinates aligns it with the "
                              "reference: ref(x + dx, y + dy) = dem(x, y) + dz",
                **result.to_dict()}
-        atomic_write_text(out, json.dumps(doc, indent=1))
+        atomic_write_json(out, doc)
     return result

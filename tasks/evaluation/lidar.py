@@ -43,15 +43,14 @@ import rasterio
 from prefect import task
 
 from core.errors import CoverageError, InputError, InsufficientDataError
-from core.evaluation import (
-    ClassedDz,
+from core.evaluation import ClassedDz, StatsConfig
+from core.evaluation_report import (
     DemInfo,
     EvaluationReport,
     GcpCheck,
     LandcoverInfo,
     PointCounts,
     PointTally,
-    StatsConfig,
     class_tables,
     gcp_check,
     select_points,
@@ -59,7 +58,9 @@ from core.evaluation import (
 from core.heights import Z_UNITS, HeightFrame, height_difference_m
 from core.jsonio import parse_json
 from core.points import GeoPoint
-from tasks.io.vertical_crs import existing_file
+from tasks.io.geoid import load_geoid
+from tasks.io.lidar import LidarSource, inspect_lidar, lidar_chunks
+from tasks.io.rasters import atomic_write_text
 from tasks.io.rasters_at_points import (
     RasterSource,
     inspect_dem,
@@ -69,9 +70,7 @@ from tasks.io.rasters_at_points import (
     sample_dem,
     summarize_mask,
 )
-from tasks.io.geoid import load_geoid
-from tasks.io.lidar import LidarSource, inspect_lidar, lidar_chunks
-from tasks.io.rasters import atomic_write_text
+from tasks.io.vertical_crs import existing_file
 
 VERTICALS = ("auto", "ellipsoidal", "egm96")
 

@@ -19,7 +19,6 @@ in the tile's own format and grid. The maths is :func:`core.void_fill.delta_surf
 
 from __future__ import annotations
 
-import json
 import math
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
@@ -30,23 +29,23 @@ import rasterio
 from prefect import task
 from prefect.cache_policies import NO_CACHE
 from rasterio.enums import Resampling
-from rasterio.errors import RasterioIOError
 from rasterio.io import MemoryFile
 from rasterio.windows import Window
 
 from core.dem import sample_bilinear
 from core.errors import CoverageError, InputError
-from core.evaluation import DemInfo
-from core.geodesy import metres_per_degree
+from core.evaluation_report import DemInfo
+from core.geodesy import ARCSEC, metres_per_degree
 from core.geoid import GeoidGrid
 from core.grid_points import affine_nodes
 from core.heights import VERTICAL_CHOICES, HeightFrame
+from core.jsonio import to_json
 from core.void_fill import FillConfig, FillResult, delta_surface_fill, dsm_to_datum
 from tasks.io.crs import Projection
 from tasks.io.dem import dem_datum
-from tasks.io.rasters_at_points import inspect_dem
 from tasks.io.geoid import load_geoid
-from tasks.io.rasters import atomic_write_bytes, atomic_write_json
+from tasks.io.rasters import atomic_write_bytes, atomic_write_json, open_raster
+from tasks.io.rasters_at_points import inspect_dem
 from tasks.io.srtm import SRTM_VOID, check_tile, parse_tile_name
 
 VERTICALS = VERTICAL_CHOICES
@@ -182,7 +181,7 @@ class FillSummary:
         return {"format": REPORT_FORMAT, "version": 1, **asdict(self)}
 
     def to_json(self) -> str:
-        return json.dumps(self.to_dict(), indent=1)
+        return to_json(self.to_dict())
 
     def lines(self) -> list[str]:
         ring = self.ring
@@ -246,11 +245,7 @@ def read_tile(path: str | Path, vertical: str = "auto") -> TileGrid:
                                               tile.lat0 + 1 + r / 2), SRTM_VOID, datum, source)
     if suffix not in TIFF_SUFFIXES:
         raise InputError(f"SRTM tile {path}: give a .hgt or a GeoTIFF (.tif), not {suffix!r}")
-    try:
-        src = rasterio.open(path)
-    except RasterioIOError as exc:
-        raise InputError(f"cannot read SRTM tile {path}: {exc}; give a .hgt or GeoTIFF") from exc
-    with src:
+    with open_raster(path, "SRTM tile", "give a .hgt or GeoTIFF") as src:
         if src.crs is None or not src.crs.is_geographic:
             raise InputError(f"SRTM tile {path} is not in geographic coordinates (CRS "
                              f"{src.crs}); give a lon/lat tile (EPSG:4326)")
@@ -338,7 +333,7 @@ def plan_fill(options: FillOptions, tile: TileGrid | None = None) -> FillPlan:
         cell_m = float(min(abs(a) * m_lon, abs(e) * m_lat))
     return FillPlan(
         tile_kind=tile.kind, tile_shape=tile.shape,
-        tile_res_arcsec=round(abs(ta) * 3600.0, 6), tile_vertical=tile.vertical,
+        tile_res_arcsec=round(abs(ta) / ARCSEC, 6), tile_vertical=tile.vertical,
         tile_vertical_source=tile.vertical_source, dem=info, dem_epsg=int(epsg),
         rows=(r0, r1), cols=(c0, c1), node_spacing_m=spacing_m, dem_cell_m=cell_m,
         decimation=max(1, math.floor(spacing_m / cell_m)))

@@ -7,24 +7,24 @@ functions (no Prefect): the CLI checks inputs with them before any flow starts.
 
 from __future__ import annotations
 
-import warnings
 from pathlib import Path
 
 import numpy as np
 import pyproj
-import rasterio
-from rasterio.errors import NotGeoreferencedWarning, RasterioIOError, WindowError
+from rasterio.errors import WindowError
 from rasterio.windows import Window, from_bounds
 
 from core.dem import GeoDEM
 from core.errors import CoverageError, InputError
 from core.geodesy import BBox
 from core.heights import VERTICAL_CHOICES, DatumDecision, decide_datum
-from tasks.io.vertical_crs import split_crs
 from tasks.io.geoid import load_geoid
+from tasks.io.rasters import open_raster, read_window
 from tasks.io.srtm import SRTM_VOID, SrtmTile, parse_tile_name
+from tasks.io.vertical_crs import split_crs
 
 VERTICALS = VERTICAL_CHOICES
+HINT = "give a GeoTIFF or .hgt file"
 
 
 def srtm_name(path: Path) -> str | None:
@@ -49,16 +49,9 @@ def dem_datum(path: str | Path, given: str = "auto", *, what: str = "reference D
     label = f"{what} {path}"
     if given != "auto":  # the option decides: no need to open the file
         return decide_datum(label, option, given=given)
-    if not path.is_file():
-        raise InputError(f"{label} does not exist; give a GeoTIFF or .hgt file")
-    try:
-        with warnings.catch_warnings():
-            warnings.simplefilter("ignore", NotGeoreferencedWarning)
-            with rasterio.open(path) as src:
-                tags = {k.lower(): v for k, v in src.tags().items()}
-                crs = src.crs
-    except RasterioIOError as exc:
-        raise InputError(f"cannot read {label}: {exc}; give a GeoTIFF or .hgt file") from exc
+    with open_raster(path, what, HINT) as src:
+        tags = {k.lower(): v for k, v in src.tags().items()}
+        crs = src.crs
     if crs is None:
         raise InputError(f"{label} has no CRS; give a georeferenced DEM (EPSG:4326 or a UTM "
                          "zone), e.g. gdal_edit.py -a_srs EPSG:4326")
@@ -88,17 +81,8 @@ def check_srtm_tiles(tiles: list[SrtmTile]) -> None:
 def check_reference(path: str | Path) -> None:
     """Fail early, in one line, on a reference DEM that cannot be read as lon/lat heights."""
     path = Path(path)
-    if not path.is_file():
-        raise InputError(f"reference DEM {path} does not exist; give a GeoTIFF or .hgt file "
-                         "in EPSG:4326")
-    try:
-        with warnings.catch_warnings():  # no georeferencing: refused below, in one line
-            warnings.simplefilter("ignore", NotGeoreferencedWarning)
-            with rasterio.open(path) as src:
-                crs = src.crs
-    except RasterioIOError as exc:
-        raise InputError(f"cannot read reference DEM {path}: {exc}; give a GeoTIFF or .hgt "
-                         "file") from exc
+    with open_raster(path, "reference DEM", HINT + " in EPSG:4326") as src:
+        crs = src.crs
     if crs is None or not crs.is_geographic:
         raise InputError(f"reference DEM {path} is not in geographic coordinates (CRS {crs}); "
                          "reproject it to EPSG:4326 (e.g. gdalwarp -t_srs EPSG:4326)")
@@ -114,7 +98,7 @@ def read_reference(path: str | Path, box: BBox, vertical: str) -> GeoDEM:
     """
     path = Path(path)
     check_reference(path)
-    with rasterio.open(path) as src:
+    with open_raster(path, "reference DEM", HINT) as src:
         f = from_bounds(*box.as_tuple(), transform=src.transform)
         c0, r0 = int(np.floor(f.col_off)) - 1, int(np.floor(f.row_off)) - 1  # one node more:
         c1 = int(np.ceil(f.col_off + f.width)) + 1  # the nodes (pixel centres) span the box
@@ -131,11 +115,9 @@ def read_reference(path: str | Path, box: BBox, vertical: str) -> GeoDEM:
                 f"{b.top:.3f}) does not cover the image footprint (lon {box.lon_min:.3f}.."
                 f"{box.lon_max:.3f}, lat {box.lat_min:.3f}..{box.lat_max:.3f}); give a DEM "
                 "covering the scene")
-        try:
-            heights = src.read(1, window=win, masked=True).astype(np.float64).filled(np.nan)
-        except RasterioIOError as exc:
-            raise InputError(f"cannot read the heights of reference DEM {path}: {exc}; the "
-                             "file is damaged, give a whole GeoTIFF or .hgt") from None
+        c0, r0 = int(win.col_off), int(win.row_off)
+        heights = read_window(src, (c0, r0, c0 + int(win.width), r0 + int(win.height)),
+                              nan_masked=True, what="reference DEM")
         tr = src.window_transform(win)
     heights[heights <= SRTM_VOID + 0.5] = np.nan  # SRTM voids when no nodata is declared
     if vertical == "egm96":

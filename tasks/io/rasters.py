@@ -1,9 +1,10 @@
-"""Raster writing shared by every task: streamed tiled writes, then an atomic COG copy."""
+"""Rasters for every task: the one opener (:func:`open_raster`), the one window reader
+(:func:`read_window`), streamed tiled writes, then an atomic COG copy; strict JSON written
+atomically and read back (:func:`read_json`)."""
 
 from __future__ import annotations
 
 import contextlib
-import json
 import math
 import os
 import tempfile
@@ -27,9 +28,12 @@ from rasterio.windows import Window
 
 from core.dem import SurfaceGrid
 from core.errors import InputError
+from core.jsonio import parse_json, to_json
 
 # GDAL block cache while building a COG: bounded so memory stays flat on large rasters
 COG_CACHE_MB = 256
+# the Dask chunks of every raster a task maps over, cells a side (DESIGN: about 1024 x 1024)
+CHUNK = 1024
 
 
 class _WindowWriter:
@@ -122,7 +126,9 @@ def write_arrays_cog(items: list[CogItem], extra: list[Any] | None = None) -> tu
                 predictor = 3 if dtype.kind == "f" else 2
             jobs.append((dst, tmp, out, predictor, opts.blocksize, opts.resampling))
         stored = darr.store(sources, targets, lock=False, compute=False)
-        with dask.config.set(scheduler="threads"):
+        from tasks.scheduling import threads
+
+        with threads():  # the window writers share this process's open datasets
             results = dask.compute(stored, *(extra or []))[1:]
         for dst, tmp, out, predictor, blocksize, resampling in jobs:
             dst.close()
@@ -176,50 +182,89 @@ def atomic_write_text(path: str | Path, text: str) -> Path:
     return atomic_write_bytes(path, text.encode("utf-8"))
 
 
-def json_ready(obj: Any) -> Any:
-    """``obj`` as strict JSON values: NaN and infinities -> None, tuples and arrays -> lists,
-    NumPy scalars -> Python numbers, paths -> strings."""
-    if isinstance(obj, dict):
-        return {str(k): json_ready(v) for k, v in obj.items()}
-    if isinstance(obj, (list, tuple, np.ndarray)):
-        return [json_ready(v) for v in (obj.tolist() if isinstance(obj, np.ndarray) else obj)]
-    if isinstance(obj, np.generic):
-        obj = obj.item()
-    if isinstance(obj, float) and not math.isfinite(obj):
-        return None
-    if isinstance(obj, Path):
-        return str(obj)
-    return obj
-
-
 def atomic_write_json(path: str | Path, doc: Any, indent: int | None = 1) -> Path:
-    """``doc`` written as strict JSON (see :func:`json_ready`) through a temporary file."""
-    return atomic_write_text(path, json.dumps(json_ready(doc), indent=indent, allow_nan=False))
+    """``doc`` written by the one strict JSON writer (:func:`core.jsonio.to_json`) through a
+    temporary file."""
+    return atomic_write_text(path, to_json(doc, indent))
 
 
-def open_image(path: str | Path) -> rasterio.io.DatasetReader:
-    """The raster at ``path`` (sensor images have no CRS: no warning for it); InputError when
-    it cannot be read."""
+def read_json(path: str | Path, what: str = "JSON file", hint: str = "check the path") -> Any:
+    """The one JSON reader of files: the document at ``path`` through
+    :func:`core.jsonio.parse_json`; a one-line InputError naming ``what`` when the file is
+    missing, unreadable or not JSON."""
+    try:
+        text = Path(path).read_text(encoding="utf-8-sig", errors="replace")
+    except OSError as exc:
+        raise InputError(f"cannot read {what} {path}: {exc.strerror or exc}; {hint}") from None
+    return parse_json(text, f"{what} {path}")
+
+
+def open_raster(path: str | Path, what: str = "image", hint: str = "check the path"
+                ) -> rasterio.io.DatasetReader:
+    """The one raster opener: the file at ``path`` open for reading (a context manager).
+
+    ``what`` says what the file is for (``"image"``, ``"reference DEM"``, ``"left ortho"``...)
+    and ``hint`` what to do: a missing or unreadable file is a one-line InputError saying both.
+    A raster without georeferencing opens without a warning (sensor images have none); a step
+    that needs a CRS refuses it itself, in its own words.
+    """
+    path = Path(path)
+    if not path.exists():
+        raise InputError(f"{what} {path} does not exist; {hint}")
     try:
         with warnings.catch_warnings():
             warnings.simplefilter("ignore", NotGeoreferencedWarning)
             return rasterio.open(path)
     except RasterioIOError as exc:
-        raise InputError(f"cannot read image {path}: {exc}; check the path") from exc
+        raise InputError(f"cannot read {what} {path}: {exc}; {hint}") from exc
+
+
+def read_window(src: rasterio.io.DatasetReader, box: tuple[int, int, int, int], *,
+                fill: float | None = None, nan_masked: bool = False,
+                what: str = "raster") -> np.ndarray:
+    """The one window reader: band 1 over ``box`` (col0, row0, col1, row1; half-open, any part
+    of it may lie beyond the raster) of an open raster.
+
+    Beyond the raster the window holds ``fill`` (default: the raster's nodata value when it
+    is a finite number, else 0), in the raster's own type. With ``nan_masked`` the window is
+    float64 with the raster's nodata and masked cells, and everything beyond it, NaN. A
+    damaged file is a one-line InputError naming ``what``.
+    """
+    c0, r0, c1, r1 = (int(v) for v in box)
+    nodata = src.nodata
+    if nan_masked:
+        out = np.full((r1 - r0, c1 - c0), np.nan)
+    else:
+        if fill is None:
+            fill = nodata if nodata is not None and math.isfinite(nodata) else 0
+        out = np.full((r1 - r0, c1 - c0), fill, dtype=src.dtypes[0])
+    a0, a1, b0, b1 = max(r0, 0), min(r1, src.height), max(c0, 0), min(c1, src.width)
+    if a1 <= a0 or b1 <= b0:
+        return out
+    win = Window(b0, a0, b1 - b0, a1 - a0)
+    try:
+        if nan_masked:
+            part = src.read(1, window=win, masked=True)
+            out[a0 - r0:a1 - r0, b0 - c0:b1 - c0] = part.astype(np.float64).filled(np.nan)
+        else:
+            out[a0 - r0:a1 - r0, b0 - c0:b1 - c0] = src.read(1, window=win)
+    except RasterioIOError as exc:
+        raise InputError(f"cannot read the pixels of {what} {src.name}: {exc}; the file is "
+                         "damaged, give a whole file") from None
+    return out
 
 
 def read_surface_window(path: str | Path, bounds_m: tuple[float, float, float, float],
-                        margin_cells: int = 2) -> SurfaceGrid:
-    """The part of a north-up projected raster covering ``bounds_m`` (x_min, y_min, x_max,
-    y_max) plus ``margin_cells``, as float64 heights (NaN outside the raster)."""
+                        margin_cells: int = 2, what: str = "DEM") -> SurfaceGrid:
+    """The cells of a north-up projected raster covering ``bounds_m`` (x_min, y_min, x_max,
+    y_max) plus ``margin_cells``, as float64 heights: NaN for nodata and beyond the raster
+    (:func:`read_window`), in the grid convention of :class:`core.dem.RegularGrid`."""
     xmin, ymin, xmax, ymax = bounds_m
-    with rasterio.open(path) as src:
+    with open_raster(path, what) as src:
         t = src.transform
-        res = t.a
-        c0 = int(np.floor((xmin - t.c) / res)) - margin_cells
-        c1 = int(np.ceil((xmax - t.c) / res)) + margin_cells
-        r0 = int(np.floor((t.f - ymax) / res)) - margin_cells
-        r1 = int(np.ceil((t.f - ymin) / res)) + margin_cells
-        a = src.read(1, window=Window(c0, r0, c1 - c0, r1 - r0), boundless=True,
-                     fill_value=np.nan, masked=False).astype(np.float64)
-    return SurfaceGrid(a, t.c + (c0 + 0.5) * res, t.f - (r0 + 0.5) * res, res, res)
+        c0 = math.floor((xmin - t.c) / t.a) - margin_cells
+        c1 = math.ceil((xmax - t.c) / t.a) + margin_cells
+        r0 = math.floor((t.f - ymax) / -t.e) - margin_cells
+        r1 = math.ceil((t.f - ymin) / -t.e) + margin_cells
+        z = read_window(src, (c0, r0, c1, r1), nan_masked=True, what=what)
+    return SurfaceGrid(z, t.c + (c0 + 0.5) * t.a, t.f + (r0 + 0.5) * t.e, t.a, t.e)

@@ -16,13 +16,10 @@ from pathlib import Path
 import numpy as np
 import pyproj
 import rasterio
-from rasterio.enums import MaskFlags
-from rasterio.errors import RasterioIOError
-from rasterio.windows import Window
 
 from core.dem import sample_bilinear
 from core.errors import InputError
-from core.evaluation import (
+from core.evaluation_report import (
     NO_CODE,
     NO_LANDCOVER,
     DemInfo,
@@ -34,6 +31,7 @@ from core.grid_points import affine_nodes, inside_grid, sample_nearest, window_g
 from core.heights import Z_UNITS, HeightFrame, unit_key
 from core.jsonio import parse_json
 from tasks.io.dem import dem_datum
+from tasks.io.rasters import open_raster, read_window
 from tasks.io.vertical_crs import crs_info, existing_file, split_crs
 
 #: DEM windows are read at most this many cells on a side (8 MB of float64)
@@ -48,14 +46,6 @@ class RasterSource:
     horizontal: pyproj.CRS
     transform: tuple[float, ...]
     shape: tuple[int, int]
-
-
-def open_raster(path: Path, what: str) -> rasterio.io.DatasetReader:
-    """The raster opened with rasterio; InputError naming ``what`` when it cannot be read."""
-    try:
-        return rasterio.open(path)
-    except RasterioIOError as exc:
-        raise InputError(f"cannot read {what} {path}: {exc}; give a GeoTIFF") from exc
 
 
 def _raster_source(src: rasterio.io.DatasetReader, path: Path,
@@ -143,21 +133,6 @@ def inspect_landcover(path: Path, names: str | None) -> tuple[RasterSource, Land
     return raster, info
 
 
-def _read_window(src: rasterio.io.DatasetReader, r0: int, r1: int, c0: int, c1: int,
-                 float_nan: bool) -> np.ndarray:
-    """One window of band 1; ``float_nan``: as float64 with nodata and masked cells NaN."""
-    win = Window(c0, r0, c1 - c0, r1 - r0)
-    if not float_nan:
-        return src.read(1, window=win)
-    a = src.read(1, window=win, out_dtype="float64")
-    flags = src.mask_flag_enums[0]
-    if MaskFlags.nodata in flags:
-        a[a == src.nodata] = np.nan
-    elif MaskFlags.all_valid not in flags:
-        a[src.read_masks(1, window=win) == 0] = np.nan
-    return a
-
-
 def sample_dem(src: rasterio.io.DatasetReader, raster: RasterSource, x: np.ndarray,
                y: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Bilinear DEM values at points in the DEM's CRS, reading only the windows they need;
@@ -165,7 +140,8 @@ def sample_dem(src: rasterio.io.DatasetReader, raster: RasterSource, x: np.ndarr
     fi, fj = affine_nodes(raster.transform, x, y)
     z = np.full(fi.shape, np.nan)
     for g in window_groups(fi, fj, raster.shape, WINDOW_CELLS):
-        win = _read_window(src, g.row0, g.row1, g.col0, g.col1, float_nan=True)
+        win = read_window(src, (g.col0, g.row0, g.col1, g.row1), nan_masked=True,
+                          what="DEM")
         z[g.index] = sample_bilinear(win, fi[g.index] - g.row0, fj[g.index] - g.col0)
     return z, inside_grid(fi, fj, raster.shape)
 
@@ -173,11 +149,11 @@ def sample_dem(src: rasterio.io.DatasetReader, raster: RasterSource, x: np.ndarr
 def sample_classes(src: rasterio.io.DatasetReader, raster: RasterSource, nodata: int | None,
                    x: np.ndarray, y: np.ndarray) -> np.ndarray:
     """Class codes of the cells holding points in the raster's CRS, reading only the windows
-    they need; :data:`core.evaluation.NO_CODE` off the raster and on its ``nodata``."""
+    they need; :data:`core.evaluation_report.NO_CODE` off the raster and on its ``nodata``."""
     fi, fj = affine_nodes(raster.transform, x, y)
     codes = np.full(fi.shape, NO_CODE, dtype=np.int64)
     for g in window_groups(fi, fj, raster.shape, WINDOW_CELLS, nearest=True):
-        win = _read_window(src, g.row0, g.row1, g.col0, g.col1, float_nan=False)
+        win = read_window(src, (g.col0, g.row0, g.col1, g.row1), what="land cover")
         codes[g.index] = sample_nearest(win.astype(np.int64), fi[g.index] - g.row0,
                                         fj[g.index] - g.col0, NO_CODE)
     if nodata is not None:

@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import io
-import json
 import tempfile
 import warnings
 from dataclasses import asdict, dataclass
@@ -15,14 +14,20 @@ import rioxarray
 import xarray as xr
 from prefect import task
 
-from core.geodesy import BBox, metres_per_degree
+from core.geodesy import ARCSEC, BBox, metres_per_degree
 from core.geoid import GeoidGrid
+from core.jsonio import to_json
 from tasks.io.dem import check_srtm_tiles
 from tasks.io.geoid import load_geoid
-from tasks.io.rasters import atomic_write_bytes, atomic_write_text, cog_item, write_arrays_cog
+from tasks.io.rasters import (
+    CHUNK,
+    atomic_write_bytes,
+    atomic_write_text,
+    cog_item,
+    write_arrays_cog,
+)
 from tasks.io.srtm import SrtmTile, build_vrt, covered, find_tiles, mosaic_grid
 
-CHUNK = 1024
 VOID_VALID, VOID_SRTM, VOID_UNCOVERED = 0, 1, 2
 
 
@@ -45,7 +50,7 @@ class ReferenceSummary:
     H_max_m: float
 
     def to_json(self) -> str:
-        return json.dumps(asdict(self), indent=2)
+        return to_json(asdict(self), indent=2)
 
     def lines(self) -> list[str]:
         return [
@@ -143,7 +148,7 @@ def build_reference(
         bbox=(bbox.lon_min, bbox.lat_min, bbox.lon_max, bbox.lat_max),
         width=int(H.sizes["x"]),
         height=int(H.sizes["y"]),
-        res_arcsec=round(abs(float(H.rio.resolution()[0])) * 3600.0, 6),
+        res_arcsec=round(abs(float(H.rio.resolution()[0])) / ARCSEC, 6),
         tiles=tuple(t.path.name for t in tiles),
         coverage_pct=100.0 * n_cov / total,
         void_pct=100.0 * int(n_void) / max(n_cov, 1),

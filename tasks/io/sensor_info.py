@@ -14,20 +14,19 @@ vendor fitted it around) for an RPC, else at h = 0.
 
 from __future__ import annotations
 
-import json
 import os
 import warnings
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-import numpy as np
 from rasterio.errors import NotGeoreferencedWarning
 
 from core.errors import GeometryError, InputError
 from core.geodesy import BBox
 from core.heights import DatumDecision
-from core.sensors.base import footprint_lonlat
+from core.jsonio import to_json
+from core.sensors.footprint import ANY_TERRAIN_H_M, footprint_box, scene_height_range_m
 from core.sensors.rpc import RPCModel
 from core.sensors.spot import frame_errors_m
 from core.sensors.viewing import (
@@ -45,9 +44,7 @@ from tasks.io.rasters import atomic_write_text
 from tasks.io.sensors import LoadedModel, load_model
 
 FORMAT = "gcpfree.info"
-REFERENCE_MARGIN_DEG = 0.02  # around the footprint when reading the reference window
 LABEL = 15  # width of the printed labels
-PLAUSIBLE_H_M = (-1000.0, 9000.0)  # terrain heights a pair may be evaluated at
 
 
 # ---------------------------------------------------------------------------- results
@@ -185,7 +182,7 @@ class InfoReport:
         return d
 
     def to_json(self) -> str:
-        return json.dumps(self.to_dict(), indent=2, allow_nan=False)
+        return to_json(self.to_dict(), indent=2)
 
     def lines(self) -> list[str]:
         out = list(self.images[0].lines())
@@ -252,11 +249,10 @@ def _default_height(lm: LoadedModel) -> tuple[float, str]:
     return 0.0, "the ellipsoid"
 
 
-def _reference_box(lm: LoadedModel, h_m: float) -> BBox:
-    """Lon/lat box of the footprint over the heights terrain may take, plus a margin."""
-    lon, lat = footprint_lonlat(lm.model, *lm.size, heights_m=(h_m - 1000.0, h_m + 3000.0))
-    return BBox(float(np.min(lon)), float(np.min(lat)), float(np.max(lon)),
-                float(np.max(lat))).expanded(REFERENCE_MARGIN_DEG)
+def _reference_box(lm: LoadedModel) -> BBox:
+    """Lon/lat box of the footprint over the heights the scene may have (the one rule of
+    :mod:`core.sensors.footprint`), plus the metadata's margin."""
+    return footprint_box([(lm.model, (0, 0, *lm.size))], scene_height_range_m([lm.model]))
 
 
 def describe_image(path: str | Path, *, model: str | Path | None = None, band: int | None = None,
@@ -274,7 +270,7 @@ def describe_image(path: str | Path, *, model: str | Path | None = None, band: i
     if reference is not None:
         reference = Path(reference)
         decision = dem_datum(reference, vertical)
-        dem = read_reference(reference, _reference_box(lm, h_view), decision.datum)
+        dem = read_reference(reference, _reference_box(lm), decision.datum)
         terrain = footprint_mean_height_m(lm.model, n_cols, n_rows, dem, h0_m=h_view)
         h_view, why = terrain.mean_h_m, "the reference's mean height"
         ref = ReferenceHeight(str(reference), decision.datum, decision.source, terrain,
@@ -323,7 +319,7 @@ def gather_info(path: str | Path, path2: str | Path | None = None, *,
     # central lines of sight meet
     try:
         h_meet, _ = centre_rays_height_m(m1, s1, m2, s2, h)
-        if PLAUSIBLE_H_M[0] <= h_meet <= PLAUSIBLE_H_M[1]:
+        if ANY_TERRAIN_H_M[0] <= h_meet <= ANY_TERRAIN_H_M[1]:
             return InfoReport((first, second), pair_geometry(m1, s1, m2, s2, h_meet), h_meet,
                               f"where the centre lines of sight meet; no overlap at {h:.1f} m")
     except GeometryError:

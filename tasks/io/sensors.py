@@ -23,12 +23,8 @@ raster's own pixels (0-based, pixel centres at integers), whichever way the mode
 from __future__ import annotations
 
 import re
-import warnings
 from dataclasses import dataclass
 from pathlib import Path
-
-import rasterio
-from rasterio.errors import NotGeoreferencedWarning, RasterioIOError
 
 from core.errors import InputError
 from core.jsonio import parse_json
@@ -37,6 +33,7 @@ from core.sensors.pushbroom import PushbroomModel
 from core.sensors.rpc import RPCModel
 from core.sensors.spot import SpotScene, spot_pushbroom
 from tasks.io.dimap import dimap_beside, read_dimap
+from tasks.io.rasters import open_raster
 
 
 def _read_text(path: Path, what: str) -> str:
@@ -87,14 +84,8 @@ def pixel_offset_of(transform: tuple[float, ...] | object, has_crs: bool) -> tup
 
 def _open_raster(path: Path) -> tuple[tuple[int, int], object, bool, dict[str, str]]:
     """(width, height), geotransform, whether it has a CRS, and the RPC tags of a raster."""
-    try:
-        with warnings.catch_warnings():
-            warnings.simplefilter("ignore", NotGeoreferencedWarning)
-            with rasterio.open(path) as src:
-                return (src.width, src.height), src.transform, src.crs is not None, \
-                    src.tags(ns="RPC")
-    except RasterioIOError as exc:
-        raise InputError(f"cannot open raster {path}: {exc}; check the path") from exc
+    with open_raster(path, "image") as src:
+        return (src.width, src.height), src.transform, src.crs is not None, src.tags(ns="RPC")
 
 
 def read_rpc_tags(image_path: str | Path) -> RPCModel:

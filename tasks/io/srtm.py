@@ -18,10 +18,10 @@ from xml.sax.saxutils import escape
 
 import numpy as np
 import rasterio
-from rasterio.errors import RasterioIOError
 
 from core.errors import CoverageError, InputError
 from core.geodesy import BBox
+from tasks.io.rasters import open_raster
 
 SRTM_VOID = -32768
 HGT_SIZES = {1201 * 1201 * 2: 1201, 3601 * 3601 * 2: 3601}
@@ -75,11 +75,8 @@ def check_tile(path: Path, lon0: int, lat0: int) -> SrtmTile:
                 "the file is truncated or not SRTM: download it again"
             )
         return SrtmTile(path, lon0, lat0, HGT_SIZES[nbytes])
-    try:
-        with rasterio.open(path) as src:
-            w, h, t = src.width, src.height, src.transform
-    except RasterioIOError as exc:
-        raise InputError(f"unreadable SRTM tile {path}: {exc}; replace the file") from exc
+    with open_raster(path, "SRTM tile", "replace the file") as src:
+        w, h, t = src.width, src.height, src.transform
     if w != h or w not in (1201, 3601) or abs(abs(t.a) * (w - 1) - 1.0) > 1e-6:
         raise InputError(
             f"SRTM tile {path} is {w}x{h} px at {t.a:.8f} deg: expected a 1x1 degree tile "

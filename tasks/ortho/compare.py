@@ -15,27 +15,22 @@ grid of windows (:mod:`core.ortho_compare`), block by block with Dask.
 from __future__ import annotations
 
 import math
-import warnings
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-import dask
 import dask.array as darr
 import numpy as np
-import rasterio
 from prefect import task
 from prefect.cache_policies import NO_CACHE
-from rasterio.errors import NotGeoreferencedWarning, RasterioIOError
-from rasterio.windows import Window
 
 from core.errors import InputError
 from core.matching.grid import GridSpec
 from core.ortho_compare import (
     CompareConfig,
     DiscrepancyStats,
+    ShiftStatus,
     WindowShifts,
-    WindowStatus,
     discrepancy_stats,
     match_windows,
     window_origins,
@@ -45,9 +40,11 @@ from tasks.io.rasters import (
     CogOptions,
     atomic_write_bytes,
     atomic_write_json,
-    json_ready,
+    open_raster,
+    read_window,
     write_arrays_cog,
 )
+from tasks.scheduling import threads
 
 DEFAULT_CONFIG = CompareConfig()
 BLOCK_WINDOWS = 8  # windows per side of a Dask block
@@ -65,15 +62,8 @@ class _Raster:
 
 def _open(path: str | Path, which: str) -> _Raster:
     path = Path(path)
-    if not path.is_file():
-        raise InputError(f"{which} ortho {path} does not exist; give a gcpfree ortho GeoTIFF")
-    try:
-        with warnings.catch_warnings():
-            warnings.simplefilter("ignore", NotGeoreferencedWarning)
-            with rasterio.open(path) as src:
-                crs, t, w, h = src.crs, src.transform, src.width, src.height
-    except RasterioIOError as exc:
-        raise InputError(f"cannot read {which} ortho {path}: {exc}; check the path") from exc
+    with open_raster(path, f"{which} ortho", "give a gcpfree ortho GeoTIFF") as src:
+        crs, t, w, h = src.crs, src.transform, src.width, src.height
     if crs is None or not crs.is_projected:
         raise InputError(f"{which} ortho {path} is not in a projected CRS (CRS {crs}); give an "
                          "ortho made by gcpfree ortho")
@@ -142,10 +132,10 @@ def plan_compare(left: str | Path, right: str | Path,
 
 
 def _read(path: str, row0: int, col0: int, n_rows: int, n_cols: int) -> np.ndarray:
-    """Band 1 over a window inside the raster, float64, NaN for nodata."""
-    with rasterio.open(path) as src:
-        z = src.read(1, window=Window(col0, row0, n_cols, n_rows), masked=True)
-    return z.astype(np.float64).filled(np.nan)
+    """Band 1 over a window, float64, NaN for nodata."""
+    with open_raster(path, "ortho") as src:
+        return read_window(src, (col0, row0, col0 + n_cols, row0 + n_rows), nan_masked=True,
+                           what="ortho")
 
 
 def compare_block(block: np.ndarray, plan: ComparePlan, block_info: dict | None = None
@@ -215,11 +205,11 @@ def compare_orthos(plan: ComparePlan, out: Path, map_path: Path | None = None,
     base = darr.zeros(shape, chunks=BLOCK_WINDOWS, dtype=np.float64)
     stack = darr.map_blocks(compare_block, base, plan=plan, new_axis=0,
                             chunks=((4,),) + base.chunks, dtype=np.float64)
-    with dask.config.set(scheduler="threads", num_workers=num_workers):
+    with threads(num_workers):
         values = stack.compute()
     shifts = WindowShifts(values[0], values[1], values[2], values[3].astype(np.uint8))
     stats = discrepancy_stats(shifts, plan.grid.res_m)
-    counts = {s.name.lower(): int((shifts.status == s).sum()) for s in WindowStatus}
+    counts = {s.name.lower(): int((shifts.status == s).sum()) for s in ShiftStatus}
     x, y = _centres(plan)
     xx, yy = np.meshgrid(x, y)
     norm = np.hypot(shifts.dx_px, shifts.dy_px)
@@ -247,7 +237,7 @@ def compare_orthos(plan: ComparePlan, out: Path, map_path: Path | None = None,
             blocksize=256))])
     if quiver_path is not None:
         atomic_write_bytes(quiver_path, _quiver_png(xx, yy, shifts, stats))
-    atomic_write_json(out, json_ready(doc))
+    atomic_write_json(out, doc)
     return CompareSummary(str(out), str(map_path) if map_path else None,
                           str(quiver_path) if quiver_path else None, plan.left, plan.right,
                           stats, counts)
@@ -263,7 +253,7 @@ def _quiver_png(xx: np.ndarray, yy: np.ndarray, s: WindowShifts,
     matplotlib.use("Agg")
     from matplotlib.figure import Figure
 
-    ok = s.status == WindowStatus.OK
+    ok = s.status == ShiftStatus.OK
     fig = Figure(figsize=(7, 6), dpi=110)
     ax = fig.add_subplot()
     ax.set_aspect("equal")

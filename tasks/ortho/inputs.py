@@ -16,17 +16,15 @@ import pyproj
 import rasterio
 import rasterio.warp
 from rasterio.enums import Resampling
-from rasterio.errors import RasterioIOError
 from rasterio.windows import Window
 
-from core.dem import SurfaceGrid
 from core.errors import CoverageError, InputError
-from core.geodesy import BBox
+from core.geodesy import BBox, metres_per_degree
 from core.ortho import SourceWindow, TileDEM
 from tasks.io.crs import Projection
 from tasks.io.dem import VERTICALS, dem_datum, read_reference
 from tasks.io.geoid import load_geoid
-from tasks.io.rasters import open_image
+from tasks.io.rasters import open_raster, read_surface_window
 
 DEM_VERTICALS = VERTICALS
 
@@ -63,13 +61,8 @@ def describe_dem(path: str | Path, vertical: str = "auto") -> DemSource:
     path = Path(path)
     if vertical not in DEM_VERTICALS:
         raise InputError(f"DEM vertical {vertical!r} unknown; use one of {DEM_VERTICALS}")
-    if not path.is_file():
-        raise InputError(f"DEM {path} does not exist; give a GeoTIFF or .hgt file")
-    try:
-        with rasterio.open(path) as src:
-            crs_r, t, nodata, b = src.crs, src.transform, src.nodata, src.bounds
-    except RasterioIOError as exc:
-        raise InputError(f"cannot read DEM {path}: {exc}; give a GeoTIFF or .hgt file") from exc
+    with open_raster(path, "DEM", "give a GeoTIFF or .hgt file") as src:
+        crs_r, t, nodata, b = src.crs, src.transform, src.nodata, src.bounds
     if crs_r is None:
         raise InputError(f"DEM {path} has no CRS; give a georeferenced DEM (EPSG:4326 or UTM)")
     if t.b != 0 or t.d != 0:
@@ -133,7 +126,8 @@ def read_tile_dem(dem: DemSource, bounds_m: tuple[float, float, float, float], e
     if dem.geographic:
         lon0, lat0, lon1, lat1 = rasterio.warp.transform_bounds(
             f"EPSG:{epsg}", "EPSG:4326", *bounds_m, densify_pts=21)
-        pad = margin_m / 111_000.0 + 2 * dem.res
+        m_lon, _ = metres_per_degree(min(max(abs(lat0), abs(lat1)), 89.0))  # the smaller step
+        pad = margin_m / float(m_lon) + 2 * dem.res
         try:
             box = BBox(max(lon0 - pad, -180.0), max(lat0 - pad, -90.0), min(lon1 + pad, 180.0),
                        min(lat1 + pad, 90.0))
@@ -144,39 +138,17 @@ def read_tile_dem(dem: DemSource, bounds_m: tuple[float, float, float, float], e
     xmin, ymin, xmax, ymax = (bounds_m if epsg == dem.epsg else rasterio.warp.transform_bounds(
         f"EPSG:{epsg}", dem.crs, *bounds_m, densify_pts=21))
     pad = margin_m + 2 * dem.res
-    grid = _read_projected(dem, (xmin - pad, ymin - pad, xmax + pad, ymax + pad))
-    if grid is None:
-        return None
+    grid = read_surface_window(dem.path, (xmin - pad, ymin - pad, xmax + pad, ymax + pad), 0)
+    if min(grid.values.shape) < 2 or not np.isfinite(grid.values).any():
+        return None  # the tile lies beyond the DEM
     return TileDEM(grid, Projection(dem.epsg).to_xy,
                    load_geoid() if dem.vertical == "egm96" else None)
-
-
-def _read_projected(dem: DemSource, bounds: tuple[float, float, float, float]
-                    ) -> SurfaceGrid | None:
-    """Cells of a north-up projected DEM covering ``bounds``, float64, NaN for nodata and
-    beyond the raster."""
-    xmin, ymin, xmax, ymax = bounds
-    with rasterio.open(dem.path) as src:
-        t = src.transform
-        c0, c1 = math.floor((xmin - t.c) / t.a), math.ceil((xmax - t.c) / t.a)
-        r0, r1 = math.floor((t.f - ymax) / -t.e), math.ceil((t.f - ymin) / -t.e)
-        a0, b0 = max(r0, 0), max(c0, 0)
-        a1, b1 = min(r1, src.height), min(c1, src.width)
-        if a1 - a0 < 1 or b1 - b0 < 1:
-            return None
-        z = np.full((r1 - r0, c1 - c0), np.nan)
-        z[a0 - r0:a1 - r0, b0 - c0:b1 - c0] = src.read(
-            1, window=Window(b0, a0, b1 - b0, a1 - a0), masked=True).astype(
-                np.float64).filled(np.nan)
-    if min(z.shape) < 2 or not np.isfinite(z).any():
-        return None
-    return SurfaceGrid(z, t.c + (c0 + 0.5) * t.a, t.f + (r0 + 0.5) * t.e, t.a, -t.e)
 
 
 def read_image_window(path: str | Path, win: SourceWindow) -> np.ndarray:
     """Band 1 over ``win`` (averaged ``factor x factor`` when decimated), its own type."""
     c0, r0, c1, r1 = win.bounds
-    with open_image(path) as src:
+    with open_raster(path, "image") as src:
         window = Window(c0, r0, min(c1, src.width) - c0, min(r1, src.height) - r0)
         if win.factor == 1:
             return src.read(1, window=window)

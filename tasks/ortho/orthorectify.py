@@ -22,7 +22,6 @@ from dataclasses import asdict, dataclass
 from pathlib import Path
 from typing import Any
 
-import dask
 import dask.array as darr
 import numpy as np
 import pyproj
@@ -30,14 +29,23 @@ from prefect import task
 from prefect.cache_policies import NO_CACHE
 
 from core.errors import CoverageError, InputError
-from core.geodesy import BBox, utm_epsg
+from core.geodesy import utm_epsg
 from core.heights import DatumDecision
 from core.matching.grid import GridSpec
 from core.ortho import OrthoConfig, resample, source_window, tile_geometry, to_dtype
-from core.sensors.base import footprint_lonlat, ray_ground_move_per_m
-from core.sensors.rpc import RPCModel
+from core.sensors.base import ray_ground_move_per_m
+from core.sensors.footprint import footprint_box, footprint_lonlat, scene_height_range_m
 from core.sensors.viewing import point_geometry
 from tasks.io.crs import Projection
+from tasks.io.rasters import (
+    CHUNK,
+    CogItem,
+    CogOptions,
+    atomic_write_json,
+    open_raster,
+    write_arrays_cog,
+)
+from tasks.io.sensors import LoadedModel, load_model
 from tasks.ortho.inputs import (
     DemSource,
     bounds_in,
@@ -46,16 +54,8 @@ from tasks.ortho.inputs import (
     read_image_window,
     read_tile_dem,
 )
-from tasks.io.rasters import (
-    CogItem,
-    CogOptions,
-    atomic_write_json,
-    open_image,
-    write_arrays_cog,
-)
-from tasks.io.sensors import LoadedModel, load_model
+from tasks.scheduling import threads
 
-CHUNK = 1024
 DEFAULT_CONFIG = OrthoConfig()
 MAX_CELLS = 4_000_000_000
 OCCLUSION_SEEN, OCCLUSION_HIDDEN, OCCLUSION_NODATA = 0, 1, 255
@@ -198,19 +198,6 @@ def output_epsg(epsg: int | None, lon_deg: float, lat_deg: float) -> int:
     return int(epsg)
 
 
-def _wide_heights(loaded: LoadedModel) -> tuple[float, float]:
-    """Heights the scene may have before the DEM is read: an RPC's own range, else -500..9000."""
-    m = loaded.model
-    if isinstance(m, RPCModel):
-        return float(m.alt_off - m.alt_scale), float(m.alt_off + m.alt_scale)
-    return -500.0, 9000.0
-
-
-def _footprint_box(loaded: LoadedModel, heights: tuple[float, float]) -> BBox:
-    lon, lat = footprint_lonlat(loaded.model, *loaded.size, heights)
-    return BBox(float(lon.min()), float(lat.min()), float(lon.max()), float(lat.max()))
-
-
 @task(name="plan-ortho", cache_policy=NO_CACHE)
 def plan_ortho(loaded: LoadedModel, dem: DemSource, resolution_m: float | None = None,
                epsg: int | None = None, occlusion: bool = False) -> OrthoPlan:
@@ -223,13 +210,14 @@ def plan_ortho(loaded: LoadedModel, dem: DemSource, resolution_m: float | None =
     if resolution_m is not None and not resolution_m > 0:
         raise InputError(f"--resolution must be > 0 m, got {resolution_m}")
     image = loaded.image or loaded.source
-    with open_image(image) as src:
+    with open_raster(image, "image") as src:
         n_bands, dtype, src_nodata = src.count, src.dtypes[0], src.nodata
         size = (src.width, src.height)
     if size != tuple(loaded.size):
         raise InputError(f"{image} is {size[0]}x{size[1]} px but its model describes "
                          f"{loaded.size[0]}x{loaded.size[1]}; give the model of this image")
-    box = _footprint_box(loaded, _wide_heights(loaded)).expanded(0.005)
+    box = footprint_box([(loaded.model, (0, 0, *loaded.size))],
+                        scene_height_range_m([loaded.model]))
     h_range = dem_height_range(dem, box)
     if h_range is None:
         raise CoverageError(
@@ -339,7 +327,7 @@ def orthorectify(plan: OrthoPlan, out: Path, config: OrthoConfig = DEFAULT_CONFI
     counts = [darr.isfinite(values).sum(), (stack[1] == 1).sum(),
               darr.where(darr.isnan(stack[2]), -1.0, stack[2]).max(),
               darr.where(darr.isnan(stack[3]), np.inf, stack[3]).min()]
-    with dask.config.set(num_workers=num_workers):
+    with threads(num_workers):
         n_valid, n_hidden, err, step = write_arrays_cog(items, extra=counts)
     n_valid = int(n_valid)
     summary = OrthoSummary(

@@ -7,7 +7,6 @@ models are found and checked, the reference is read or prepared, and the results
 
 from __future__ import annotations
 
-import json
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -29,35 +28,27 @@ from core.orientation.relative import (
     image_correction,
     relative_orientation,
 )
-from core.sensors.base import SensorModel, footprint_lonlat
+from core.sensors.base import SensorModel
+from core.sensors.footprint import footprint_box
 from core.sensors.viewing import footprint_mean_height_m, pair_geometry
-from tasks.io.rasters import atomic_write_text
-from tasks.io.sensors import LoadedModel, load_model
+from tasks.io.pair import PairInputs
+from tasks.io.rasters import atomic_write_json
+from tasks.io.sensors import LoadedModel
 
 FORMAT = "gcpfree.relative"
-FOOTPRINT_MARGIN_DEG = 0.05
 DEFAULT_CONFIG = RelativeConfig()
 
 
 @task(name="load-pair")
-def load_pair(left: Path, right: Path, left_model: Path | None = None,
-              right_model: Path | None = None, band: int | None = None
-              ) -> tuple[LoadedModel, LoadedModel]:
+def load_pair(pair: PairInputs) -> tuple[LoadedModel, LoadedModel]:
     """The sensor models of both images (found beside them unless given)."""
-    return (load_model(left, model=left_model, band=band),
-            load_model(right, model=right_model, band=band))
+    return pair.load()
 
 
 def pair_box(left: LoadedModel, right: LoadedModel, h_range: tuple[float, float]) -> BBox:
-    """The lon/lat box holding both footprints over the height range, with a margin."""
-    lons, lats = [], []
-    for m in (left, right):
-        lo, la = footprint_lonlat(m.model, m.size[0], m.size[1], h_range)
-        lons.append(lo)
-        lats.append(la)
-    lon, lat = np.concatenate(lons), np.concatenate(lats)
-    return BBox(float(lon.min()), float(lat.min()), float(lon.max()),
-                float(lat.max())).expanded(FOOTPRINT_MARGIN_DEG)
+    """The lon/lat box holding both images' footprints over the height range, with the
+    metadata's margin (:func:`core.sensors.footprint.footprint_box`)."""
+    return footprint_box([(m.model, (0, 0, *m.size)) for m in (left, right)], h_range)
 
 
 def scene_height_m(left: LoadedModel, dem: GeoDEM | None, h_range: tuple[float, float]) -> float:
@@ -198,7 +189,7 @@ def orient_relative(
             "heights": "WGS84 ellipsoidal, from the left and the relatively oriented right model",
         },
     }
-    atomic_write_text(tie_json, json.dumps(tie_doc))
+    atomic_write_json(tie_json, tie_doc, indent=None)
     doc = {
         "format": FORMAT, "version": 1,
         "left": {"image": str(left.image), "model": str(left.source), "family": left.family},
@@ -226,7 +217,7 @@ def orient_relative(
         "reference": None if reference_used is None else reference_used.to_dict(),
         "right_model": _model_dict(model),
     }
-    atomic_write_text(out, json.dumps(doc, indent=1))
+    atomic_write_json(out, doc)
     return RelativeProducts(Path(out), tie_json, model, int(rel.inlier.sum()),
                             int((~rel.inlier).sum()), rel.parallax_rms_before_px,
                             rel.parallax_rms_after_px, along, ties.report.cell_m,

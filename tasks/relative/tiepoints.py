@@ -10,45 +10,40 @@ windows, the reference DEM over the scene and the point arrays.
 
 from __future__ import annotations
 
-import json
-import warnings
 from dataclasses import dataclass, replace
 from pathlib import Path
 
 import cv2
 import dask
 import numpy as np
-import rasterio
-import rasterio.io
 from prefect import task
-from rasterio.errors import NotGeoreferencedWarning, RasterioIOError
-from rasterio.windows import Window, from_bounds
 
 from core.dem import GeoDEM
 from core.errors import CoverageError, GeometryError, InputError
 from core.matching.overlap import overlap_cell_m, overlap_cells
-from core.matching.tiepoint_results import TiePointResult, tiepoint_report
+from core.matching.tiepoint_match import match_points
+from core.matching.tiepoint_results import Matches, TiePointResult, tiepoint_report
 from core.matching.tiepoints import (
     HeightPrior,
-    Matches,
     TiePointConfig,
     cell_ids,
     check_consistency,
     detect_points,
     ground_sampling_m,
     ground_xy_m,
-    match_points,
     predict_search,
     search_windows,
     select_tie_points,
     valid_pixels,
 )
-from core.sensors.base import SensorModel, footprint_lonlat
-from tasks.io.rasters import atomic_write_text
+from core.sensors.base import SensorModel
+from core.sensors.footprint import footprint_box, scene_height_range_m
+from tasks.io.dem import dem_datum, read_reference
+from tasks.io.rasters import atomic_write_json, open_raster, read_window
+from tasks.scheduling import compute
 
 # margin (degrees) around the left footprint when reading the reference DEM: the search
 # radius and the parallax of the height range stay well inside it
-DEM_MARGIN_DEG = 0.03
 DEFAULT_CONFIG = TiePointConfig()
 
 
@@ -72,68 +67,39 @@ def blocks(size: tuple[int, int], tile_px: int) -> list[Block]:
 # ---------------------------------------------------------------------------- reading
 
 
-def _open(path: str | Path) -> rasterio.io.DatasetReader:
-    with warnings.catch_warnings():
-        warnings.simplefilter("ignore", NotGeoreferencedWarning)
-        return rasterio.open(path)
-
-
 def raster_info(path: str | Path) -> tuple[tuple[int, int], float | None]:
     """(cols, rows) of a raster and the value of its saturated pixels (the maximum of an
     integer type; None for floating-point images)."""
-    try:
-        with _open(path) as src:
-            dtype = np.dtype(src.dtypes[0])
-            sat = float(np.iinfo(dtype).max) if dtype.kind in "ui" else None
-            return (src.width, src.height), sat
-    except RasterioIOError as exc:
-        raise InputError(f"cannot open image {path}: {exc}; check the path") from exc
+    with open_raster(path, "image") as src:
+        dtype = np.dtype(src.dtypes[0])
+        sat = float(np.iinfo(dtype).max) if dtype.kind in "ui" else None
+        return (src.width, src.height), sat
 
 
-def read_window(path: str | Path, col0: int, row0: int, col1: int, row1: int) -> np.ndarray:
-    """Pixels [row0:row1, col0:col1] of band 1; 0 (nodata) outside the raster."""
-    with _open(path) as src:
-        out = np.zeros((row1 - row0, col1 - col0), dtype=src.dtypes[0])
-        a0, a1 = max(row0, 0), min(row1, src.height)
-        b0, b1 = max(col0, 0), min(col1, src.width)
-        if a1 > a0 and b1 > b0:
-            out[a0 - row0:a1 - row0, b0 - col0:b1 - col0] = src.read(
-                1, window=Window(b0, a0, b1 - b0, a1 - a0))
-    return out
+def _read(path: str | Path, box: tuple[int, int, int, int]) -> np.ndarray:
+    """Pixels of ``box`` of band 1; 0 (nodata for the matching) beyond the raster."""
+    with open_raster(path, "image") as src:
+        return read_window(src, box, fill=0, what="image")
 
 
-def read_reference(path: str | Path, left_model: SensorModel, left_size: tuple[int, int]
-                   ) -> GeoDEM:
-    """The part of an ellipsoidal EPSG:4326 reference DEM (``gcpfree prepare-reference``) under
-    the left image over the DEM's own height range, with a margin."""
-    try:
-        src = rasterio.open(path)
-    except RasterioIOError as exc:
-        raise InputError(f"cannot open reference DEM {path}: {exc}; give the COG written by "
-                         "gcpfree prepare-reference") from exc
-    with src:
-        if src.crs is None or src.crs.to_epsg() != 4326:
-            raise InputError(f"reference DEM {path} is in {src.crs}, not EPSG:4326; give the COG "
-                             "written by gcpfree prepare-reference (ellipsoidal heights)")
-        heights: tuple[float, ...] = (0.0,)
-        for _ in range(3):
-            lon, lat = footprint_lonlat(left_model, *left_size, heights)
-            bounds = (np.nanmin(lon) - DEM_MARGIN_DEG, np.nanmin(lat) - DEM_MARGIN_DEG,
-                      np.nanmax(lon) + DEM_MARGIN_DEG, np.nanmax(lat) + DEM_MARGIN_DEG)
-            win = from_bounds(*bounds, transform=src.transform).round_offsets().round_lengths()
-            h = src.read(1, window=win, boundless=True, fill_value=np.nan, masked=True)
-            h = h.filled(np.nan).astype(np.float64)
-            if not np.isfinite(h).any():
-                raise CoverageError(
-                    f"reference DEM {path} does not cover the left image (lon {bounds[0]:.3f}.."
-                    f"{bounds[2]:.3f}, lat {bounds[1]:.3f}..{bounds[3]:.3f}); prepare it over "
-                    "the scene with gcpfree prepare-reference --bbox")
-            new = (float(np.nanmin(h)), float(np.nanmax(h)))
-            if heights == new:
-                break
-            heights = new
-        transform = src.window_transform(win)
-    return GeoDEM.from_transform(h, tuple(transform)[:6])
+def reference_under(path: str | Path, left_model: SensorModel, left_size: tuple[int, int]
+                    ) -> GeoDEM:
+    """The part of a lon/lat reference DEM under the left image, as ellipsoidal heights (its
+    datum by the one rule, :func:`tasks.io.dem.dem_datum`): read over the footprint at the
+    heights the model allows, then again at the heights the DEM shows there."""
+    datum = dem_datum(path).datum
+    heights = scene_height_range_m([left_model])
+    for _ in range(2):
+        dem = read_reference(path, footprint_box([(left_model, (0, 0, *left_size))], heights),
+                             datum)
+        lo, hi = dem.height_range_m()
+        if not np.isfinite(lo):
+            raise CoverageError(f"reference DEM {path} has no height under the left image; "
+                                "give a DEM covering the scene")
+        if (lo, hi) == heights:
+            break
+        heights = (lo, hi)
+    return dem
 
 
 # ---------------------------------------------------------------------------- per block
@@ -145,7 +111,7 @@ def block_matches(block: Block, left_path: str, right_path: str, left_model: Sen
     """Matches of the interest points of one left block: read, detect, predict, read, match."""
     cv2.setNumThreads(1)
     t = cfg.template_half_px
-    img = read_window(left_path, block.col0 - t, block.row0 - t, block.col1 + t, block.row1 + t)
+    img = _read(left_path, (block.col0 - t, block.row0 - t, block.col1 + t, block.row1 + t))
     area = (block.col1 - block.col0) * (block.row1 - block.row0)
     gsd_m = ground_sampling_m(left_model, 0.5 * (block.col0 + block.col1),
                               0.5 * (block.row0 + block.row1), heights.typical_h_m)
@@ -163,13 +129,13 @@ def block_matches(block: Block, left_path: str, right_path: str, left_model: Sen
         return match_points(np.zeros((1, 1)), (0, 0), np.zeros((1, 1)), (0, 0), col, row,
                             prior, cfg)
     lw, rw = windows
-    with _open(right_path) as src:  # the right window never exceeds the right image
+    with open_raster(right_path, "image") as src:  # the right window stays near it
         rw = (max(rw[0], -t - 2), max(rw[1], -t - 2), min(rw[2], src.width + t + 2),
               min(rw[3], src.height + t + 2))
     if rw[2] <= rw[0] or rw[3] <= rw[1]:
         rw = (0, 0, 1, 1)
-    left = read_window(left_path, *lw)
-    right = read_window(right_path, *rw)
+    left = _read(left_path, lw)
+    right = _read(right_path, rw)
     return match_points(left, lw[:2], right, rw[:2], col, row, prior, cfg)
 
 
@@ -210,7 +176,7 @@ def find_tie_points(
         heights = HeightPrior.from_range(*h_range_m)
     else:
         dem = (reference if isinstance(reference, GeoDEM)
-               else read_reference(reference, left_model, left_size))
+               else reference_under(reference, left_model, left_size))
         heights = HeightPrior.from_dem(dem, cfg.search_radius_m, cfg.height_margin_m)
     c_mid, r_mid = (left_size[0] - 1) / 2.0, (left_size[1] - 1) / 2.0
     h0 = float(np.nan_to_num(heights.heights(left_model, [c_mid], [r_mid])[0][0]))
@@ -229,8 +195,7 @@ def find_tie_points(
     parts = [dask.delayed(block_matches)(b, str(left_image), str(right_image), left_model,
                                          right_model, heights, cfg, saturation)
              for b in blocks(left_size, cfg.tile_px)]
-    matches = Matches.concat(list(dask.compute(*parts, scheduler="threads",
-                                               num_workers=num_workers)))
+    matches = Matches.concat(compute(parts, workers=num_workers))
     x, y = ground_xy_m(left_model, matches.left_col, matches.left_row, matches.h_m, origin)
     matches = check_consistency(matches, x, y, cfg, heights_known=reference is not None)
     tie_points = select_tie_points(matches, x, y, cfg.cell_m)
@@ -238,5 +203,5 @@ def find_tie_points(
                              cell_ids(x, y, cfg.cell_m), overlap, cfg.cell_m)
     result = TiePointResult(tie_points, report)
     if out is not None:
-        atomic_write_text(out, json.dumps(result.to_dict()))
+        atomic_write_json(out, result.to_dict(), indent=None)
     return result

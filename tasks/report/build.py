@@ -19,7 +19,7 @@ report.json holds every number of the report. A folder with no report.json gets 
 
 A missing or unreadable product never fails the run: the report says what is not available
 and what it would have shown. The maths is in core
-(:func:`core.surface_match.correlation_surface`, the sensor models' ``project``); the reading in
+(:func:`core.matching.surface.correlation_surface`, the sensor models' ``project``); the reading in
 :mod:`tasks.report.inputs`, the drawing in :mod:`tasks.report.figures`, the HTML and Markdown
 in :mod:`tasks.report.doc`.
 """
@@ -43,12 +43,18 @@ from rasterio.enums import Resampling
 from rasterio.errors import NotGeoreferencedWarning
 from rasterio.windows import Window
 
+from core.errors import GcpFreeError
+from core.geodesy import ARCSEC
+from core.matching.surface import SurfaceMatchConfig, correlation_surface
 from core.points import ControlPoint
-from core.surface_match import SurfaceMatchConfig, correlation_surface
-from tasks.report import figures as F
-from tasks.io.crs import Projection
 from tasks.absolute.orientation import NAMES, read_checkpoints
-from tasks.io.rasters import atomic_write_bytes, atomic_write_json, atomic_write_text
+from tasks.absolute.report import FILE as JSON_NAME
+from tasks.absolute.report import OrientReport, read_report
+from tasks.absolute.surface_match import read_window_cells
+from tasks.io.crs import Projection
+from tasks.io.rasters import atomic_write_bytes, atomic_write_text
+from tasks.io.sensors import load_model
+from tasks.report import figures as F
 from tasks.report.doc import Block, Figure, Heading, Para, Table, to_html, to_markdown
 from tasks.report.inputs import (
     MADE_REFERENCE,
@@ -56,7 +62,7 @@ from tasks.report.inputs import (
     ReportInputs,
     best_window,
     read_inputs,
-    read_json,
+    read_optional_json,
 )
 from tasks.report.tables import (
     SECTIONS,
@@ -70,13 +76,11 @@ from tasks.report.tables import (
     summary_table,
     surface_tables,
 )
-from tasks.io.sensors import load_model
-from tasks.absolute.surface_match import read_window_cells
 
 log = logging.getLogger(__name__)
 
-HTML_NAME, MD_NAME, FIGURES_DIR, JSON_NAME = "report.html", "report.md", "report_files", "report.json"
-JSON_KEY = "report"  # the key of report.json the report writes (the rest is the orientation's)
+HTML_NAME, MD_NAME, FIGURES_DIR = "report.html", "report.md", "report_files"
+JSON_KEY = OrientReport.RUN_REPORT_KEY  # the key of report.json the report writes
 FORMAT = "gcpfree.report"
 THUMB_PX = 1200  # longest side of the image thumbnail
 
@@ -87,7 +91,7 @@ class _Report:
     the numbers it adds to report.json (``data``)."""
 
     out: Path
-    doc: dict[str, Any]
+    orientation: OrientReport | None  # report.json; None: missing or unreadable
     blocks: list[Block] = field(default_factory=list)
     missing: list[str] = field(default_factory=list)
     figures: list[Path] = field(default_factory=list)
@@ -116,10 +120,10 @@ class _Report:
             self.lack(f"part of '{title}' could not be made ({type(exc).__name__}: {exc})")
 
 
-def _tables(rep: _Report, key: str, make: Callable[[Any], list[Block]]) -> None:
-    """The tables of ``report.json[key]``, or a note that it is missing."""
-    if key in rep.doc:
-        rep.add(*make(rep.doc[key]))
+def _tables(rep: _Report, key: str, make: Callable[[OrientReport], list[Block]]) -> None:
+    """The tables of report.json's ``key``, or a note that report.json is not available."""
+    if rep.orientation is not None:
+        rep.add(*make(rep.orientation))
     else:
         rep.lack(f"report.json '{key}'")
 
@@ -132,7 +136,7 @@ def _points(col: np.ndarray, row: np.ndarray, label: str) -> F.Points:
 
 
 def _tie_points(rep: _Report, inp: ReportInputs) -> None:
-    rel = rep.doc.get("relative", {})
+    rel = rep.orientation.relative if rep.orientation is not None else {}
     if inp.ties is None or inp.tie_doc is None:
         return rep.lack(f"{TIEPOINTS.as_posix()} (the tie-point figure)")
     image = rel.get("left", {}).get("image")
@@ -162,7 +166,8 @@ def _tie_points(rep: _Report, inp: ReportInputs) -> None:
                                 f"window {status} ({k.size})"), status))
     used = rejected = None
     if inp.gcps is not None:
-        bad = {r["id"] for r in rep.doc.get("gcps", {}).get("rejected_ids", [])}
+        bad = ({r.id for r in rep.orientation.gcps.rejected_ids}
+               if rep.orientation is not None else set())
         c, r, flag = _gcp_positions(inp.gcps, "left", bad)
         used = _points(c[~flag], r[~flag], f"GCP used ({int((~flag).sum())})")
         rejected = _points(c[flag], r[flag], f"GCP rejected ({int(flag.sum())})")
@@ -183,7 +188,10 @@ def _gcp_positions(gcps: tuple[ControlPoint, ...], name: str, bad: set[int]
 
 
 def _profile(rep: _Report, inp: ReportInputs) -> None:
-    rep.add(*dem_tables(rep.doc.get("relative_dem", {})))
+    if rep.orientation is not None:
+        rep.add(*dem_tables(rep.orientation.relative_dem))
+    else:
+        rep.lack("report.json 'relative_dem'")
     dem_path = rep.out / "relative_dem.tif"
     if not dem_path.is_file():
         return rep.lack("relative_dem.tif (the profile figure)")
@@ -209,8 +217,8 @@ def _profile(rep: _Report, inp: ReportInputs) -> None:
     title = f"Profile along DEM row {r} (UTM north {y[0]:.0f} m)"
     if best is not None:
         w = best[0]
-        moved = inp.reference.height_m(lon + w["shift_lon_arcsec"] / 3600.0,
-                                       lat + w["shift_lat_arcsec"] / 3600.0) - w["shift_h_m"]
+        moved = inp.reference.height_m(lon + w["shift_lon_arcsec"] * ARCSEC,
+                                       lat + w["shift_lat_arcsec"] * ARCSEC) - w["shift_h_m"]
         lines.append(F.Profile(km, moved, "reference brought into the relative frame by the "
                                "window's 3-D shift", ":"))
         title += (f"; window at tie point {w['tie_point']}: shift {w['shift_east_m']:.1f} m E, "
@@ -232,14 +240,13 @@ def _profile(rep: _Report, inp: ReportInputs) -> None:
 
 
 def _surface_matching(rep: _Report, inp: ReportInputs) -> None:
-    sm = rep.doc.get("surface_matching")
-    if sm is None:
+    if rep.orientation is None:
         return rep.lack("report.json 'surface_matching'")
+    sm = rep.orientation.surface_matching
     rep.add(*surface_tables(sm, inp.windows))
     if inp.windows is None:
         return rep.lack("windows.json (per-window table, relief and correlation figures)")
-    v = sm.get("relief", {})
-    enough = bool(v.get("enough"))
+    v = sm.relief
 
     def arr(k: str) -> np.ndarray:
         return np.array([np.nan if w.get(k) is None else w[k] for w in inp.windows], dtype=float)
@@ -248,10 +255,10 @@ def _surface_matching(rep: _Report, inp: ReportInputs) -> None:
     ok = np.isfinite(rel_m) & np.isfinite(pred)
     statuses = [w["status"] for w, k in zip(inp.windows, ok, strict=True) if k]
     rep.figure("relief", F.relief_figure(rel_m[ok], pred[ok], statuses,
-                                         float(v.get("max_precision_m") or 10.0),
-                                         ("Enough relief" if enough else "Too little relief")
-                                         + f": {v.get('n_qualified')} windows qualify, "
-                                         f"{v.get('n_needed')} needed"),
+                                         float(v.max_precision_m or 10.0),
+                                         ("Enough relief" if v.enough else "Too little relief")
+                                         + f": {v.n_qualified} windows qualify, "
+                                         f"{v.n_needed} needed"),
                "Relief-sufficiency verdict: each window's relief against the precision it "
                "promises; windows below the dashed line qualify.")
     best = best_window(inp)
@@ -303,15 +310,15 @@ def _residuals(rep: _Report, name: str, pts: list[Any], flagged: set[int]
 
 
 def _gcps(rep: _Report, inp: ReportInputs) -> list[F.Residuals]:
-    g = rep.doc.get("gcps")
-    if g is None:
+    if rep.orientation is None:
         rep.lack("report.json 'gcps'")
         return []
+    g = rep.orientation.gcps
     rep.add(*gcp_tables(g))
     if inp.gcps is None:
         rep.lack("gcps.json (GCP residual vectors)")
         return []
-    bad = {r["id"] for r in g.get("rejected_ids", [])}
+    bad = {r.id for r in g.rejected_ids}
     panels = [p for name in NAMES if (p := _residuals(rep, name, list(inp.gcps), bad))]
     if panels:
         rep.figure("gcp_residuals", F.residual_vectors_figure(
@@ -322,7 +329,8 @@ def _gcps(rep: _Report, inp: ReportInputs) -> list[F.Residuals]:
 
 def _check_points(rep: _Report, checkpoints: Path | None,
                   gcp_panels: list[F.Residuals]) -> None:
-    after, before = rep.doc.get("check_points"), rep.doc.get("check_points_before")
+    o = rep.orientation
+    after, before = (o.check_points, o.check_points_before) if o is not None else (None, None)
     groups = [(f"GCPs {p.name} (used)", p.d_col[~p.flagged], p.d_row[~p.flagged])
               for p in gcp_panels]
     if after is None:
@@ -349,7 +357,7 @@ def _evaluation(rep: _Report, evaluation: Path | None) -> None:
     if evaluation is None:
         return rep.lack("the lidar evaluation (not given: gcpfree evaluate writes an eval.json "
                         "to pass to the report)")
-    ev = read_json(Path(evaluation))
+    ev = read_optional_json(Path(evaluation))
     if not isinstance(ev, dict) or not isinstance(ev.get("classes"), dict):
         return rep.lack(f"a readable evaluation file at {evaluation}")
     rep.data["evaluation"] = {"file": str(evaluation), **ev}
@@ -409,13 +417,18 @@ def make_report(out_dir: str | Path, reference: str | Path | None = None,
     said in the report ("Not available: ..."), never raised.
     """
     out = Path(out_dir)
-    doc = read_json(out / JSON_NAME)
-    rep = _Report(out, doc if isinstance(doc, dict) else {})
-    if not rep.doc:
+    rep = _Report(out, None)
+    if not (out / JSON_NAME).is_file():
         rep.missing.append(f"{JSON_NAME} (the orientation did not finish?)")
+    else:
+        try:
+            rep.orientation = read_report(out / JSON_NAME)
+        except GcpFreeError as exc:
+            rep.missing.append(f"{JSON_NAME} ({exc})")
     if reference is None and (out / MADE_REFERENCE).is_file():
         reference = out / MADE_REFERENCE
-    rel = rep.doc.get("relative", {})
+    orientation = rep.orientation
+    rel = orientation.relative if orientation is not None else {}
     inputs = {"output_folder": str(out), "left_image": rel.get("left", {}).get("image"),
               "right_image": rel.get("right", {}).get("image"),
               "reference": str(reference) if reference else None,
@@ -424,25 +437,28 @@ def make_report(out_dir: str | Path, reference: str | Path | None = None,
     rep.add(Heading("Inputs"), Table.of(("product", "path"), [
         [k.replace("_", " "), "not given" if v is None else str(v)] for k, v in inputs.items()]))
     inp = read_inputs(out, Path(reference) if reference else None, reference_vertical,
-                      surface or SurfaceMatchConfig(), rep.missing)
+                      surface or SurfaceMatchConfig(), rep.missing, orientation)
     gcp_panels: list[F.Residuals] = []
     rep.section("Tie points", lambda: _tie_points(rep, inp))
-    rep.section("Relative orientation", lambda: _tables(rep, "relative", relative_tables))
+    rep.section("Relative orientation",
+                lambda: _tables(rep, "relative", lambda o: relative_tables(o.relative)))
     rep.section("Relative DEM against the reference", lambda: _profile(rep, inp))
     rep.section("Surface matching and relief", lambda: _surface_matching(rep, inp))
     rep.section("Simulated GCPs", lambda: gcp_panels.extend(_gcps(rep, inp)))
-    rep.section("Absolute orientation", lambda: _tables(rep, "absolute", absolute_tables))
+    rep.section("Absolute orientation",
+                lambda: _tables(rep, "absolute", lambda o: absolute_tables(o.absolute)))
     rep.section("Check points", lambda: _check_points(
         rep, Path(checkpoints) if checkpoints else None, gcp_panels))
     rep.section("Accuracy against lidar", lambda: _evaluation(
         rep, Path(evaluation) if evaluation else None))
-    rest = {k: v for k, v in rep.doc.items() if k not in SECTIONS and k != JSON_KEY}
+    rest = {k: v for k, v in (orientation.to_dict() if orientation else {}).items()
+            if k not in SECTIONS and k != JSON_KEY}
     if rest:
         rep.section("Other products", lambda: rep.add(Table.flat(rest, "Other entries")))
     title = f"gcpfree orient: {out.resolve().name}"
-    blocks: list[Block] = [Heading("Summary"), summary_table(rep.doc)]
-    if "relief" in rep.doc.get("surface_matching", {}):
-        blocks.append(relief_verdict(rep.doc["surface_matching"]["relief"]))
+    blocks: list[Block] = [Heading("Summary"), summary_table(orientation)]
+    if orientation is not None:
+        blocks.append(relief_verdict(orientation.surface_matching.relief))
     if rep.missing:
         blocks.append(Para("Not in this report: " + "; ".join(rep.missing) + ".", "bad"))
     blocks += rep.blocks
@@ -452,11 +468,11 @@ def make_report(out_dir: str | Path, reference: str | Path | None = None,
         if old not in rep.figures:
             old.unlink(missing_ok=True)
     js = None
-    if rep.doc:  # the orientation's keys as they are, the report's numbers beside them
-        js = atomic_write_json(out / JSON_NAME, {**rep.doc, JSON_KEY: {
+    if orientation is not None:  # the orientation's keys as they are, the report's beside
+        js = orientation.with_run_report({
             "format": FORMAT, "version": 1, "html": HTML_NAME, "markdown": MD_NAME,
             "figures": {p.stem: f"{FIGURES_DIR}/{p.name}" for p in rep.figures},
-            "inputs": inputs, "not_available": rep.missing, **rep.data}})
+            "inputs": inputs, "not_available": rep.missing, **rep.data}).write(out / JSON_NAME)
     return ReportOutcome(html, md, js, tuple(rep.figures), tuple(rep.missing))
 
 

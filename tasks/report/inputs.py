@@ -7,7 +7,6 @@ over the relative DEM's extent. No maths here and no drawing.
 
 from __future__ import annotations
 
-import json
 import logging
 from collections.abc import Callable
 from dataclasses import dataclass
@@ -18,12 +17,15 @@ import numpy as np
 import rasterio
 
 from core.dem import GeoDEM
-from core.geodesy import BBox
+from core.errors import InputError
+from core.geodesy import ARCSEC, BBox
+from core.matching.surface import SurfaceMatchConfig
 from core.points import ControlPoint, control_points_from_dict
-from core.surface_match import SurfaceMatchConfig
+from tasks.absolute.report import OrientReport
+from tasks.absolute.surface_match import TieGround
 from tasks.io.crs import Projection
 from tasks.io.dem import dem_datum, read_reference
-from tasks.absolute.surface_match import TieGround
+from tasks.io.rasters import read_json
 
 log = logging.getLogger(__name__)
 
@@ -31,11 +33,11 @@ TIEPOINTS = Path("relative") / "rel.tiepoints.json"
 MADE_REFERENCE = Path("relative") / "rel.reference.tif"  # made from SRTM tiles (--srtm-dir)
 
 
-def read_json(path: Path) -> Any:
+def read_optional_json(path: Path) -> Any:
     """A JSON product, or None when it is missing or unreadable."""
     try:
-        return json.loads(Path(path).read_text())
-    except (OSError, ValueError):
+        return read_json(path, "product")
+    except InputError:
         return None
 
 
@@ -62,16 +64,19 @@ def _attempt(missing: list[str], what: str, read: Callable[[], Any]) -> Any:
 
 
 def read_inputs(out: Path, reference: Path | None, vertical: str, surface: SurfaceMatchConfig,
-                missing: list[str]) -> ReportInputs:
+                missing: list[str], orientation: OrientReport | None = None) -> ReportInputs:
     """Read the products of ``out`` (and ``reference`` over the relative DEM's extent); what
-    cannot be read is appended to ``missing`` with its reason."""
-    wdoc = read_json(out / "windows.json")
+    cannot be read is appended to ``missing`` with its reason. The windows and the GCPs are
+    read from the files ``orientation`` (report.json) names, by default those orient writes."""
+    windows_file = orientation.surface_matching.windows_file if orientation else "windows.json"
+    gcps_file = orientation.gcps.file if orientation else "gcps.json"
+    wdoc = read_optional_json(out / windows_file)
     tie_path = out / TIEPOINTS
-    tie_doc = read_json(tie_path)
+    tie_doc = read_optional_json(tie_path)
     ties = (_attempt(missing, "the tie points", lambda: TieGround.from_tiepoints_json(tie_path))
             if tie_doc is not None else None)
-    gdoc = read_json(out / "gcps.json")
-    gcps = (_attempt(missing, "gcps.json", lambda: control_points_from_dict(gdoc))
+    gdoc = read_optional_json(out / gcps_file)
+    gcps = (_attempt(missing, gcps_file, lambda: control_points_from_dict(gdoc))
             if gdoc is not None else None)
     ref = None
     if reference is not None and (out / "relative_dem.tif").is_file():
@@ -90,7 +95,7 @@ def dem_box(dem_path: Path, cfg: SurfaceMatchConfig) -> BBox:
     lon, lat = Projection(epsg).to_lonlat(np.array([b.left, b.right, b.left, b.right]),
                                           np.array([b.bottom, b.bottom, b.top, b.top]))
     box = BBox(float(lon.min()), float(lat.min()), float(lon.max()), float(lat.max()))
-    return box.expanded((cfg.shift_max_arcsec + 10.0) / 3600.0)
+    return box.expanded((cfg.shift_max_arcsec + 10.0) * ARCSEC)
 
 
 def best_window(inp: ReportInputs) -> tuple[dict[str, Any], float, float] | None:

@@ -1,15 +1,22 @@
-"""The tables of the run report: the numbers of ``report.json`` (and of ``windows.json`` and
-``eval.json``) as blocks of :mod:`tasks.report.doc`, every one of them but the relative
-orientation's, which is curated (its full record is rel.json). Plain functions of the JSON
-documents: no I/O, no figures (those are :mod:`tasks.report.build`)."""
+"""The tables of the run report: the numbers of ``report.json`` (its typed sections,
+:mod:`tasks.absolute.report`), of ``windows.json`` and ``eval.json`` as blocks of
+:mod:`tasks.report.doc`, every one of them but the relative orientation's, which is curated (its
+full record is rel.json). Plain functions: no I/O, no figures (those are
+:mod:`tasks.report.build`)."""
 
 from __future__ import annotations
 
 import math
 from collections.abc import Mapping, Sequence
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
+from tasks.absolute.report import OrientReport
 from tasks.report.doc import Block, Para, Table, flatten, fmt
+
+if TYPE_CHECKING:
+    from core.orientation.absolute import CheckPointStats
+    from tasks.absolute.report import Absolute, GcpSummary, Relief, SurfaceMatching
+    from tasks.dense.dem import DemSummary
 
 STATS = ("n", "min_col_px", "max_col_px", "mean_col_px", "std_col_px", "rms_col_px",
          "min_row_px", "max_row_px", "mean_row_px", "std_row_px", "rms_row_px")
@@ -19,8 +26,7 @@ WINDOW_KEYS = ("tie_point", "status", "shift_lon_arcsec", "shift_lat_arcsec", "s
 EVAL_KEYS = ("count", "mean", "std", "rmse", "nmad", "le68", "le90")
 PARAMS = ("param_names", "param_units", "params_before", "params_after", "sigmas")
 # the top-level keys of report.json given their own section
-SECTIONS = ("format", "version", "relative", "relative_dem", "surface_matching", "gcps",
-            "absolute", "check_points", "check_points_before")
+SECTIONS = OrientReport.SECTIONS
 
 Doc = Mapping[str, Any]
 
@@ -132,32 +138,29 @@ def _along_epipolar_rows(rel: Doc) -> list[list[str]]:
                     along.get("n_points"))]]
 
 
-def dem_tables(dem: Doc) -> list[Block]:
+def dem_tables(dem: DemSummary) -> list[Block]:
     """The relative DEM's summary and one row per tile."""
-    out: list[Block] = [Table.flat(dem, "Relative DEM", skip=("tiles",))]
-    tiles = dem.get("tiles") or []
-    if tiles:
-        keys = list(dict.fromkeys(k for t in tiles for k in t))
-        out.append(Table.of(keys, ([_cell(t.get(k)) for k in keys] for t in tiles),
+    out: list[Block] = [Table.flat(dem.to_dict(), "Relative DEM", skip=("tiles",))]
+    if dem.tiles:
+        keys = list(dict.fromkeys(k for t in dem.tiles for k in t))
+        out.append(Table.of(keys, ([_cell(t.get(k)) for k in keys] for t in dem.tiles),
                             "Relative DEM tiles"))
     return out
 
 
-def relief_verdict(v: Doc) -> Para:
+def relief_verdict(v: Relief) -> Para:
     """The relief-sufficiency verdict in a sentence (green when enough)."""
-    text = (f"{fmt(v.get('n_qualified'))} of {fmt(v.get('n_windows'))} windows have the relief "
-            f"to fix the position to {fmt(v.get('max_precision_m'))} m "
-            f"({fmt(v.get('n_needed'))} needed); relief found {fmt(v.get('relief_found_m'))} m "
-            f"(median std of heights per window), needed about "
-            f"{fmt(v.get('relief_needed_m'))} m.")
-    enough = bool(v.get("enough"))
-    return Para(("Relief sufficient: " if enough else "Relief insufficient: ") + text,
-                "good" if enough else "bad")
+    text = (f"{fmt(v.n_qualified)} of {fmt(v.n_windows)} windows have the relief to fix the "
+            f"position to {fmt(v.max_precision_m)} m ({fmt(v.n_needed)} needed); relief found "
+            f"{fmt(v.relief_found_m)} m (median std of heights per window), needed about "
+            f"{fmt(v.relief_needed_m)} m.")
+    return Para(("Relief sufficient: " if v.enough else "Relief insufficient: ") + text,
+                "good" if v.enough else "bad")
 
 
-def surface_tables(sm: Doc, windows: Sequence[Doc] | None) -> list[Block]:
-    out: list[Block] = [relief_verdict(sm.get("relief", {})),
-                        Table.flat(sm, "Surface matching and relief verdict")]
+def surface_tables(sm: SurfaceMatching, windows: Sequence[Doc] | None) -> list[Block]:
+    out: list[Block] = [relief_verdict(sm.relief),
+                        Table.flat(sm.to_dict(), "Surface matching and relief verdict")]
     if windows is not None:
         out.append(Table.of(WINDOW_KEYS, ([w.get(k) for k in WINDOW_KEYS] for w in windows),
                             "Windows (windows.json; shifts move the relative DEM onto the "
@@ -165,42 +168,43 @@ def surface_tables(sm: Doc, windows: Sequence[Doc] | None) -> list[Block]:
     return out
 
 
-def gcp_tables(g: Doc) -> list[Block]:
-    out: list[Block] = [Table.flat(g, "Simulated GCPs", skip=("rejected_ids",))]
-    if g.get("rejected_ids"):
-        out.append(Table.of(("GCP id", "reason"),
-                            ((r.get("id"), r.get("reason")) for r in g["rejected_ids"]),
+def gcp_tables(g: GcpSummary) -> list[Block]:
+    out: list[Block] = [Table.flat(g.to_dict(), "Simulated GCPs", skip=("rejected_ids",))]
+    if g.rejected_ids:
+        out.append(Table.of(("GCP id", "reason"), ((r.id, r.reason) for r in g.rejected_ids),
                             "GCPs rejected by the absolute orientation"))
     return out
 
 
-def absolute_tables(a: Doc) -> list[Block]:
+def absolute_tables(a: Absolute) -> list[Block]:
     """Per image its parameters before and after with their sigmas and its GCP residuals; the
     adjustment's figures; the lens self-calibration."""
     out: list[Block] = []
-    for name, img in a.get("images", {}).items():
+    for name, img in a.images.items():
         out.append(Table.of(("parameter", "before", "after", "sigma"),
-                            zip(img["param_names"], img["params_before"], img["params_after"],
-                                img["sigmas"], strict=True),
+                            zip(img.param_names, img.params_before, img.params_after,
+                                img.sigmas, strict=True),
                             f"Image {name}: parameters adjusted"))
-        out.append(Table.flat(img, f"Image {name}: residuals at the GCPs used (px)",
+        out.append(Table.flat(img.to_dict(), f"Image {name}: residuals at the GCPs used (px)",
                               skip=PARAMS))
-    out.append(Table.flat(a, "Absolute adjustment", skip=("images", "self_calibration")))
-    if a.get("self_calibration") is not None:
-        out.append(Table.flat(a["self_calibration"], "Lens self-calibration"))
+    out.append(Table.flat(a.to_dict(), "Absolute adjustment",
+                          skip=("images", "self_calibration")))
+    if a.self_calibration is not None:
+        out.append(Table.flat(a.self_calibration.to_dict(), "Lens self-calibration"))
     else:
         out.append(Para("Lens self-calibration was not asked for."))
     return out
 
 
-def check_point_table(after: Doc, before: Doc | None) -> Table:
+def check_point_table(after: Mapping[str, CheckPointStats],
+                      before: Mapping[str, CheckPointStats] | None) -> Table:
     """The paper's Table 2: check-point residual statistics per image, before (relative
     orientation only) and after the absolute orientation."""
     rows = []
     for name in after:
-        for stage, d in (("before", (before or {}).get(name)), ("after", after[name])):
-            if d is not None:
-                rows.append([name, stage, *(d.get(k) for k in STATS)])
+        for stage, s in (("before", (before or {}).get(name)), ("after", after[name])):
+            if s is not None:
+                rows.append([name, stage, *(getattr(s, k) for k in STATS)])
     return Table.of(("image", "orientation", *STATS), rows,
                     "Check-point residuals (measured - projected, px; col = P, row = L); "
                     "before: relative orientation only")
@@ -221,25 +225,28 @@ def evaluation_tables(ev: Doc) -> list[Block]:
     return out
 
 
-def summary_table(d: Doc) -> Table:
-    """The run at a glance."""
-    rel, sm, g = d.get("relative", {}), d.get("surface_matching", {}), d.get("gcps", {})
+def summary_table(r: OrientReport | None) -> Table:
+    """The run at a glance (dashes where the orientation's report is not available)."""
+    rel = r.relative if r is not None else {}
     rows = [["tie points used / rejected",
              f"{fmt(rel.get('tie_points'))} / {fmt(rel.get('tie_points_rejected'))}"],
             ["y-parallax RMS before / after (px)",
              (f"{fmt(rel.get('parallax_rms_before_px'))} / "
-              f"{fmt(rel.get('parallax_rms_after_px'))}")],
-            ["windows / matched / qualified by relief",
-             (f"{fmt(sm.get('windows'))} / {fmt(sm.get('counts', {}).get('OK'))} / "
-              f"{fmt(sm.get('qualified'))}")],
-            ["GCPs given / used / rejected",
-             f"{fmt(g.get('given'))} / {fmt(g.get('used'))} / {fmt(g.get('rejected'))}"]]
-    for name, a in d.get("absolute", {}).get("images", {}).items():
+              f"{fmt(rel.get('parallax_rms_after_px'))}")]]
+    if r is None:
+        rows += [["windows / matched / qualified by relief", _slash(None, None, None)],
+                 ["GCPs given / used / rejected", _slash(None, None, None)]]
+        return Table(("", "value"), tuple(tuple(x) for x in rows))
+    sm, g = r.surface_matching, r.gcps
+    rows += [["windows / matched / qualified by relief",
+              f"{fmt(sm.windows)} / {fmt(sm.counts.get('OK'))} / {fmt(sm.qualified)}"],
+             ["GCPs given / used / rejected",
+              f"{fmt(g.given)} / {fmt(g.used)} / {fmt(g.rejected)}"]]
+    for name, a in r.absolute.images.items():
         rows.append([f"GCP residual RMS {name}: col / row (px)",
-                     f"{fmt(a.get('rms_col_px'))} / {fmt(a.get('rms_row_px'))}"])
-    for stage, key in (("before", "check_points_before"), ("after", "check_points")):
-        for name, c in (d.get(key) or {}).items():
+                     f"{fmt(a.rms_col_px)} / {fmt(a.rms_row_px)}"])
+    for stage, stats in (("before", r.check_points_before), ("after", r.check_points)):
+        for name, c in (stats or {}).items():
             rows.append([f"check-point RMS {name} {stage}: col / row (px)",
-                         (f"{fmt(c.get('rms_col_px'))} / {fmt(c.get('rms_row_px'))} "
-                          f"({fmt(c.get('n'))} points)")])
-    return Table(("", "value"), tuple(tuple(r) for r in rows))
+                         f"{fmt(c.rms_col_px)} / {fmt(c.rms_row_px)} ({fmt(c.n)} points)"])
+    return Table(("", "value"), tuple(tuple(x) for x in rows))

@@ -27,6 +27,7 @@ from core.simulation.landcover import LandCoverConfig
 from core.simulation.scene import SceneDef, scale_relief
 from core.simulation.surface import SurfaceSpec
 from tasks.io.geoid import load_geoid
+from tasks.io.rasters import open_raster
 
 
 @dataclass(frozen=True)
@@ -88,14 +89,8 @@ class ScenePaths:
 
 def check_dem(path: Path) -> None:
     """Fail early, in one line, on a DEM that cannot serve the simulator."""
-    path = Path(path)
-    if not path.exists():
-        raise InputError(f"DEM {path} does not exist; give a GeoTIFF (EPSG:4326) or .hgt file")
-    try:
-        with rasterio.open(path) as src:
-            crs = src.crs
-    except rasterio.errors.RasterioIOError as exc:
-        raise InputError(f"cannot read DEM {path}: {exc}; give a GeoTIFF or .hgt file") from exc
+    with open_raster(path, "DEM", "give a GeoTIFF (EPSG:4326) or .hgt file") as src:
+        crs = src.crs
     if crs is None or not crs.is_geographic:
         raise InputError(
             f"DEM {path} is not in geographic coordinates (CRS {crs}); reproject it to "

@@ -9,7 +9,6 @@ reading of the DEM the world stands on are in :mod:`tasks.simulate.io`.
 
 from __future__ import annotations
 
-import json
 from dataclasses import dataclass, replace
 from datetime import date
 from functools import lru_cache, partial
@@ -25,7 +24,8 @@ from prefect import task
 from rasterio.rpc import RPC
 
 from core.errors import InputError, InsufficientDataError
-from core.geodesy import metres_per_degree, utm_epsg
+from core.geodesy import ARCSEC, metres_per_degree, utm_epsg
+from core.jsonio import parse_json
 from core.points import CheckPointSet, GeoPoint
 from core.sensors.pushbroom import PushbroomModel
 from core.sensors.rpcfit import fit_rpc
@@ -54,15 +54,16 @@ from tasks.io.dem import dem_datum
 from tasks.io.dimap import write_dimap
 from tasks.io.geoid import load_geoid
 from tasks.io.rasters import (
+    CHUNK,
     CogItem,
     CogOptions,
+    atomic_write_json,
     atomic_write_text,
     read_surface_window,
     write_arrays_cog,
 )
 from tasks.simulate.io import ScenePaths, check_dem, load_surface_spec, read_dem_window
 
-CHUNK = 1024
 NOISE_DN = {8: 1.0, 12: 6.0}
 
 
@@ -303,7 +304,7 @@ def make_checkpoints(scene: SceneDef, out: Path, n_wanted: int = 100) -> Path:
             "needed); the scene is mostly water, forest or town: choose another --center"
         )
     doc = CheckPointSet(f"EPSG:{scene.epsg}", scene.image_names, tuple(points))
-    atomic_write_text(paths.checkpoints, json.dumps(doc.to_dict(), indent=1))
+    atomic_write_json(paths.checkpoints, doc.to_dict())
     return paths.checkpoints
 
 
@@ -321,7 +322,7 @@ def make_reference(scene: SceneDef, out: Path, errors: ReferenceErrors | None = 
     if _exist(target):
         return target
     errors = errors or ReferenceErrors.drawn(derive_seed(scene.seed, "reference"))
-    d = 3.0 / 3600.0
+    d = 3.0 * ARCSEC
     w = scene.dem_window
     lons = np.arange(np.ceil(w.lon_min / d), np.floor(w.lon_max / d) + 1) * d
     lats = np.arange(np.floor(w.lat_max / d), np.ceil(w.lat_min / d) - 1, -1) * d
@@ -340,7 +341,7 @@ def make_reference(scene: SceneDef, out: Path, errors: ReferenceErrors | None = 
     write_arrays_cog([CogItem(h.astype(np.float32), target, CogOptions(
         transform=(d, 0.0, lons[0] - d / 2, 0.0, -d, lats[0] + d / 2), crs="EPSG:4326",
         nodata=np.nan, tags=tags))])
-    atomic_write_text(paths.truth / "reference_errors.json", json.dumps(vars(errors), indent=1))
+    atomic_write_json(paths.truth / "reference_errors.json", vars(errors))
     return target
 
 
@@ -421,7 +422,7 @@ class SimulationSummary:
 @task(name="summarize-scene")
 def summarize(scene: SceneDef, out: Path) -> SimulationSummary:
     paths = ScenePaths(Path(out))
-    n_cp = len(json.loads(paths.checkpoints.read_text())["points"])
+    n_cp = len(parse_json(paths.checkpoints.read_text(), str(paths.checkpoints))["points"])
     n_lidar = 0
     if paths.lidar.exists():
         with laspy.open(paths.lidar) as f:

@@ -12,8 +12,10 @@ import rasterio
 from affine import Affine
 from scipy.ndimage import shift as nd_shift
 
-from core.coregister import Grid, metres_per_unit, nuth_kaab
+from core.coregister import nuth_kaab
+from core.dem import GeoDEM, SurfaceGrid
 from core.errors import InputError, InsufficientDataError
+from core.geodesy import metres_per_degree
 from tasks.io.geoid import BUNDLED_SRTM_DIR, load_geoid
 
 D = 1 / 1200
@@ -39,40 +41,31 @@ def shifted(z, col_px, row_px, dz, noise_m=0.0, seed=0):
 @pytest.mark.parametrize(("col", "row", "dz", "noise"),
                          [(0.3, -0.45, 0.0, 0.0), (-0.27, 0.61, 12.5, 0.5), (1.3, 0.2, -3.0, 1.0)])
 def test_known_subpixel_shift_recovered(srtm, col, row, dz, noise):
-    ref = Grid(srtm, 5.25, 44.75, D, -D, True)
-    r = nuth_kaab(ref, Grid(shifted(srtm, col, row, dz, noise), 5.25, 44.75, D, -D, True))
+    ref = GeoDEM(srtm, 5.25, 44.75, D, -D)
+    r = nuth_kaab(ref, GeoDEM(shifted(srtm, col, row, dz, noise), 5.25, 44.75, D, -D))
     assert r.shift_col_px == pytest.approx(col, abs=0.01)
     assert r.shift_row_px == pytest.approx(row, abs=0.01)
     assert r.shift_up_m == pytest.approx(dz, abs=0.05)
-    me, mn = metres_per_unit(44.5)
+    me, mn = metres_per_degree(44.5)
     assert r.shift_east_m == pytest.approx(col * D * float(me), rel=0.01)
     assert r.shift_north_m == pytest.approx(-row * D * float(mn), rel=0.01)
     assert r.nmad_after_m < max(noise, 0.01) * 1.6
 
 
 def test_projected_grids(srtm):
-    ref = Grid(srtm, 650_000.0, 4_950_000.0, 30.0, -30.0, False)
-    r = nuth_kaab(ref, Grid(shifted(srtm, -0.4, 0.25, 2.0), 650_000.0, 4_950_000.0, 30.0, -30.0,
-                            False))
+    ref = SurfaceGrid(srtm, 650_000.0, 4_950_000.0, 30.0, -30.0)
+    r = nuth_kaab(ref, SurfaceGrid(shifted(srtm, -0.4, 0.25, 2.0), 650_000.0, 4_950_000.0, 30.0,
+                                   -30.0))
     assert r.shift_east_m == pytest.approx(-0.4 * 30.0, abs=0.3)
     assert r.shift_north_m == pytest.approx(-0.25 * 30.0, abs=0.3)
 
 
-def test_metres_per_unit_against_proj():
-    import pyproj
-
-    geod = pyproj.Geod(ellps="WGS84")
-    me, mn = metres_per_unit(44.5)
-    assert float(me) * 1e-3 == pytest.approx(geod.inv(5.0, 44.5, 5.001, 44.5)[2], rel=1e-6)
-    assert float(mn) * 1e-3 == pytest.approx(geod.inv(5.0, 44.4995, 5.0, 44.5005)[2], rel=1e-6)
-
-
 def test_bad_inputs(srtm):
-    ref = Grid(srtm, 5.25, 44.75, D, -D, True)
+    ref = GeoDEM(srtm, 5.25, 44.75, D, -D)
     with pytest.raises(InputError, match="both be geographic"):
-        nuth_kaab(ref, Grid(srtm, 0.0, 0.0, 30.0, -30.0, False))
+        nuth_kaab(ref, SurfaceGrid(srtm, 0.0, 0.0, 30.0, -30.0))
     with pytest.raises(InsufficientDataError, match="overlap"):
-        nuth_kaab(ref, Grid(srtm, 9.25, 44.75, D, -D, True))
+        nuth_kaab(ref, GeoDEM(srtm, 9.25, 44.75, D, -D))
 
 
 def test_cli_on_geotiffs(srtm, tmp_path):

@@ -1,7 +1,7 @@
 import numpy as np
 import pytest
 
-from core.dem import GeoDEM, sample_bilinear
+from core.dem import GeoDEM, SurfaceGrid, sample_bilinear
 from core.errors import InputError
 
 
@@ -31,3 +31,21 @@ def test_geodem_from_north_up_transform():
     assert dem.bounds_deg() == pytest.approx((10.25, 44.75, 11.75, 45.75))
     with pytest.raises(InputError, match="rotated"):
         GeoDEM.from_transform(h, (0.5, 0.1, 10.0, 0.0, -0.5, 46.0))
+
+
+def test_both_grid_types_read_one_transform_the_same_way():
+    """GeoDEM (degrees) and SurfaceGrid (metres) share one convention: the same array and
+    the same north-up transform give the same values at the same coordinates."""
+    h = np.arange(20.0).reshape(4, 5)
+    t = (30.0, 0.0, 600_000.0, 0.0, -30.0, 4_900_000.0)
+    geo, proj = GeoDEM.from_transform(h, t), SurfaceGrid.from_transform(h, t)
+    assert proj.axes == geo.axes == (600_015.0, 4_899_985.0, 30.0, -30.0)
+    x, y = np.array([600_015.0, 600_050.0, 600_130.0]), np.array([4_899_985.0, 4_899_950.0,
+                                                                4_899_900.0])
+    np.testing.assert_array_equal(geo.sample(x, y), proj.sample(x, y))
+    assert proj.sample(600_015.0, 4_899_985.0 - 30.0) == 5.0  # one row south
+    np.testing.assert_array_equal(geo.nodes()[1][:, 0], 4_899_985.0 - 30.0 * np.arange(4))
+    assert proj.bounds() == (600_015.0, 4_899_895.0, 600_135.0, 4_899_985.0)
+    assert proj.with_values(h + 1.0).sample(600_015.0, 4_899_985.0) == 1.0
+    with pytest.raises(InputError, match="non-zero"):
+        SurfaceGrid(h, 0.0, 0.0, 30.0, 0.0)

@@ -10,14 +10,12 @@ import numpy as np
 import pytest
 
 from core.errors import InputError
-from core.evaluation import (
+from core.evaluation import ClassedDz, DzAccumulator, DzStats, StatsConfig
+from core.evaluation_report import (
     NO_CODE,
     NO_LANDCOVER,
-    ClassedDz,
     CrsInfo,
     DemInfo,
-    DzAccumulator,
-    DzStats,
     EvaluationReport,
     GcpCheck,
     LandcoverInfo,
@@ -25,7 +23,6 @@ from core.evaluation import (
     MaskSummary,
     PointCounts,
     PointTally,
-    StatsConfig,
     class_tables,
     code_counts,
     gcp_check,

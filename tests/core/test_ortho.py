@@ -101,7 +101,7 @@ def test_lattice_agrees_on_a_projected_egm96_dsm_with_a_steep_geoid():
     cells = tile_around(LON0, LAT0, 10.0, 256)
     x0, y0 = cells.x0_m - 100, cells.y0_m + 100
     z = rough((700, 700), 2, 60.0)
-    grid = SurfaceGrid(z, x0, y0, 4.0, 4.0)
+    grid = SurfaceGrid(z, x0, y0, 4.0, -4.0)
     # EGM96's 15' nodes with 20 times its undulations over the Alps (N 47..53 m here)
     glat, glon = np.arange(43.0, 45.5, 0.25), np.arange(4.0, 6.5, 0.25)
     egm96 = load_geoid()
@@ -205,7 +205,7 @@ def test_a_wall_hides_the_ground_behind_it_by_its_shadow_length():
     wall_x = cells.x0_m + 400.0  # wall cells [wall_x, wall_x + 20 m)
     xs = x0 + 5.0 * np.arange(220)
     z[:, (xs >= wall_x) & (xs < wall_x + 20.0)] = 700.0
-    dem = TileDEM(SurfaceGrid(z, x0, y0, 5.0, 5.0), TO_XY)
+    dem = TileDEM(SurfaceGrid(z, x0, y0, 5.0, -5.0), TO_XY)
     geo = tile_geometry(model, cells, dem, TO_LONLAT, OrthoConfig(occlusion=True))
     x, _ = cell_centres(cells)
     lon, lat = TO_LONLAT(x, _)

@@ -10,8 +10,8 @@ import pytest
 from core.errors import InputError
 from core.ortho_compare import (
     CompareConfig,
+    ShiftStatus,
     WindowShifts,
-    WindowStatus,
     discrepancy_stats,
     match_windows,
     window_origins,
@@ -44,7 +44,7 @@ def test_known_shifts_are_recovered_to_a_hundredth_of_a_cell(d_col, d_row):
     cfg = CompareConfig(window_px=48, step_px=60, search_px=6)
     rows = cols = window_origins(0, N, cfg)
     s = match_windows(left, right, rows, cols, cfg)
-    assert (s.status == WindowStatus.OK).all()
+    assert (s.status == ShiftStatus.OK).all()
     np.testing.assert_allclose(s.dx_px, d_col, atol=0.01)
     np.testing.assert_allclose(s.dy_px, -d_row, atol=0.01)  # dy is north: rows go south
     assert np.all(s.ncc > 0.99)
@@ -60,10 +60,10 @@ def test_nodata_flat_and_mismatched_windows_are_flagged():
     rng = np.random.default_rng(0)  # window (2, 0): noise against texture
     right[rows[2] - 6:rows[2] + 38, cols[0] - 6:cols[0] + 38] = rng.normal(size=(44, 44))
     s = match_windows(left, right, rows, cols, cfg)
-    assert s.status[0, 0] == WindowStatus.NODATA
-    assert s.status[1, 0] == WindowStatus.FLAT
-    assert s.status[2, 0] == WindowStatus.LOW_NCC
-    assert (s.status[:, 1:] == WindowStatus.OK).all()
+    assert s.status[0, 0] == ShiftStatus.NODATA
+    assert s.status[1, 0] == ShiftStatus.FLAT
+    assert s.status[2, 0] == ShiftStatus.LOW_NCC
+    assert (s.status[:, 1:] == ShiftStatus.OK).all()
     assert np.isnan(s.dx_px[0, 0]) and np.isnan(s.dy_px[1, 0])
 
 
@@ -72,7 +72,7 @@ def test_a_shift_beyond_the_search_is_not_reported():
     cfg = CompareConfig(window_px=48, step_px=60, search_px=4, min_ncc=-1.0)
     rows = cols = window_origins(0, N, cfg)
     s = match_windows(left, right, rows, cols, cfg)
-    assert not (s.status == WindowStatus.OK).any()
+    assert not (s.status == ShiftStatus.OK).any()
 
 
 def test_window_origins_keep_the_search_inside():
@@ -87,7 +87,7 @@ def test_statistics_agree_with_numpy():
     rng = np.random.default_rng(1)
     dx, dy = rng.normal(0.3, 1, (7, 9)), rng.normal(-0.2, 1, (7, 9))
     status = np.zeros((7, 9), np.uint8)
-    status[0] = WindowStatus.NODATA
+    status[0] = ShiftStatus.NODATA
     st = discrepancy_stats(WindowShifts(dx, dy, np.ones((7, 9)), status), cell_m=2.5)
     norm = np.hypot(dx[1:], dy[1:])
     assert st.n_windows == 63 and st.n_valid == 54

@@ -17,10 +17,11 @@ import pytest
 
 from core.errors import InputError
 from flows.commands import archive as archive_command
+from tests.flows.reports import finished_evaluation, finished_report
 
 
 def complete_pair(out: Path, report: dict, evaluation: dict | None = None) -> None:
-    """The minimal finished products :func:`flows.orient_pair.pair_complete` accepts: the
+    """The minimal finished products :func:`tasks.archive.pair.pair_complete` accepts: the
     manifest ``pair.json`` listing products that read back with their recorded sizes."""
     out.mkdir(parents=True)
     products = {"report": "report.json"}
@@ -33,13 +34,9 @@ def complete_pair(out: Path, report: dict, evaluation: dict | None = None) -> No
         "sizes": {rel: (out / rel).stat().st_size for rel in products.values()}}))
 
 
-FINISHED_REPORT = {
-    "format": "gcpfree.orient", "gcps": {"used": 41},
-    "absolute": {"images": {"left": {"rms_col_px": 0.25, "rms_row_px": 0.5},
-                            "right": {"rms_col_px": 0.75, "rms_row_px": 0.125}}},
-    "check_points": {"left": {"rms_col_px": 0.375, "rms_row_px": 0.625},
-                     "right": {"rms_col_px": 0.875, "rms_row_px": 0.0625}}}
-FINISHED_EVAL = {"all": {"le68": 3.5}, "classes": {}}
+FINISHED_REPORT = finished_report(41, {"left": (0.25, 0.5), "right": (0.75, 0.125)},
+                                  {"left": (0.375, 0.625), "right": (0.875, 0.0625)})
+FINISHED_EVAL = finished_evaluation(3.5)
 
 
 def parse(*argv: str) -> argparse.Namespace:
@@ -81,7 +78,7 @@ def archive(tiny_clean_scene, tmp_path_factory, prefect_harness):
 
 
 def test_each_pair_ends_done_skipped_or_failed_with_its_reason(archive):
-    from flows.orient_pair import pair_complete
+    from tasks.archive.pair import pair_complete
 
     _, _, root, outcome, _, _, before = archive
     status = {r.id: r.status for r in outcome.rows}
@@ -237,8 +234,8 @@ def test_archive_on_a_separately_started_dask_cluster(tiny_clean_scene, dask_clu
     from dask.utils import key_split
     from distributed import Client
 
-    from flows.orient_pair import pair_complete
     from flows.reprocess_archive import reprocess_archive
+    from tasks.archive.pair import pair_complete
 
     scene, _ = tiny_clean_scene
     cat, root = tmp_path / "catalog", tmp_path / "root"

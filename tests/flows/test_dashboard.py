@@ -8,6 +8,7 @@ from pathlib import Path
 
 import pytest
 
+from tests.flows.reports import finished_report
 from tests.flows.test_archive import FINISHED_EVAL, FINISHED_REPORT, complete_pair
 
 
@@ -20,7 +21,7 @@ def finished_archive(tmp_path_factory, prefect_harness):
     base = tmp_path_factory.mktemp("dashboard")
     (base / "cat.csv").write_text("id,left,right\nnorth,n/l.tif,n/r.tif\nsouth,s/l.tif,s/r.tif\n")
     complete_pair(base / "root" / "north", FINISHED_REPORT, FINISHED_EVAL)
-    complete_pair(base / "root" / "south", {"gcps": {"used": 12}})
+    complete_pair(base / "root" / "south", finished_report(12, {"left": (0.5, 0.5)}))
     state = reprocess_archive(catalog=base / "cat.csv", out=base / "root",
                               srtm_dir=base, return_state=True)
     return base, state

@@ -6,7 +6,6 @@ from __future__ import annotations
 
 import argparse
 import json
-import sys
 import types
 from pathlib import Path
 
@@ -39,24 +38,20 @@ def stub_orientation(monkeypatch, tiny_clean_scene):
     scene_dir, _ = tiny_clean_scene
     calls = []
 
-    def relative_models(left, right, *, left_model=None, right_model=None, band=None,
-                        reference=None, reference_vertical="auto", srtm_dir=None, out_dir):
-        calls.append({"left": left, "right": right, "reference": reference,
-                      "reference_vertical": reference_vertical, "out_dir": out_dir})
-        pair = []
-        for name, image in (("left", left), ("right", right)):
+    def relative_models(pair, out_dir):
+        calls.append({"left": pair.left, "right": pair.right, "reference": pair.reference,
+                      "reference_vertical": pair.reference_vertical, "out_dir": out_dir})
+        loaded = []
+        for name, image in (("left", pair.left), ("right", pair.right)):
             path = scene_dir / "truth" / f"{name}_truth.json"
             m = PushbroomModel.from_json(path.read_text())
-            pair.append(LoadedModel(m, "pushbroom", path, Path(image), (m.n_cols, m.n_rows)))
-        return types.SimpleNamespace(left=pair[0], right=pair[1], reference=reference,
+            loaded.append(LoadedModel(m, "pushbroom", path, Path(image), (m.n_cols, m.n_rows)))
+        return types.SimpleNamespace(left=loaded[0], right=loaded[1], reference=pair.reference,
                                      rel_json=Path(out_dir) / "rel.json")
 
-    try:
-        import flows.relative as module
-    except ImportError:
-        module = types.ModuleType("flows.relative")
-        monkeypatch.setitem(sys.modules, "flows.relative", module)
-    monkeypatch.setattr(module, "relative_models", relative_models, raising=False)
+    import flows.relative as module
+
+    monkeypatch.setattr(module, "relative_models", relative_models)
     return calls
 
 

@@ -1,4 +1,4 @@
-"""``gcpfree evaluate`` end to end: the parser built from ``flows.evaluate.add_parser``, the
+"""``gcpfree evaluate`` end to end: the parser built from ``flows.commands.evaluate``, the
 flow under the Prefect harness writing eval.json, and bad input (one line on stderr, exit 2,
 no traceback, nothing written) caught before Prefect starts."""
 
@@ -15,7 +15,8 @@ import pyproj
 import pytest
 
 from core.errors import GcpFreeError
-from flows.evaluate import add_parser, main, run
+from flows.cli import main
+from flows.commands.evaluate import add_parser, run
 from tests.tasks.test_evaluate import (
     AUTZEN,
     CELL,
@@ -134,18 +135,19 @@ def test_parser_help_and_bad_classes(capsys):
     assert exc.value.code == 2 and "LAS codes" in capsys.readouterr().err
 
 
-def test_module_runs_alone_and_imports_light(scene, tmp_path):
-    """``python -m flows.evaluate``: bad input is one line and exit 2 before Prefect loads;
-    importing the module (as the gcpfree parser does) loads no Prefect, rasterio or laspy."""
-    code = ("import sys; import flows.evaluate; "
+def test_command_imports_light_and_refuses_in_one_line(scene, tmp_path):
+    """The command module (what the gcpfree parser imports) loads no Prefect, rasterio or
+    laspy; ``python -m flows.cli evaluate``: bad input is one line and exit 2."""
+    code = ("import sys; import flows.cli, flows.commands.evaluate; "
             "sys.exit(10 * any(m in sys.modules for m in ('prefect', 'rasterio', 'laspy')))")
     proc = subprocess.run([sys.executable, "-c", code], cwd=REPO, capture_output=True,
                           text=True, timeout=120, check=False)
     assert proc.returncode == 0, proc.stderr
-    proc = subprocess.run([sys.executable, "-m", "flows.evaluate", "--dem", str(scene["dem"]),
-                           "--lidar", str(AUTZEN), "--out", str(tmp_path / "e.json")],
+    proc = subprocess.run([sys.executable, "-m", "flows.cli", "evaluate", "--dem",
+                           str(scene["dem"]), "--lidar", str(AUTZEN), "--out",
+                           str(tmp_path / "e.json")],
                           cwd=REPO, capture_output=True, text=True, timeout=120, check=False)
     assert proc.returncode == 2 and proc.stderr.count("\n") == 1
     assert "does not cover the lidar" in proc.stderr and "Traceback" not in proc.stderr
-    assert main(["--dem", str(tmp_path / "x.tif"), "--lidar", str(AUTZEN), "--out",
-                 str(tmp_path / "e.json")]) == 2
+    assert main(["evaluate", "--dem", str(tmp_path / "x.tif"), "--lidar", str(AUTZEN),
+                 "--out", str(tmp_path / "e.json")]) == 2

@@ -58,7 +58,7 @@ def test_bad_input_is_one_line_and_exit_2(tmp_path, capsys):
     _bad(capsys, ["info", str(tmp_path / "missing.tif")], "does not exist")
     junk = tmp_path / "scene.foo"
     junk.write_text("not an image")
-    _bad(capsys, ["info", str(junk)], "cannot open raster")
+    _bad(capsys, ["info", str(junk)], "cannot read image")
     _bad(capsys, ["info", str(VENTOUX / "left_image.tif"), "--model", str(junk)],
          "unknown model format")
     bad_json = tmp_path / "model.json"

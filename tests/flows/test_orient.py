@@ -18,10 +18,13 @@ import pytest
 from core.errors import InputError, InsufficientReliefError
 from core.geodesy import geodetic_to_enu
 from core.intersection import triangulate
+from core.matching.relief import relief_sufficiency
+from core.matching.surface import SurfaceMatchConfig, WindowMatch, WindowStatus
 from core.points import control_points_from_dict
-from core.surface_match import SurfaceMatchConfig, WindowMatch, WindowStatus, relief_sufficiency
 from flows.commands import orient as orient_command
 from tasks.absolute.orientation import read_checkpoints
+from tasks.absolute.report import OrientReport
+from tasks.io.pair import PairInputs
 from tasks.io.sensors import load_model
 from tests.scenes import dsm_against_truth
 
@@ -41,7 +44,9 @@ def oriented(tiny_oriented):
 def test_pushbroom_pair_reaches_the_check_points_with_no_gcp(oriented):
     _, out, outcome = oriented
     report = json.loads((out / "report.json").read_text())
-    assert report == outcome.report
+    # the typed report is the file, every key and value (read through its schema and back)
+    assert report == outcome.report.to_dict()
+    assert OrientReport.from_dict(report) == outcome.report
     before, after = report["check_points_before"], report["check_points"]
     for name in ("left", "right"):
         # the metadata are 100-300 m (2.5-7.5 px) off; SRTM alone brings them under a pixel
@@ -71,11 +76,11 @@ def test_products_are_what_the_report_says(oriented):
         c, r = model.project(lon, lat, h)
         dc = np.array([p.image_points[name].col for p in pts]) - c
         dr = np.array([p.image_points[name].row for p in pts]) - r
-        cp = outcome.report["check_points"][name]
-        assert np.sqrt(np.mean(dc**2)) == pytest.approx(cp["rms_col_px"], rel=1e-9)
-        assert np.sqrt(np.mean(dr**2)) == pytest.approx(cp["rms_row_px"], rel=1e-9)
+        cp = outcome.report.check_points[name]
+        assert np.sqrt(np.mean(dc**2)) == pytest.approx(cp.rms_col_px, rel=1e-9)
+        assert np.sqrt(np.mean(dr**2)) == pytest.approx(cp.rms_row_px, rel=1e-9)
     gcps = control_points_from_dict(json.loads((out / "gcps.json").read_text()))
-    assert len(gcps) == outcome.report["gcps"]["given"]
+    assert len(gcps) == outcome.report.gcps.given
     assert all(p.source == "srtm_surface_match" and p.sigma_xy_m > 0 for p in gcps)
     windows = json.loads((out / "windows.json").read_text())["windows"]
     assert sum(w["status"] == "OK" for w in windows) == len(gcps)
@@ -135,14 +140,15 @@ def test_the_chain_never_needs_the_simulators_answers(tiny_oriented, tmp_path,
     cps = shutil.copy2(scene / "truth" / "checkpoints.json", elsewhere / "checkpoints.json")
     out = tmp_path / "out"
     outcome = orient_flow(OrientParams(
-        left=bare / "left.tif", right=bare / "right.tif", out=out,
-        reference=bare / "reference.tif", checkpoints=cps, self_calibrate=True,
-        progress=False))
+        pair=PairInputs(bare / "left.tif", bare / "right.tif",
+                        reference=bare / "reference.tif"),
+        out=out, checkpoints=cps, self_calibrate=True, progress=False))
     for name in ("gcps.json", "left.json", "right.json", "windows.json"):
         assert_same_json(json.loads((out / name).read_text()),
                          json.loads((ref_out / name).read_text()), name)
+    doc, ref_doc = outcome.report.to_dict(), ref_outcome.report.to_dict()
     for key in ("gcps", "check_points", "check_points_before"):
-        assert_same_json(outcome.report[key], ref_outcome.report[key], key)
+        assert_same_json(doc[key], ref_doc[key], key)
 
 
 def test_rpc_family_is_oriented_too(tiny_scene, tmp_path, prefect_harness):
@@ -152,16 +158,17 @@ def test_rpc_family_is_oriented_too(tiny_scene, tmp_path, prefect_harness):
 
     scene, _ = tiny_scene
     outcome = orient_flow(OrientParams(
-        left=scene / "left.tif", right=scene / "right.tif", left_model=scene / "left.tif",
-        right_model=scene / "right.tif", out=tmp_path, reference=scene / "reference.tif",
-        checkpoints=scene / "truth" / "checkpoints.json", self_calibrate=True, progress=False))
+        pair=PairInputs(scene / "left.tif", scene / "right.tif", scene / "left.tif",
+                        scene / "right.tif", reference=scene / "reference.tif"),
+        out=tmp_path, checkpoints=scene / "truth" / "checkpoints.json", self_calibrate=True,
+        progress=False))
     r = outcome.report
     assert json.loads((tmp_path / "left.json").read_text())["type"] == "rpc"
-    assert not r["absolute"]["self_calibration"]["applied"]
+    assert not r.absolute.self_calibration.applied
     for name in ("left", "right"):
-        assert r["check_points_before"][name]["rms_row_px"] > 2.0
-        assert r["check_points"][name]["rms_row_px"] < 0.8
-        assert r["check_points"][name]["rms_col_px"] < 1.0
+        assert r.check_points_before[name].rms_row_px > 2.0
+        assert r.check_points[name].rms_row_px < 0.8
+        assert r.check_points[name].rms_col_px < 1.0
 
 
 def test_too_few_windows_with_relief_is_refused_with_the_figures(tiny_scene, tmp_path,
@@ -174,9 +181,9 @@ def test_too_few_windows_with_relief_is_refused_with_the_figures(tiny_scene, tmp
 
     scene, _ = tiny_scene
     with pytest.raises(InsufficientDataError) as err:
-        orient_flow(OrientParams(left=scene / "left.tif", right=scene / "right.tif",
-                                 out=tmp_path, reference=scene / "reference.tif",
-                                 min_windows=500, progress=False))
+        orient_flow(OrientParams(pair=PairInputs(scene / "left.tif", scene / "right.tif",
+                                                 reference=scene / "reference.tif"),
+                                 out=tmp_path, min_windows=500, progress=False))
     m = re.search(r"too few surface-matching windows: (\d+) placed, (\d+) with enough relief"
                   r".*, 500 needed; .*--min-windows", str(err.value))
     assert m, str(err.value)
@@ -198,8 +205,9 @@ def test_nearly_flat_terrain_is_refused_with_the_relief_figures(tmp_path_factory
     run_scene(scene, seed=21, jitter=False, lidar=False, relief_factor=0.05, date_change=0.1)
     out = tmp_path_factory.mktemp("flat_out")
     with pytest.raises(InsufficientReliefError) as err:
-        orient_flow(OrientParams(left=scene / "left.tif", right=scene / "right.tif", out=out,
-                                 reference=scene / "reference.tif", progress=False))
+        orient_flow(OrientParams(pair=PairInputs(scene / "left.tif", scene / "right.tif",
+                                                 reference=scene / "reference.tif"),
+                                 out=out, progress=False))
     msg = str(err.value)
     m = re.search(r"too flat for GCP-free orientation: (\d+) of (\d+) windows judged.* "
                   r"\((\d+) needed\); relief found ([0-9.]+) m .*needed about ([0-9.]+) m", msg)

@@ -5,7 +5,7 @@ SRTM tile as the ground: the scene is smaller than one surface-matching window. 
 used to refuse it after three minutes of matching as "too flat ... relief found 0.0 m ...
 needed about nan m", after a numpy ``RuntimeWarning`` line; it is now refused before anything
 runs, with its size and the size a window needs (the relief verdict's own ``too_small`` reason,
-for overlaps between, is tested in ``tests/core/test_surface_match.py``). The installed command
+for overlaps between, is tested in ``tests/core/matching/test_surface_match.py``). The installed command
 runs in a subprocess, so what reaches stderr is exactly what a user reads.
 """
 

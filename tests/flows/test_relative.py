@@ -19,6 +19,7 @@ from core.sensors.pushbroom import PushbroomModel
 from core.sensors.rpc import RPCModel
 from flows.relative import RelativeParams, relative_flow
 from tasks.io.geoid import BUNDLED_SRTM_DIR
+from tasks.io.pair import PairInputs
 from tasks.io.sensors import load_model
 
 SRTM = BUNDLED_SRTM_DIR / "N44E005.hgt"
@@ -52,9 +53,9 @@ def clean_runs(prefect_harness, tiny_clean_scene, tmp_path_factory):
     for family, models in (("pushbroom", (None, None)),
                            ("rpc", (scene_dir / "left.tif", scene_dir / "right.tif"))):
         runs[family] = relative_flow(RelativeParams(
-            left=scene_dir / "left.tif", right=scene_dir / "right.tif",
-            left_model=models[0], right_model=models[1], reference=SRTM, cell_m=1000.0,
-            out=out / f"{family}.json"))
+            pair=PairInputs(scene_dir / "left.tif", scene_dir / "right.tif", models[0],
+                            models[1], reference=SRTM),
+            cell_m=1000.0, out=out / f"{family}.json"))
     return scene_dir, runs
 
 
@@ -87,8 +88,8 @@ def test_without_reference_the_along_epipolar_part_is_held(prefect_harness, tiny
                                                              tmp_path):
     scene_dir, _ = tiny_clean_scene
     outcome = relative_flow(RelativeParams(
-        left=scene_dir / "left.tif", right=scene_dir / "right.tif", height_range_m=(0.0, 2500.0),
-        cell_m=1000.0, out=tmp_path / "rel.json"))
+        pair=PairInputs(scene_dir / "left.tif", scene_dir / "right.tif"),
+        height_range_m=(0.0, 2500.0), cell_m=1000.0, out=tmp_path / "rel.json"))
     doc = json.loads(outcome.rel_json.read_text())
     assert doc["along_epipolar_observable"] is False
     assert abs(doc["right_correction"]["along_epipolar_px"]) < 0.05
@@ -105,7 +106,7 @@ def test_ventoux_rpc_inconsistency_is_found_and_a_known_bias_recovered(prefect_h
         shutil.copy(VENTOUX / "right_image.tif", right)
         shutil.copy(right_geom, right.with_suffix(".geom"))
         outcome = relative_flow(RelativeParams(
-            left=VENTOUX / "left_image.tif", right=right, reference=SRTM, cell_m=cell_m,
+            pair=PairInputs(VENTOUX / "left_image.tif", right, reference=SRTM), cell_m=cell_m,
             tie_points=TiePointConfig(min_cells_per_side=min_cells),
             out=tmp_path / f"{name}.json"))
         return json.loads(outcome.rel_json.read_text())
@@ -156,7 +157,7 @@ def test_real_crops_without_reference(prefect_harness, left, right, tmp_path):
     4.75 -> 0.13 px, across-epipolar -4.79 px (-4.83 px with the SRTM reference); Reunion 63,
     64.7 m, 0.70 -> 0.11 px; Gizeh 61, 52.6 m, 0.52 -> 0.06 px."""
     outcome = relative_flow(RelativeParams(
-        left=left, right=right, out=tmp_path / "rel.json",
+        pair=PairInputs(left, right), out=tmp_path / "rel.json",
         tie_points=TiePointConfig(candidates_per_cell=3)))
     doc = json.loads(outcome.rel_json.read_text())
     search = doc["tie_point_search"]

@@ -21,8 +21,8 @@ import rasterio
 from flows.commands import archive as archive_command
 from flows.commands import orient as orient_command
 from flows.commands import pair as pair_command
-from tasks.io.geoid import BUNDLED_SRTM_DIR
 from tasks.absolute.orientation import read_checkpoints
+from tasks.io.geoid import BUNDLED_SRTM_DIR
 from tasks.io.sensors import load_model
 
 MADE = Path("relative") / "rel.reference.tif"  # where the orientation writes its reference
@@ -82,7 +82,7 @@ def test_orient_with_srtm_dir_agrees_with_the_reference_run(srtm_oriented, tiny_
                          - check_point_pixels(theirs, scene)[0]).T)
         assert np.median(gap) < 0.3 and gap.max() < 1.0, (name, np.median(gap), gap.max())
     assert report["dsm"]["summary"]["completeness_pct"] == pytest.approx(
-        ref_outcome.report["dsm"]["summary"]["completeness_pct"], abs=2.0)
+        ref_outcome.report.dsm.summary.completeness_pct, abs=2.0)
     # the products name the reference made from the tiles, and it says what it was made of
     assert report["report"]["inputs"]["reference"] == str(out / MADE)
     assert report["reference"]["srtm_dir"] == str(BUNDLED_SRTM_DIR)
@@ -98,7 +98,7 @@ def test_pair_with_srtm_dir_resumes_and_orthorectifies_on_the_made_reference(
     """``gcpfree pair --srtm-dir``: the orientation kept, both orthos over the reference the
     orientation made (not the SRTM tile as such, not another one), and they agree as the
     ``--reference`` pair's do (median 0.57 px there)."""
-    from flows.orient_pair import pair_complete
+    from tasks.archive.pair import pair_complete
 
     scene, _, report = srtm_oriented
     out = resumed(srtm_oriented, tmp_path / "tiny")

@@ -27,7 +27,6 @@ import rasterio
 from rasterio.crs import CRS
 from rasterio.windows import Window
 
-from core.errors import GcpFreeError
 from tasks.io.geoid import BUNDLED_SRTM_DIR, load_geoid
 
 DATA = Path(__file__).resolve().parents[1] / "data"
@@ -271,8 +270,8 @@ def test_fill_voids_reads_every_variant_of_the_tile_alike(dems, tmp_path):
 
 
 def test_simulate_says_the_datum_of_its_dem(dems, tmp_path):
-    from tasks.simulate.io import read_dem_window
     from core.geodesy import BBox
+    from tasks.simulate.io import read_dem_window
 
     box = BBox(5.2, 44.15, 5.3, 44.25)
     a, _, _ = read_dem_window(dems["hgt"], box, "egm96")
@@ -283,11 +282,11 @@ def test_simulate_says_the_datum_of_its_dem(dems, tmp_path):
 def test_the_products_record_the_decision(tiny_oriented):
     """orient's report.json, its relative DEM and rel.json say which reference and datum."""
     _, out, outcome = tiny_oriented
-    ref = outcome.report["reference"]
-    assert ref["path"].endswith("reference.tif") and ref["vertical"] == "ellipsoidal"
-    assert ref["vertical_source"].startswith("tag vertical_datum=")
-    assert outcome.report["relative_dem"]["reference"]["vertical"] == "ellipsoidal"
+    ref = outcome.report.reference
+    assert ref.path.endswith("reference.tif") and ref.vertical == "ellipsoidal"
+    assert ref.vertical_source.startswith("tag vertical_datum=")
+    assert outcome.report.relative_dem.reference["vertical"] == "ellipsoidal"
     rel = json.loads((out / "relative" / "rel.json").read_text())
-    assert rel["reference"]["path"] == ref["path"]
-    assert rel["reference"]["vertical_source"] == ref["vertical_source"]
-    assert outcome.report["surface_matching"]["settings"]["radius_m"] > 0
+    assert rel["reference"]["path"] == ref.path
+    assert rel["reference"]["vertical_source"] == ref.vertical_source
+    assert outcome.report.surface_matching.settings["radius_m"] > 0

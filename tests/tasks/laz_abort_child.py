@@ -9,6 +9,8 @@ import sys
 from typing import BinaryIO
 
 from tasks.io import laz_child
+
+
 class _AbortAfterFirstChunk:
     """Passes the frames on; once a chunk's points are written, flushes and aborts."""
 

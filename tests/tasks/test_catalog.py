@@ -23,6 +23,7 @@ from tasks.archive.catalog import (
     summary_csv,
     write_summary,
 )
+from tests.flows.reports import finished_evaluation, finished_report
 
 
 def touch(path: Path, text: str = "x") -> Path:
@@ -171,13 +172,10 @@ def test_catalog_reading_retries_io_errors_only():
 
 
 def _report(tmp: Path) -> None:
-    touch(tmp / "report.json", json.dumps({
-        "format": "gcpfree.orient", "gcps": {"used": 37, "rejected": 2},
-        "absolute": {"images": {"left": {"rms_col_px": 0.31, "rms_row_px": 0.42},
-                                "right": {"rms_col_px": 0.5, "rms_row_px": 0.25}}},
-        "check_points": {"left": {"rms_col_px": 0.61, "rms_row_px": 0.72, "n": 50},
-                         "right": {"rms_col_px": 0.83, "rms_row_px": 0.94, "n": 50}}}))
-    touch(tmp / "eval.json", json.dumps({"all": {"le68": 4.25, "count": 100}, "classes": {}}))
+    touch(tmp / "report.json", json.dumps(finished_report(
+        37, {"left": (0.31, 0.42), "right": (0.5, 0.25)},
+        {"left": (0.61, 0.72), "right": (0.83, 0.94)})))
+    touch(tmp / "eval.json", json.dumps(finished_evaluation(4.25)))
 
 
 def test_pair_row_reads_the_products(tmp_path: Path):
@@ -189,10 +187,16 @@ def test_pair_row_reads_the_products(tmp_path: Path):
         gcp_left_rms_row_px=0.42, gcp_right_rms_col_px=0.5, gcp_right_rms_row_px=0.25,
         le68_m=4.25, out=str(tmp_path))
     # no check points, no lidar: unknown, not zero
-    touch(tmp_path / "report.json", json.dumps({"gcps": {"used": 9}}))
+    touch(tmp_path / "report.json", json.dumps(finished_report(9, {"left": (0.3, 0.4)})))
     (tmp_path / "eval.json").unlink()
     row = pair_row("p", "skipped", tmp_path)
     assert row.gcps == 9 and row.cp_left_rms_col_px is None and row.le68_m is None
+    assert row.gcp_left_rms_row_px == 0.4 and row.gcp_right_rms_col_px is None
+    # a report.json that is not the orientation's (an older hand-made one, a damaged file):
+    # no figure rather than a wrong one
+    for text in (json.dumps({"format": "gcpfree.orient", "gcps": {"used": 9}}), "{ trunc"):
+        touch(tmp_path / "report.json", text)
+        assert pair_row("p", "done", tmp_path).gcps is None
     # a failed pair gives only its reason (first line), whatever lies in its folder
     row = pair_row("p", "failed", tmp_path, "InputError: bad\n  traceback...")
     assert row.reason == "InputError: bad" and row.gcps is None

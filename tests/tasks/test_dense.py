@@ -17,8 +17,8 @@ from core.errors import GeometryError, InputError, InsufficientDataError
 from core.matching.grid import MASK_VALID, remove_offset_and_tilt
 from core.sensors.pushbroom import PushbroomModel
 from core.simulation.landcover import LandCover
-from tasks.dense.dem import DenseConfig, grid_dem_cog, match_tiles, plan_dense
 from tasks.dense.blocks import check_roi, tile_boxes
+from tasks.dense.dem import DenseConfig, grid_dem_cog, match_tiles, plan_dense
 from tasks.io.geoid import BUNDLED_SRTM_DIR
 from tasks.io.sensors import LoadedModel, load_model
 
@@ -159,11 +159,11 @@ def test_saved_matches_are_triangulated_again_with_other_models(tiny_clean_scene
     models (the right one's roll changed by 0.1 mrad) give the exact intersection of the same
     correspondences through them."""
     from core.intersection import triangulate
-    from core.matching.dense import core_pixels
+    from core.matching.dense_tile import core_pixels
     from core.matching.rectify import TileRectification
-    from tasks.io.crs import Projection
-    from tasks.dense.dem import retriangulate_tiles
     from tasks.dense.blocks import tile_points_path
+    from tasks.dense.dem import retriangulate_tiles
+    from tasks.io.crs import Projection
 
     scene_dir, _ = tiny_clean_scene
     left, right = truth_pair(scene_dir)

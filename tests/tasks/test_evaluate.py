@@ -23,7 +23,8 @@ from scipy.interpolate import RegularGridInterpolator
 from scipy.stats import binned_statistic_2d
 
 from core.errors import CoverageError, InputError, InsufficientDataError
-from core.evaluation import EvaluationReport, StatsConfig
+from core.evaluation import StatsConfig
+from core.evaluation_report import EvaluationReport
 from tasks.evaluation.lidar import (
     EvaluationOptions,
     evaluate_lidar,
@@ -31,9 +32,9 @@ from tasks.evaluation.lidar import (
     plan_evaluation,
     write_evaluation,
 )
-from tasks.io.rasters_at_points import parse_landcover_names
 from tasks.io.geoid import EGM96_GTX
 from tasks.io.lidar import inspect_lidar
+from tasks.io.rasters_at_points import parse_landcover_names
 
 DATA = Path(__file__).resolve().parents[1] / "data"
 AUTZEN = DATA / "lidar" / "autzen_trim.laz"

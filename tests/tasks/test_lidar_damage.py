@@ -30,10 +30,10 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
 from core.errors import GcpFreeError, InputError
-from core.evaluation import MAX_REFUSED_SHARE, EvaluationReport, refused_points
+from core.evaluation_report import MAX_REFUSED_SHARE, EvaluationReport, refused_points
 from flows import cli
-from tasks.io import lidar as lidar_io
 from tasks.evaluation.lidar import EvaluationOptions, evaluate_plan, plan_evaluation
+from tasks.io import lidar as lidar_io
 from tasks.io.lidar import inspect_lidar, lidar_chunks
 from tests.tasks.test_evaluate import AUTZEN, write_las, write_raster
 

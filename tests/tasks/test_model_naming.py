@@ -39,8 +39,8 @@ from core.sensors.rpc import RPCModel
 from core.sensors.spot import spot_pushbroom, spot_scene_from_model
 from tasks.archive.catalog import read_catalog
 from tasks.io.dimap import read_dimap, write_dimap
-from tasks.relative.orientation import load_pair
 from tasks.io.sensors import load_model, rpc_from_dimap_file, rpc_from_geom_file
+from tasks.relative.orientation import load_pair
 
 DATA = Path(__file__).resolve().parents[1] / "data"
 VENTOUX = DATA / "pleiades_ventoux"
@@ -137,7 +137,7 @@ def _catalog_models(folder: Path, image: Path, model: Path) -> SensorModel:
         name = model.name if model.parent == folder else str(model)  # relative or absolute
         w.writerow(["p1", image.name, image.name, name, name])
     entry = read_catalog(cat).pairs[0]
-    left, right = load_pair.fn(entry.left, entry.right, entry.left_model, entry.right_model)
+    left, right = load_pair.fn(entry.pair_inputs())
     assert left.source == right.source == model
     return left.model
 

@@ -35,14 +35,14 @@ from core.geodesy import BBox
 from core.matching.grid import GridSpec
 from core.ortho import OrthoConfig, tile_geometry
 from core.ortho_compare import CompareConfig
-from core.sensors.base import footprint_lonlat
-from tasks.ortho import orthorectify as T
+from core.sensors.footprint import footprint_lonlat
 from tasks.io.crs import Projection
 from tasks.io.dem import read_reference
 from tasks.io.geoid import BUNDLED_SRTM_DIR
+from tasks.io.sensors import LoadedModel, load_model
+from tasks.ortho import orthorectify as T
 from tasks.ortho.compare import compare_orthos, plan_compare
 from tasks.ortho.inputs import describe_dem, read_tile_dem
-from tasks.io.sensors import LoadedModel, load_model
 
 RES = 40.0  # the tiny scene's GSD
 

@@ -153,7 +153,7 @@ def test_truncated_hgt_is_rejected(tmp_path):
 
 def test_unreadable_geotiff_is_rejected(tmp_path):
     (tmp_path / "N44E005.tif").write_bytes(b"not a tiff at all")
-    with pytest.raises(InputError, match="unreadable SRTM tile"):
+    with pytest.raises(InputError, match="cannot read SRTM tile"):
         find_tiles(tmp_path, BBox(5.1, 44.1, 5.2, 44.2))
 
 

@@ -19,6 +19,8 @@ import numpy as np
 import pytest
 from PIL import Image
 
+from core.errors import InputError
+from tasks.absolute.report import OrientReport, read_report
 from tasks.report.build import FIGURES_DIR, JSON_KEY, ReportOutcome, make_report, write_report
 from tasks.report.doc import MAX_INLINE, Table
 from tasks.report.tables import (
@@ -28,6 +30,7 @@ from tasks.report.tables import (
     WINDOW_KEYS,
     relative_tables,
 )
+from tests.flows.reports import finished_report
 
 PNG_MAGIC = b"\x89PNG\r\n\x1a\n"
 FIGURES = {"tie_points", "profile", "relief", "correlation_surface", "gcp_residuals",
@@ -492,6 +495,48 @@ def test_the_relative_table_says_what_set_the_along_epipolar_part():
     adj = {"param_names": ["a", "b"], "params_before": [0.0, 0.0], "params_after": [1.0, 2.0]}
     [_, params] = [b for b in relative_tables({"adjustment": adj}) if isinstance(b, Table)]
     assert params.rows == (("a", "", "0", "1", "–"), ("b", "", "0", "2", "–"))
+
+
+# ---------------------------------------------------------------------------- report.json
+
+
+def test_report_json_schema_round_trips_and_refuses_what_it_cannot_read(tmp_path):
+    """report.json through :class:`OrientReport`: every key back as written; a newer version,
+    another product, a missing or mistyped key refused in one line naming it."""
+    doc = json.loads(json.dumps(finished_report(
+        12, {"left": (0.25, 0.5), "right": (0.75, 0.125)},
+        {"left": (0.375, 0.625), "right": (0.875, 0.0625)})))
+    report = OrientReport.from_dict(doc)
+    assert report.to_dict() == doc and OrientReport.from_dict(report.to_dict()) == report
+    assert report.gcps.used == 12 and report.check_points["right"].rms_row_px == 0.0625
+    assert report.absolute.images["left"].rms_col_px == 0.25
+    path = report.with_run_report({"format": "gcpfree.report"}).write(tmp_path / "report.json")
+    assert read_report(tmp_path).report == {"format": "gcpfree.report"}  # a folder or a file
+    for bad, says in [({**doc, "version": 2}, "version 2"),
+                      ({**doc, "format": "gcpfree.pair"}, "not the report.json"),
+                      ({k: v for k, v in doc.items() if k != "gcps"}, "'gcps' is missing"),
+                      ({**doc, "gcps": {**doc["gcps"], "used": "12"}}, "'gcps.used' is a str"),
+                      ({**doc, "check_points": {"left": {"n": 3}}},
+                       "'check_points.left.name' is missing")]:
+        path.write_text(json.dumps(bad))
+        with pytest.raises(InputError, match=re.escape(says)) as err:
+            read_report(path)
+        assert "\n" not in str(err.value) and str(path) in str(err.value)
+
+
+def test_the_schema_keeps_every_key_its_records_write():
+    """The records report.json embeds whole keep their writers' keys: a key added to the
+    relief verdict or the check-point table would otherwise be dropped on the way through."""
+    from core.matching.relief import ReliefVerdict
+    from core.orientation.absolute import CheckPointStats
+    from tasks.absolute.report import Relief
+
+    verdict = ReliefVerdict(10, 9, 8, 50.0, 20.0, 10.0)
+    assert list(verdict.to_dict()) == list(Relief.from_dict(verdict.to_dict()).to_dict())
+    stats = CheckPointStats("left", 3, *range(10))
+    assert OrientReport.from_dict({**finished_report(1, {"left": (0.1, 0.2)}),
+                                   "check_points": {"left": stats.to_dict()}}
+                                  ).check_points["left"] == stats
 
 
 # what a reader of the report sees in the browser

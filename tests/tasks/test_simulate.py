@@ -17,8 +17,8 @@ from core.errors import CoverageError, InputError
 from core.sensors.pushbroom import PushbroomModel
 from core.simulation.landcover import LandCover
 from core.simulation.scene import ErrorConfig
-from tasks.simulate import scene as S
 from tasks.io.geoid import EGM96_GTX, load_geoid
+from tasks.simulate import scene as S
 from tasks.simulate.io import check_dem
 from tests.scenes import CENTRE, DEM, run_scene
 

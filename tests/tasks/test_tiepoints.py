@@ -283,6 +283,7 @@ def test_a_reference_that_misses_the_scene_or_is_projected_is_refused(small_pair
         with rasterio.open(path, "w", driver="GTiff", width=50, height=50, count=1,
                            dtype="float32", crs=crs, transform=t, nodata=np.nan) as dst:
             dst.write(np.full((50, 50), 500.0, np.float32), 1)
+            dst.update_tags(vertical_datum="WGS84 ellipsoid")
     m = _model(5.25, 44.2)
     with pytest.raises(CoverageError, match="does not cover"):
         find_tie_points.fn(*small_pair, m, m, far, TiePointConfig())

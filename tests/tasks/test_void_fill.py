@@ -16,9 +16,6 @@ import rasterio
 from core.errors import CoverageError, InputError
 from core.geodesy import metres_per_degree
 from core.void_fill import FillConfig
-from tasks.io.crs import Projection
-from tasks.io.geoid import BUNDLED_SRTM_DIR, load_geoid
-from tasks.io.srtm import SRTM_VOID
 from tasks.evaluation.void_fill import (
     FillOptions,
     fill_tile_voids,
@@ -26,6 +23,9 @@ from tasks.evaluation.void_fill import (
     read_tile,
     write_fill_report,
 )
+from tasks.io.crs import Projection
+from tasks.io.geoid import BUNDLED_SRTM_DIR, load_geoid
+from tasks.io.srtm import SRTM_VOID
 
 RES = 1.0 / 1200.0  # 3"
 UTM31 = 32631

@@ -10,7 +10,9 @@ from scipy import ndimage
 
 from core.dem import GeoDEM
 from core.errors import InputError
+from core.matching.tiepoint_match import match_points
 from core.matching.tiepoint_results import (
+    Matches,
     TiePointReport,
     TiePointResult,
     TiePoints,
@@ -19,16 +21,13 @@ from core.matching.tiepoint_results import (
 )
 from core.matching.tiepoints import (
     HeightPrior,
-    Matches,
     SearchPrior,
     TiePointConfig,
     best_per_cell,
     cell_ids,
     check_consistency,
     detect_points,
-    match_points,
     predict_search,
-    quadratic_peak,
     valid_pixels,
 )
 from core.sensors.pushbroom_synthetic import SyntheticSpec, synthetic_pushbroom
@@ -194,14 +193,6 @@ def test_points_without_prior_are_flagged():
     m = match_points(left, (0, 0), right, (0, 0), col, row, prior, TiePointConfig())
     assert np.all(m.status[::2] == TiePointStatus.NO_PRIOR)
     assert np.all(m.ok[1::2])
-
-
-def test_quadratic_peak_finds_the_vertex_of_a_quadratic():
-    v, u = np.mgrid[-1:2, -1:2].astype(float)
-    z = 0.9 - 0.3 * (u - 0.23) ** 2 - 0.2 * (v + 0.41) ** 2 + 0.05 * (u - 0.23) * (v + 0.41)
-    dx, dy = quadratic_peak(z[None])
-    assert dx[0] == pytest.approx(0.23, abs=1e-9)
-    assert dy[0] == pytest.approx(-0.41, abs=1e-9)
 
 
 # ---------------------------------------------------------------------------- detection

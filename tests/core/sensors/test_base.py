@@ -4,6 +4,7 @@ import numpy as np
 import pytest
 
 from core.dem import GeoDEM
+from core.geodesy import metres_per_degree
 from core.sensors.base import localize_on_dem
 from core.sensors.pushbroom_synthetic import SyntheticSpec, synthetic_pushbroom
 
@@ -19,7 +20,7 @@ def cliff_dem() -> GeoDEM:
     dlon, dlat = 1.0 / 8000, 1.0 / 11000
     lon = 5.15 + np.arange(2400) * dlon
     lat = 44.32 - np.arange(2640) * dlat
-    x_m = (lon - 5.3) * 111_320 * np.cos(np.radians(44.2))
+    x_m = (lon - 5.3) * metres_per_degree(44.2)[0]
     h = 500.0 + 1500.0 * np.clip(x_m / 300.0, 0.0, 1.0)
     return GeoDEM(np.broadcast_to(h, (lat.size, lon.size)).copy(), lon[0], lat[0], dlon, -dlat)
 

@@ -13,7 +13,8 @@ from rasterio.transform import RPCTransformer
 from core.dem import GeoDEM
 from core.errors import ConvergenceError, InputError
 from core.sensors.base import SensorModel
-from core.sensors.rpc import RPCModel, rational_functions
+from core.sensors.rpc import RPCModel
+from core.sensors.rpc00b import rational_functions
 
 DATA = Path(__file__).resolve().parents[2] / "data"
 DIMAP_VENTOUX = DATA / "dimap" / "RPC_PHR1B_P_201308051042194_SEN_690908101-001.XML"

@@ -12,6 +12,7 @@ import pytest
 from core.errors import InputError
 from core.geodesy import geodetic_to_ecef
 from core.points import GeoPoint
+from core.sensors.dimap import dimap_xml, parse_dimap
 from core.sensors.orbit import rotation_rpy
 from core.sensors.spot import (
     SpotAngles,
@@ -26,7 +27,7 @@ from core.sensors.spot import (
     spot_scene_from_model,
 )
 from core.simulation.scene import PRESETS, ErrorConfig, scene_models
-from tasks.io.dimap import dimap_xml, parse_dimap, read_dimap
+from tasks.io.dimap import read_dimap
 
 SHARED = Path(__file__).resolve().parents[4] / "shared" / "data" / "spot_dimap"
 REAL = pytest.mark.skipif(not SHARED.is_dir(), reason="../shared/data/spot_dimap is absent")

@@ -18,7 +18,7 @@ def test_plane_intersection_is_exact():
     x = np.arange(0, 2000, 10.0)
     y = np.arange(0, 2000, 10.0)
     z = 100 + 0.2 * x[None, :] + 0 * y[:, None]
-    surf = SurfaceGrid(z[::-1], 0.0, 1990.0, 10.0, 10.0)
+    surf = SurfaceGrid(z[::-1], 0.0, 1990.0, 10.0, -10.0)
     rng = np.random.default_rng(0)
     xg, yg = rng.uniform(300, 1500, 500), rng.uniform(100, 1800, 500)
     tan_inc = np.tan(np.radians(25))
@@ -34,7 +34,7 @@ def test_occlusion_keeps_the_first_crossing():
     # a 50 m high wall between x = 500 and 520 on flat ground at 0
     x = np.arange(0, 1000, 5.0)
     z = np.where((x >= 500) & (x <= 520), 50.0, 0.0)[None, :].repeat(20, axis=0)
-    surf = SurfaceGrid(z, 0.0, 95.0, 5.0, 5.0)
+    surf = SurfaceGrid(z, 0.0, 95.0, 5.0, -5.0)
     tan_inc = 1.0  # 45 degrees: the ray descends towards -x as h drops
     # foot at x=530 on flat ground; from above, the ray passes over x in [530, 580] at
     # heights 0..50, i.e. it meets the wall's top? No: the ray at height h is at 530 + h,
@@ -50,7 +50,7 @@ def test_occlusion_keeps_the_first_crossing():
 
 def test_rays_outside_give_nan_and_bad_range():
     z = np.zeros((10, 10))
-    surf = SurfaceGrid(z, 0.0, 90.0, 10.0, 10.0)
+    surf = SurfaceGrid(z, 0.0, 90.0, 10.0, -10.0)
     rays = slanted_rays(np.array([5000.0]), np.array([5000.0]), 0.3)
     _, _, h = first_hit(rays, surf, 100.0, -100.0)
     assert np.isnan(h).all()

@@ -1,6 +1,7 @@
-"""``orient-pair``: the whole chain for one pair, resumed from the session's orientation (which
-also proves the resume: the orientation step must be kept, not rerun), evaluated against the
-simulated lidar, reported, catalogued in STAC, and checked by its manifest."""
+"""``gcpfree pair`` (flow ``pair``): the whole chain for one pair, resumed from the session's
+orientation (which also proves the resume: the orientation step must be kept, not rerun),
+evaluated against the simulated lidar, reported, catalogued in STAC, and checked by its
+manifest."""
 
 from __future__ import annotations
 
@@ -15,7 +16,9 @@ import rasterio.crs
 from pystac.extensions.projection import ProjectionExtension
 from rasterio.warp import transform_bounds
 
-from flows.orient_pair import PairParams, orient_pair_flow, pair_complete
+from flows.pair import PairParams, pair_flow
+from tasks.archive.pair import pair_complete
+from tasks.io.pair import PairInputs
 
 
 @pytest.fixture(scope="module")
@@ -23,14 +26,14 @@ def pair_run(tiny_oriented, tmp_path_factory):
     scene, oriented_out, _ = tiny_oriented
     out = tmp_path_factory.mktemp("pair") / "tiny-pair"
     shutil.copytree(oriented_out, out)
-    params = PairParams(left=scene / "left.tif", right=scene / "right.tif", out=out,
-                        reference=scene / "reference.tif",
-                        lidar=scene / "truth" / "lidar.laz",
+    params = PairParams(pair=PairInputs(scene / "left.tif", scene / "right.tif",
+                                        reference=scene / "reference.tif"),
+                        out=out, lidar=scene / "truth" / "lidar.laz",
                         landcover=scene / "truth" / "landcover.tif",
                         checkpoints=scene / "truth" / "checkpoints.json",
                         self_calibrate=True)
     mtime = (out / "dsm.tif").stat().st_mtime_ns
-    outcome = orient_pair_flow(params)
+    outcome = pair_flow(params)
     return scene, out, params, outcome, mtime
 
 
@@ -95,7 +98,7 @@ def test_a_damaged_product_is_redone_on_rerun(pair_run):
     _scene, out, params, _, mtime = pair_run
     (out / "eval.json").write_text("{ truncated")
     assert not pair_complete(out)
-    outcome = orient_pair_flow(params)
+    outcome = pair_flow(params)
     assert "orient" in outcome.skipped and "evaluate" not in outcome.skipped
     assert json.loads((out / "eval.json").read_text())["all"]["count"] > 1000
     assert (out / "dsm.tif").stat().st_mtime_ns == mtime

@@ -1,13 +1,15 @@
-"""Local surface matching of the relative DEM to the reference: simulated GCPs from SRTM alone.
+"""SRTM surface matching (step 3 of the chain, Goncalves 3.3): simulated GCPs from the
+reference DEM alone. How GCPs are made is here, from the windows to the points.
 
-Step 3 of the chain (Goncalves 3.3). Around each tie point, the relative DEM's cells within a
+**One window** (:func:`match_window`). Around a tie point, the relative DEM's cells within a
 radius (heights ``h'``, ellipsoidal, in the frame the relative orientation left them) are
 compared with the reference DEM (SRTM + EGM96, ellipsoidal) shifted by ``(dlon, dlat)`` over a
 grid of shifts (default -20" .. +20" every 1"): the correlation coefficient of the two height
 sets is computed for every shift at once, its peak refined to a fraction of an arcsecond by a
-quadratic fit (then, optionally, a finer grid around it), and the vertical shift is the robust
-mean of the height differences at the refined position. The window's local 3-D shift moves the
-tie point's relative ground coordinates onto the reference: a simulated GCP.
+quadratic fit (:func:`core.matching.peaks.quadratic_peak`; then, optionally, a finer grid
+around it), and the vertical shift is the robust mean of the height differences at the refined
+position (:func:`core.robust.robust_fit`). The window's local 3-D shift moves the tie point's
+relative ground coordinates onto the reference.
 
 Cells are first averaged onto a lattice of about the reference's cell size (finer detail is
 absent from SRTM and would only cost time). Quality of a window: peak correlation, the peak's
@@ -16,11 +18,19 @@ of cells, the share of the window masked (mismatched cells or reference voids), 
 precision predicted from the relief before matching (relief sufficiency): with RMS slope ``g``
 and height noise ``s`` over ``N`` independent patches (the window's area over the squared
 correlation length of the reference's errors) the shift is known to about ``s / (g sqrt(N))``.
+
+**The scene.** :func:`choose_windows` puts one window per ground cell on the best tie point;
+:func:`search_windows` searches the first :data:`FIRST_PASS` windows over the whole shift range,
+the others around the shift an affine fit of those predicts (:func:`shift_prior`), and a window
+whose peak falls on the border of its prior box again over the whole range;
+:func:`gcps_from_windows` makes a GCP of every good window. Whether the scene's relief can
+orient it at all is :mod:`core.matching.relief`. No I/O here: the task reads the windows' cells
+and runs them on Dask threads.
 """
 
 from __future__ import annotations
 
-from collections.abc import Sequence
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass
 from enum import IntEnum
 from typing import Any
@@ -30,10 +40,13 @@ from numpy.typing import ArrayLike, NDArray
 
 from core.dem import GeoDEM
 from core.errors import InputError
-from core.geodesy import metres_per_degree
+from core.geodesy import ARCSEC, geodetic_to_enu, metres_per_degree
+from core.matching.peaks import peak_hessian, quadratic_peak
+from core.matching.tiepoints import best_per_cell
+from core.points import ControlPoint, ImagePoint
+from core.robust import nmad, robust_fit
 
 FloatArray = NDArray[np.float64]
-ARCSEC = 1.0 / 3600.0
 
 
 class WindowStatus(IntEnum):
@@ -275,24 +288,6 @@ def _valid_rho(cells: WindowCells, reference: GeoDEM, sx_arcsec: FloatArray,
     return np.where(count >= min_cells, rho, np.nan)
 
 
-def quadratic_peak(z: FloatArray) -> tuple[float, float, FloatArray]:
-    """Offset (dx, dy) in grid steps of the maximum of the quadratic fitted to a 3x3 patch (rows
-    y, columns x; centre at 0), and the fit's Hessian (2, 2) per step squared."""
-    y, x = np.mgrid[-1:2, -1:2]
-    design = np.stack([np.ones(9), x.ravel(), y.ravel(), x.ravel() ** 2, x.ravel() * y.ravel(),
-                       y.ravel() ** 2], axis=1)
-    c, *_ = np.linalg.lstsq(design, z.ravel(), rcond=None)
-    hess = np.array([[2 * c[3], c[4]], [c[4], 2 * c[5]]])
-    grad = np.array([c[1], c[2]])
-    try:
-        off = -np.linalg.solve(hess, grad)
-    except np.linalg.LinAlgError:
-        off = np.zeros(2)
-    if not np.all(np.isfinite(off)) or np.max(np.abs(off)) > 1.0:
-        off = np.clip(np.nan_to_num(off), -1.0, 1.0)
-    return float(off[0]), float(off[1]), hess
-
-
 def _grid(half: float, step: float) -> FloatArray:
     n = int(round(half / step))
     return np.arange(-n, n + 1) * step
@@ -393,10 +388,10 @@ def match_window(lon_deg: ArrayLike, lat_deg: ArrayLike, h_m: ArrayLike,
     patch = rho[iy - 1:iy + 2, ix - 1:ix + 2]
     if not np.all(np.isfinite(patch)):
         return WindowMatch(WindowStatus.MASKED, **base)
-    dx, dy, hess = quadratic_peak(patch)
+    (dx,), (dy,) = quadratic_peak(patch)
     step = cfg.shift_step_arcsec
     sx, sy = grid[ix] + dx * step, grid[iy] + dy * step
-    hess = hess / step**2  # per arcsec squared
+    hess = peak_hessian(patch)[0] / step**2  # per arcsec squared
     if cfg.refine_step_arcsec is not None:
         fine = _grid(0.5 * step, cfg.refine_step_arcsec)  # the 1" quadratic is within 0.2"
         fx, fy = np.meshgrid(sx + fine, sy + fine)
@@ -407,7 +402,7 @@ def match_window(lon_deg: ArrayLike, lat_deg: ArrayLike, h_m: ArrayLike,
             jy, jx = np.unravel_index(int(np.argmax(rf)), rf.shape)
             jy = int(np.clip(jy, 1, rf.shape[0] - 2))
             jx = int(np.clip(jx, 1, rf.shape[1] - 2))
-            ddx, ddy, _ = quadratic_peak(rf[jy - 1:jy + 2, jx - 1:jx + 2])
+            (ddx,), (ddy,) = quadratic_peak(rf[jy - 1:jy + 2, jx - 1:jx + 2])
             sx = float(fx[jy, jx] + ddx * cfg.refine_step_arcsec)
             sy = float(fy[jy, jx] + ddy * cfg.refine_step_arcsec)
     peak = float(np.nanmax(rho))
@@ -416,7 +411,7 @@ def match_window(lon_deg: ArrayLike, lat_deg: ArrayLike, h_m: ArrayLike,
     diff = ref - cells.h_m[valid]
     use = np.isfinite(diff)
     basis = _basis(cells, valid, cfg.detrend)[use]
-    coef, spread = _robust_fit(diff[use], basis, mode_scale_m=cfg.height_noise_m)
+    coef, spread = robust_fit(diff[use], basis, mode_scale_m=cfg.height_noise_m)
     dz = float(coef[0])  # at the centre: x = y = 0 there
     # precision: near its peak rho(s) ~ 1 - k s^2 / 2 with k = slope^2 / relief^2 along the
     # flattest direction (the peak's curvature, per m^2); least squares then knows the shift to
@@ -435,55 +430,6 @@ def match_window(lon_deg: ArrayLike, lat_deg: ArrayLike, h_m: ArrayLike,
     if not precision <= cfg.max_precision_m:
         return WindowMatch(**{**vars(result), "status": WindowStatus.IMPRECISE})
     return result
-
-
-def _robust_fit(d: FloatArray, basis: FloatArray, k: float = 1.5, n_iter: int = 10,
-                mode_scale_m: float | None = None) -> tuple[FloatArray, float]:
-    """Fit of ``d`` on ``basis`` (n, k) and the robust spread (1.4826 MAD) of its residuals.
-
-    Huber IRLS first; then, with ``mode_scale_m``, the fit is moved to the dominant mode of
-    the residuals (the peak of their kernel density) and refined with Gaussian (Welsch)
-    weights of that scale, which ignore a second population: the relative DEM is a surface
-    model, the reference has no canopy (SRTM partly, the simulator's not at all), and
-    forests on a third of a window pulled the Huber fit 5 m down on the simulated ``spot``
-    pair (17.5 m trees on 32 % of it); the spread is then that of the dominant population.
-    """
-    if d.size < basis.shape[1]:
-        return np.full(basis.shape[1], np.nan), float("nan")
-
-    def mad(r: FloatArray) -> float:
-        return max(float(1.4826 * np.median(np.abs(r - np.median(r)))), 1e-6)
-
-    coef, *_ = np.linalg.lstsq(basis, d, rcond=None)
-    res = d - basis @ coef
-    s = mad(res)
-    for _ in range(n_iter):
-        w = 1.0 / np.maximum(np.abs(res) / (k * s), 1.0)
-        sw = np.sqrt(w)
-        coef, *_ = np.linalg.lstsq(basis * sw[:, None], d * sw, rcond=None)
-        res = d - basis @ coef
-        s = mad(res)
-    if mode_scale_m is None:
-        return coef, s
-    h = float(mode_scale_m)
-    lo, hi = np.percentile(res, (0.5, 99.5))
-    step = h / 10.0
-    edges = np.arange(lo - 3 * h, hi + 3 * h + step, step)
-    density, _ = np.histogram(res, bins=edges)
-    from scipy.ndimage import gaussian_filter1d
-
-    peak = int(np.argmax(gaussian_filter1d(density.astype(np.float64), 0.5 * h / step)))
-    coef = coef.copy()
-    coef[0] += 0.5 * (edges[peak] + edges[peak + 1])
-    for _ in range(n_iter):
-        res = d - basis @ coef
-        sw = np.exp(-0.25 * (res / h) ** 2)  # sqrt of the Gaussian weight exp(-r^2 / 2h^2)
-        if np.count_nonzero(sw > 0.1) < basis.shape[1]:
-            break
-        coef, *_ = np.linalg.lstsq(basis * sw[:, None], d * sw, rcond=None)
-    res = d - basis @ coef
-    core = np.abs(res) < 3.0 * h
-    return coef, mad(res[core]) if core.sum() >= basis.shape[1] else mad(res)
 
 
 # ------------------------------------------------------------------------- search prior
@@ -510,7 +456,7 @@ def shift_prior(lon_deg: ArrayLike, lat_deg: ArrayLike, matches: Sequence[Window
                        if k])
     coef, *_ = np.linalg.lstsq(a, shifts, rcond=None)
     res = shifts - a @ coef
-    scatter = 1.4826 * float(np.median(np.abs(res - np.median(res, axis=0))))
+    scatter = nmad(res - np.median(res, axis=0), centre=0.0)  # each axis about its median
     half = max(min_half_arcsec, 4.0 * scatter + 1.0)
     ln, lt = np.asarray(lon_new, float), np.asarray(lat_new, float)
     b = np.stack([np.ones(ln.size), ln.ravel() - lon0, lt.ravel() - lat0], axis=1)
@@ -518,165 +464,89 @@ def shift_prior(lon_deg: ArrayLike, lat_deg: ArrayLike, matches: Sequence[Window
     return np.column_stack([pred, np.full(len(pred), half)])
 
 
-# ------------------------------------------------------------------------- relief sufficiency
+# ------------------------------------------------------------------------- the scene
+
+#: windows searched over the whole shift range before the others are searched around the shift
+#: those predict (:func:`search_windows`)
+FIRST_PASS = 24
+#: the least vertical precision a GCP states (m): a window's robust spread over many patches
+#: can promise centimetres that the reference's own errors do not allow
+MIN_GCP_SIGMA_H_M = 0.5
+#: ``match(indices, priors)``: the windows ``indices`` matched, with ``priors`` (n, 3) as
+#: :func:`match_window`'s ``prior`` (None: the whole range), in that order
+MatchWindows = Callable[[NDArray[np.intp], FloatArray | None], Sequence[WindowMatch]]
 
 
-@dataclass(frozen=True)
-class ReliefVerdict:
-    """Whether the scene gives surface matching what it needs, judged before orienting, and
-    if not the true reason (:attr:`reason`).
+def choose_windows(lon_deg: ArrayLike, lat_deg: ArrayLike, h_m: ArrayLike, score: ArrayLike,
+                   spacing_m: float) -> NDArray[np.intp]:
+    """Window centres: indices of the tie points (relative ground lon, lat, h) that are the
+    best (highest ``score``) of their ``spacing_m`` ground cell, so that the windows spread over
+    the overlap without overlapping much."""
+    lon, lat, h = (np.asarray(v, dtype=np.float64) for v in (lon_deg, lat_deg, h_m))
+    origin = (float(np.median(lon)), float(np.median(lat)), float(np.median(h)))
+    e, n, _ = geodetic_to_enu(lon, lat, h, origin)
+    return best_per_cell(e, n, score, spacing_m)
 
-    ``n_qualified``: windows whose relief promises ``max_precision_m`` (the precision predicted
-    from the relief and the measured noise, see :func:`realistic_precision_m`), of
-    ``n_windows`` placed; ``n_small``: windows the relative DEM fills with fewer than
-    ``min_cells`` lattice cells of ``cell_m`` (the scene, or its overlap, is smaller than a
-    window: ``best_dem_cells`` is the most any window got); ``n_voids``: windows the relative
-    DEM fills but the reference leaves without heights (voids) or that are masked beyond the
-    allowed share; the other windows are judged on their relief. ``relief_found_m``: the
-    median relief (std of heights) of the judged windows; ``relief_needed_m``: the median over
-    them of the relief that would have made them qualify (the predicted precision goes as one
-    over the slopes, so as one over the relief of a terrain of the same shape; NaN when no
-    judged window has a slope).
+
+def first_pass_mask(n_windows: int, first_pass: int = FIRST_PASS) -> NDArray[np.bool_]:
+    """The windows :func:`search_windows` searches over the whole range first: ``first_pass``
+    of them spread evenly over the list (which :func:`choose_windows` orders by ground cell)."""
+    first = np.zeros(n_windows, dtype=bool)
+    first[np.unique(np.linspace(0, n_windows - 1, min(first_pass, n_windows))
+                    .round().astype(int))] = True
+    return first
+
+
+def search_windows(lon_deg: ArrayLike, lat_deg: ArrayLike, match: MatchWindows,
+                   first_pass: int = FIRST_PASS) -> list[WindowMatch]:
+    """Every window (centres at ``lon_deg``, ``lat_deg``) matched in two passes: the
+    :func:`first_pass_mask` windows over the whole shift range, then the others around the
+    shift an affine fit of the first ones' predicts (:func:`shift_prior`; the whole range when
+    too few of them matched), and a window whose peak falls on the border of its prior box
+    (``EDGE_PEAK``) again over the whole range. ``match`` runs the windows (:data:`MatchWindows`).
     """
-
-    n_windows: int
-    n_qualified: int
-    n_needed: int
-    relief_found_m: float
-    relief_needed_m: float
-    max_precision_m: float
-    n_small: int = 0
-    n_voids: int = 0
-    best_dem_cells: int = 0
-    min_cells: int = 100
-    cell_m: float = float("nan")
-    radius_m: float = float("nan")
-
-    @property
-    def enough(self) -> bool:
-        return self.n_qualified >= self.n_needed
-
-    @property
-    def n_judged(self) -> int:
-        return self.n_windows - self.n_small - self.n_voids
-
-    @property
-    def reason(self) -> str | None:
-        """None when enough windows qualify, else why not: ``"too_small"`` (no window holds
-        enough of the relative DEM: the scene is smaller than a window), ``"voids"`` (the
-        reference has no heights under the windows), ``"few_windows"`` (every window judged
-        qualifies, but too few fit in the scene), ``"too_flat"``."""
-        if self.enough:
-            return None
-        if self.n_judged == 0:
-            return "too_small" if self.n_small >= self.n_voids else "voids"
-        if self.n_qualified == self.n_judged:
-            return "few_windows"
-        return "too_flat"
-
-    def message(self) -> str:
-        """The refusal in one line: what was found, what is needed, what to do. Never NaN."""
-        n, need = self.n_windows, self.n_needed
-        skipped = "" if not (self.n_small or self.n_voids) else (
-            f" ({self.n_small} too little of the scene, {self.n_voids} on reference voids)")
-        if self.reason == "too_small":
-            area = self.min_cells * self.cell_m**2 / 1e6
-            have = self.best_dem_cells * self.cell_m**2 / 1e6
-            return (f"the scene is too small for SRTM surface matching: the best of {n} windows "
-                    f"holds {self.best_dem_cells} cells of the relative DEM at the reference's "
-                    f"{self.cell_m:.0f} m (about {have:.2g} km2), {self.min_cells} are needed "
-                    f"(about {area:.2g} km2 of overlap, in windows of radius "
-                    f"{self.radius_m:g} m); use a scene covering kilometres of terrain, or "
-                    "real GCPs")
-        if self.reason == "voids":
-            return (f"the reference DEM has no heights under the scene: {self.n_voids} of {n} "
-                    f"surface-matching windows fall on its voids or are masked beyond the "
-                    f"allowed share; fill the reference's voids (gcpfree fill-voids) or use "
-                    "another reference")
-        if self.reason == "few_windows":
-            return (f"the scene holds too few surface-matching windows: {n} placed, "
-                    f"{self.n_qualified} with enough relief{skipped}, {need} needed; use a "
-                    "larger scene, or lower --min-windows or --window-radius")
-        if np.isfinite(self.relief_needed_m):
-            needed = f"needed about {self.relief_needed_m:.1f} m"
-        else:
-            needed = "no window has a slope to match on"
-        return (f"the terrain is too flat for GCP-free orientation: {self.n_qualified} of "
-                f"{self.n_judged} windows judged{skipped} have the relief to fix the position "
-                f"to {self.max_precision_m:g} m ({need} needed); relief found "
-                f"{self.relief_found_m:.1f} m (median std of heights per window), {needed}; "
-                "use real GCPs or a scene with more relief")
-
-    def to_dict(self) -> dict[str, Any]:
-        return {k: (None if isinstance(v, float) and not np.isfinite(v) else v)
-                for k, v in vars(self).items()} | {"enough": self.enough,
-                                                    "reason": self.reason}
+    lon, lat = np.asarray(lon_deg, dtype=np.float64), np.asarray(lat_deg, dtype=np.float64)
+    first = first_pass_mask(lon.size, first_pass)
+    head, rest = np.flatnonzero(first), np.flatnonzero(~first)
+    found = dict(zip(head.tolist(), match(head, None), strict=True))
+    if rest.size:
+        priors = shift_prior(lon[head], lat[head], [found[k] for k in head.tolist()],
+                             lon[rest], lat[rest])
+        found.update(zip(rest.tolist(), match(rest, priors), strict=True))
+        if priors is not None:
+            again = np.array([k for k in rest.tolist()
+                              if found[k].status == WindowStatus.EDGE_PEAK], dtype=np.intp)
+            if again.size:
+                found.update(zip(again.tolist(), match(again, None), strict=True))
+    return [found[k] for k in range(lon.size)]
 
 
-def scene_size_verdict(overlap_m2: float, cfg: SurfaceMatchConfig,
-                       cell_m: float) -> str | None:
-    """Before anything is matched: None when the pair's overlap (``overlap_m2``, its largest
-    over the heights the scene may have) can hold one surface-matching window's
-    ``cfg.min_cells`` lattice cells of ``cell_m`` (the reference's cell, or ``cfg.cell_m``),
-    else the refusal, with its figures. The relief verdict judges the windows afterwards; this
-    only spares minutes of matching on a scene that cannot hold one window."""
-    cell = float(cfg.cell_m if cfg.cell_m is not None else cell_m)
-    needed = cfg.min_cells * cell**2
-    if not overlap_m2 < needed:
-        return None
-    return (f"the scene is too small for SRTM surface matching: the two images overlap on about "
-            f"{overlap_m2 / 1e6:.2g} km2 ({overlap_m2 / cell**2:.0f} cells of the reference's "
-            f"{cell:.0f} m), one window needs {cfg.min_cells} cells (about "
-            f"{needed / 1e6:.2g} km2); use a scene covering kilometres of terrain, or real GCPs")
-
-
-def realistic_precision_m(m: WindowMatch, cfg: SurfaceMatchConfig) -> float:
-    """The precision a window's relief promises with the noise its correlation reveals, when
-    that exceeds the reference's nominal noise (``cfg.height_noise_m``).
-
-    A surface of relief ``r`` (std) seen through independent noise ``n`` correlates with the
-    noise-free one at ``rho = r^2 / (r^2 + n^2)``, so the peak correlation measures the noise
-    between the two surfaces, ``n = r sqrt(1 / rho - 1)``: the relative DEM's own noise, canopy,
-    the reference's errors. On terrain of a few tens of metres of relief that noise, not SRTM's,
-    decides (simulated tiny at 40 m pixels, relief scaled by 0.05: windows promising 10 m with
-    the nominal noise, none of them correlating). A window refused before matching keeps the
-    nominal prediction.
-    """
-    rho = m.correlation
-    if not (np.isfinite(rho) and 0.0 < rho < 1.0 and np.isfinite(m.relief_m)):
-        return m.predicted_precision_m
-    noise = m.relief_m * float(np.sqrt(1.0 / rho - 1.0))
-    return m.predicted_precision_m * max(noise / cfg.height_noise_m, 1.0)
-
-
-def relief_sufficiency(matches: Sequence[WindowMatch], cfg: SurfaceMatchConfig,
-                       n_needed: int, cell_m: float | None = None) -> ReliefVerdict:
-    """The verdict on ``matches`` (windows matched or refused by :func:`match_window`), each
-    judged by :func:`realistic_precision_m`; ``cell_m`` the lattice cell the windows were
-    averaged on (``cfg.cell_m`` or the reference's), for the message."""
-    def filled(m: WindowMatch) -> int:  # n_cells (with a reference height) <= n_dem_cells;
-        return max(m.n_dem_cells, m.n_cells)  # windows.json of older runs lack the latter
-
-    small = [m for m in matches if filled(m) < cfg.min_cells]
-    voids = [m for m in matches if filled(m) >= cfg.min_cells
-             and m.status in (WindowStatus.TOO_FEW_CELLS, WindowStatus.MASKED)]
-    sized = [m for m in matches if filled(m) >= cfg.min_cells
-             and m.status not in (WindowStatus.TOO_FEW_CELLS, WindowStatus.MASKED)
-             and np.isfinite(m.relief_m)]
-    precision = [realistic_precision_m(m, cfg) for m in sized]
-    qualified = [m for m, p in zip(sized, precision, strict=True) if p <= cfg.max_precision_m]
-    found = float(np.median([m.relief_m for m in sized])) if sized else 0.0
-    need = [m.relief_m * p / cfg.max_precision_m for m, p in zip(sized, precision, strict=True)
-            if np.isfinite(p) and m.relief_m > 0]
-    needed = float(np.median(need)) if need else float("nan")
-    return ReliefVerdict(
-        len(matches), len(qualified), n_needed, found, needed, cfg.max_precision_m,
-        n_small=len(small), n_voids=len(voids),
-        best_dem_cells=max((filled(m) for m in matches), default=0),
-        min_cells=cfg.min_cells,
-        cell_m=float(cfg.cell_m if cfg.cell_m is not None else
-                     (cell_m if cell_m is not None else float("nan"))),
-        radius_m=cfg.radius_m)
+def gcps_from_windows(centres: ArrayLike, matches: Sequence[WindowMatch], lon_deg: ArrayLike,
+                      lat_deg: ArrayLike, h_m: ArrayLike,
+                      image_points: Mapping[str, tuple[ArrayLike, ArrayLike]]
+                      ) -> tuple[ControlPoint, ...]:
+    """A GCP of every good window: its centre tie point (index into ``lon_deg``, ``lat_deg``,
+    ``h_m``, the relative ground coordinates) moved by the window's 3-D shift, measured where
+    the tie point is in each image (``image_points``: image name -> (col, row) arrays indexed
+    like the tie points), with the window's precisions (the vertical one at least
+    :data:`MIN_GCP_SIGMA_H_M`) and figures (``provenance``). Ids count from 1."""
+    lon, lat, h = (np.asarray(v, dtype=np.float64) for v in (lon_deg, lat_deg, h_m))
+    pts = {name: (np.asarray(c, dtype=np.float64), np.asarray(r, dtype=np.float64))
+           for name, (c, r) in image_points.items()}
+    gcps: list[ControlPoint] = []
+    for i, m in zip(np.asarray(centres, dtype=np.intp), matches, strict=True):
+        if m.status != WindowStatus.OK:
+            continue
+        gcps.append(ControlPoint(
+            id=len(gcps) + 1,
+            lon_deg=float(lon[i] + m.shift_lon_arcsec * ARCSEC),
+            lat_deg=float(lat[i] + m.shift_lat_arcsec * ARCSEC),
+            h_m=float(h[i] + m.shift_h_m),
+            image_points={name: ImagePoint(float(c[i]), float(r[i]))
+                          for name, (c, r) in pts.items()},
+            sigma_xy_m=m.precision_m, sigma_h_m=max(m.precision_h_m, MIN_GCP_SIGMA_H_M),
+            source="srtm_surface_match", provenance={"tie_point": int(i), **m.to_dict()}))
+    return tuple(gcps)
 
 
 # ------------------------------------------------------------------------- report figure

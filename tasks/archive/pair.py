@@ -1,0 +1,210 @@
+"""The products of one pair run by ``gcpfree pair`` (``flows.pair``): which of them read back
+(so that a rerun resumes), the manifest ``OUT/pair.json`` written last, the STAC catalog of the
+rasters, the Prefect artifacts, the headline figures; and which pairs of an archive are done.
+
+A product that exists and reads back (JSON that parses, the orientation's report.json as
+:func:`tasks.absolute.report.read_report` reads it, a raster that opens with its size) is kept;
+:func:`pair_complete` reads the manifest and checks every product it lists with its size.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Iterable, Mapping
+from pathlib import Path
+from typing import Any
+
+from prefect import task
+from prefect.cache_policies import NO_CACHE
+
+from core.errors import GcpFreeError, InputError
+from tasks.io.rasters import read_json
+
+FORMAT = "gcpfree.pair"
+MANIFEST = "pair.json"
+
+# the orientation's products: manifest key -> file in OUT
+ORIENT_PRODUCTS = {"report": "report.json", "left_model": "left.json",
+                   "right_model": "right.json", "gcps": "gcps.json", "dsm": "dsm.tif",
+                   "dsm_egm96": "dsm_egm96.tif", "relative_dem": "relative_dem.tif"}
+STAC_TITLES = {"dsm": "final DSM, WGS84 ellipsoidal heights",
+               "dsm_egm96": "final DSM, EGM96 orthometric heights",
+               "dsm_mask": "final DSM mask (0 valid, 1 mismatch, 2 occluded/outside)",
+               "relative_dem": "relative DEM (before absolute orientation)",
+               "ortho_left": "left orthoimage", "ortho_right": "right orthoimage",
+               "ortho_discrepancy": "left-right ortho discrepancy (px)"}
+
+
+# ----------------------------------------------------------------------------- validity
+
+
+def _read_json(path: Path) -> Any:
+    """The JSON document at ``path``; InputError when it is missing or not JSON."""
+    return read_json(path, "product")
+
+
+def json_ok(path: Path) -> bool:
+    """True when ``path`` holds JSON."""
+    try:
+        _read_json(path)
+    except InputError:
+        return False
+    return True
+
+
+def _raster_ok(path: Path) -> bool:
+    import rasterio
+
+    from tasks.io.rasters import open_raster
+
+    try:
+        with open_raster(path, "product") as src:
+            return src.width > 0 and src.height > 0 and src.crs is not None
+    except (InputError, OSError, rasterio.errors.RasterioError):
+        return False
+
+
+def product_ok(path: Path) -> bool:
+    """True when ``path`` exists and reads back (rasters open, JSON parses)."""
+    path = Path(path)
+    if not path.is_file():
+        return False
+    if path.suffix.lower() in (".tif", ".tiff"):
+        return _raster_ok(path)
+    if path.suffix.lower() == ".json":
+        return json_ok(path)
+    return path.stat().st_size > 0
+
+
+def orientation_done(out: Path) -> bool:
+    """The orientation's products are all there and read back (report.json as the
+    orientation's report)."""
+    from tasks.absolute.report import read_report
+
+    try:
+        read_report(Path(out) / ORIENT_PRODUCTS["report"])
+    except GcpFreeError:
+        return False
+    return all(product_ok(Path(out) / p) for p in ORIENT_PRODUCTS.values())
+
+
+def pair_complete(out: str | Path) -> bool:
+    """True when ``OUT/pair.json`` exists and every product it lists reads back with the
+    size it had when the pair finished: a rerun skips this pair."""
+    out = Path(out)
+    try:
+        manifest = _read_json(out / MANIFEST)
+    except InputError:
+        return False
+    if not isinstance(manifest, dict) or manifest.get("format") != FORMAT:
+        return False
+    sizes = manifest.get("sizes", {})
+    for rel in manifest.get("products", {}).values():
+        path = out / rel
+        if not product_ok(path) or sizes.get(rel) != path.stat().st_size:
+            return False
+    return True
+
+
+@task(name="find-complete-pairs", cache_policy=NO_CACHE)
+def complete_pairs(ids: Iterable[str], root: Path) -> frozenset[str]:
+    """The ``ids`` whose ``ROOT/<id>`` already holds valid finished products."""
+    return frozenset(i for i in ids if pair_complete(Path(root) / i))
+
+
+def write_manifest(out: Path, pair_id: str, params: Mapping[str, Any],
+                   products: Mapping[str, str]) -> Path:
+    """``OUT/pair.json``: the run's parameters, its products and their sizes (written last)."""
+    from tasks.io.rasters import atomic_write_json
+
+    doc = {"format": FORMAT, "version": 1, "pair_id": pair_id, "params": dict(params),
+           "products": dict(products),
+           "sizes": {rel: (Path(out) / rel).stat().st_size for rel in products.values()}}
+    return atomic_write_json(Path(out) / MANIFEST, doc)
+
+
+# ----------------------------------------------------------------------------- products
+
+
+@task(name="write-stac", cache_policy=NO_CACHE, retries=1)
+def write_stac(out: Path, pair_id: str, rasters: Mapping[str, Path]) -> Path:
+    """The STAC catalog of the pair's rasters (``OUT/stac/catalog.json``)."""
+    from tasks.archive.stac import RasterProduct, write_catalog
+
+    products = [RasterProduct(k, p, STAC_TITLES.get(k, k),
+                              ("data",) if k.startswith(("dsm", "ortho")) else ("metadata",))
+                for k, p in rasters.items()]
+    return write_catalog(out, pair_id, products, f"gcpfree products of pair {pair_id}",
+                         properties={"gcpfree:pair": pair_id})
+
+
+def read_evaluation_stats(path: Path):  # -> dict[str, DzStats] | None
+    """The statistics of an ``eval.json`` of ``gcpfree evaluate``, per class and ``all``
+    (:class:`core.evaluation.DzStats`, as the evaluation report writes them), or None when
+    it is missing or not one."""
+    from core.evaluation import DzStats
+    from core.evaluation_report import REPORT_FORMAT
+
+    try:
+        doc = _read_json(path)
+        if not isinstance(doc, dict) or doc.get("format") != REPORT_FORMAT:
+            return None
+        return {**{str(k): DzStats.from_dict(v) for k, v in doc["classes"].items()},
+                "all": DzStats.from_dict(doc["all"])}
+    except (GcpFreeError, KeyError, TypeError, ValueError, AttributeError):
+        return None
+
+
+def publish_artifacts(out: Path, pair_id: str) -> None:
+    """Prefect artifacts of a finished pair: the orientation table, the LE68 table, a link to
+    the report."""
+    from prefect.artifacts import create_link_artifact, create_table_artifact
+
+    from tasks.absolute.report import read_report
+
+    key = "".join(c if c.isalnum() else "-" for c in pair_id.lower()).strip("-") or "pair"
+    report = read_report(out)
+    rows = []
+    for name, a in report.absolute.images.items():
+        cp = (report.check_points or {}).get(name)
+        rows.append({"image": name, "gcp_rms_col_px": round(a.rms_col_px, 3),
+                     "gcp_rms_row_px": round(a.rms_row_px, 3),
+                     "check_rms_col_px": round(cp.rms_col_px, 3) if cp else None,
+                     "check_rms_row_px": round(cp.rms_row_px, 3) if cp else None,
+                     "gcps_used": report.gcps.used})
+    create_table_artifact(rows, key=f"{key}-orientation",
+                          description=f"{pair_id}: orientation without GCP")
+    stats = read_evaluation_stats(out / "eval.json")
+    if stats is not None:
+        le = [{"class": name, "count": s.count, "le68_m": round(s.le68_m, 3),
+               "nmad_m": round(s.nmad_m, 3), "bias_m": round(s.mean_m, 3)}
+              for name, s in stats.items()]
+        create_table_artifact(le, key=f"{key}-le68", description=f"{pair_id}: DSM vs lidar")
+    for name in ("report.html", "report.md"):
+        if (out / name).exists():
+            create_link_artifact((out / name).resolve().as_uri(), link_text=name,
+                                 key=f"{key}-report", description=f"{pair_id}: report")
+            break
+
+
+def figure_lines(out: Path) -> list[str]:
+    """The pair's headline figures, read back from its products (those missing are left out):
+    the orientation's, the ortho discrepancy, the DSM against the lidar."""
+    from tasks.absolute.report import read_report
+
+    lines: list[str] = []
+    try:
+        lines += read_report(out).lines()
+    except GcpFreeError:
+        pass
+    try:
+        c = _read_json(out / "ortho_compare.json")["px"]
+        lines.append(f"ortho discrepancy     median {c['median_norm']:.2f} px, "
+                     f"95th percentile {c['p95_norm']:.2f} px (left vs right ortho)")
+    except (GcpFreeError, KeyError, TypeError, ValueError):
+        pass
+    stats = read_evaluation_stats(out / "eval.json")
+    if stats is not None:
+        a = stats["all"]
+        lines.append(f"DSM vs lidar          LE68 {a.le68_m:.2f} m, NMAD {a.nmad_m:.2f} m, "
+                     f"bias {a.mean_m:+.2f} m ({a.count} points; per class in eval.json)")
+    return lines

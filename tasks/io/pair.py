@@ -1,0 +1,79 @@
+"""The inputs of a stereo pair, as one value: both images, their model files, the SPOT band,
+and the reference DEM with its vertical datum (or the SRTM tiles to prepare it from).
+
+Every command that takes a pair (``relative``, ``dsm``, ``orient``, ``pair``) builds one
+:class:`PairInputs` from its options (:meth:`PairInputs.from_args`), the archive one per
+catalog entry, and the flows and tasks pass it whole.
+"""
+
+from __future__ import annotations
+
+from dataclasses import asdict, dataclass, replace
+from pathlib import Path
+from typing import Any
+
+from core.errors import InputError
+from core.heights import VERTICAL_CHOICES
+
+PATHS = ("left", "right", "left_model", "right_model", "reference", "srtm_dir")
+
+
+@dataclass(frozen=True)
+class PairInputs:
+    """A stereo pair's files (see ``gcpfree orient --help``).
+
+    ``left`` stays fixed in the relative orientation, ``right`` is adjusted to it; each model
+    is found beside its image unless ``left_model`` / ``right_model`` name it; ``band``: the
+    SPOT band whose look angles to use (default the first). The ground: ``reference``, a DEM
+    in EPSG:4326 whose heights ``reference_vertical`` says (``auto``: decided by the one datum
+    rule), or ``srtm_dir``, SRTM tiles a reference is prepared from; at most one of them.
+    """
+
+    left: Path
+    right: Path
+    left_model: Path | None = None
+    right_model: Path | None = None
+    band: int | None = None
+    reference: Path | None = None
+    reference_vertical: str = "auto"
+    srtm_dir: Path | None = None
+
+    def __post_init__(self) -> None:
+        for name in PATHS:
+            value = getattr(self, name)
+            if value is not None and not isinstance(value, Path):
+                object.__setattr__(self, name, Path(value))
+        if self.reference is not None and self.srtm_dir is not None:
+            raise InputError("give the reference DEM (--reference) or the SRTM tiles to "
+                             "prepare it from (--srtm-dir), not both")
+        if self.reference_vertical not in VERTICAL_CHOICES:
+            raise InputError(f"--reference-vertical {self.reference_vertical!r} unknown; use "
+                             f"one of {', '.join(VERTICAL_CHOICES)}")
+
+    @classmethod
+    def from_args(cls, args: Any) -> PairInputs:
+        """From a command's options (``--left --right --left-model --right-model --band
+        --reference --reference-vertical --srtm-dir``; those a command lacks stay unset)."""
+        return cls(**{k: getattr(args, k) for k in
+                      ("left", "right", "left_model", "right_model", "band", "reference",
+                       "reference_vertical", "srtm_dir") if getattr(args, k, None) is not None})
+
+    @property
+    def has_ground(self) -> bool:
+        """Whether a reference is given or can be prepared (GCP-free orientation needs one)."""
+        return self.reference is not None or self.srtm_dir is not None
+
+    def load(self):  # -> tuple[LoadedModel, LoadedModel]
+        """The sensor models of both images (:func:`tasks.io.sensors.load_model`)."""
+        from tasks.io.sensors import load_model
+
+        return (load_model(self.left, model=self.left_model, band=self.band),
+                load_model(self.right, model=self.right_model, band=self.band))
+
+    def with_models(self, left_model: Path, right_model: Path) -> PairInputs:
+        """The same images with other model files (e.g. the oriented ``left.json``)."""
+        return replace(self, left_model=Path(left_model), right_model=Path(right_model))
+
+    def to_dict(self) -> dict[str, Any]:
+        """JSON values (paths as strings), one key per field."""
+        return {k: (str(v) if isinstance(v, Path) else v) for k, v in asdict(self).items()}
