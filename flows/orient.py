@@ -146,8 +146,9 @@ def orient_flow(params: OrientParams) -> OrientOutcome:
         dsm=FinalDsm("dsm.tif", "dsm_egm96.tif", final["ellipsoidal"]))
     if checkpoints is not None:
         report = replace(
-            report, check_points=check_points_of(check_point_report(absolute.models,
-                                                                   checkpoints)),
+            report, check_points=check_points_of(check_point_report(
+                absolute.models, checkpoints, absolute.adjustment,
+                params.absolute.reference_sigma_m)),
             check_points_before=check_points_of(check_point_report(
                 (rel.left.model, rel.right.model), checkpoints)))
     path = report.write(out / "report.json")

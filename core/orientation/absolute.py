@@ -15,7 +15,7 @@ keeps those whose estimate is significant against its sigma.
 from __future__ import annotations
 
 from collections.abc import Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from typing import Any
 
 import numpy as np
@@ -23,6 +23,15 @@ from numpy.typing import ArrayLike, NDArray
 
 from core.errors import ConvergenceError, GeometryError, InputError, InsufficientDataError
 from core.geodesy import geodetic_to_ecef
+from core.orientation.uncertainty import (
+    PredictedAccuracy,
+    VarianceComponents,
+    components_differ,
+    ground_jacobian,
+    image_grid,
+    neighbour_covariance,
+    solve_with_components,
+)
 from core.points import ControlPoint
 from core.robust import RobustAdjustment, huber_weights, nmad
 from core.sensors.base import SensorModel
@@ -35,18 +44,34 @@ class AbsoluteConfig(RobustAdjustment):
     """Settings of :func:`absolute_orientation`: the robust adjustment's
     (:class:`~core.robust.RobustAdjustment`; ``huber_k`` and ``reject_k`` in normalised
     residuals, wider than the relative orientation's, and a rejection round per blunder), the
-    matching precision of the image measurements (px) and the fewest GCPs to solve with."""
+    matching precision of the image measurements (px) and the fewest GCPs to solve with.
+
+    ``variance_components``: once the blunders are out, the GCPs' a-priori sigmas are
+    calibrated on their residuals, one factor for the columns and one for the rows
+    (:mod:`core.orientation.uncertainty`), merged into one when the F test at ``split_alpha``
+    finds them alike; the parameters and their covariance are then those of that weighting.
+    Off: today's robust solution and its covariance scaled by the robust ``sigma0``.
+    ``reference_sigma_m``: the reference's registration error (east, north, up; m, 1 sigma),
+    common to every GCP and so invisible in their residuals, which the predicted check-point
+    RMS adds (:meth:`AbsoluteOrientation.predict`); 5 m as the relative orientation assumes."""
 
     huber_k: float = 2.0
     reject_k: float = 3.5
     max_rejection_rounds: int = 200
     matching_sigma_px: float = 0.3
     min_gcps: int = 4
+    variance_components: bool = True
+    split_alpha: float = 0.01
+    reference_sigma_m: tuple[float, float, float] = (5.0, 5.0, 5.0)
 
     def __post_init__(self) -> None:
         super().__post_init__()
         if self.matching_sigma_px <= 0 or self.min_gcps < 1:
             raise InputError("need matching_sigma_px > 0 and min_gcps >= 1")
+        if len(self.reference_sigma_m) != 3 or min(self.reference_sigma_m) < 0:
+            raise InputError("reference_sigma_m is (east, north, up) in metres, each >= 0")
+        if not 0.0 < self.split_alpha < 1.0:
+            raise InputError(f"split_alpha is a probability in (0, 1), got {self.split_alpha}")
 
 
 @dataclass(frozen=True, eq=False)
@@ -94,7 +119,9 @@ class Observations:
 @dataclass(frozen=True, eq=False)
 class ImageResiduals:
     """Residuals (measured - projected, px) of one image at the GCPs kept: ``rms_col_px`` is the
-    paper's P, ``rms_row_px`` its L."""
+    paper's P, ``rms_row_px`` its L; ``unmodelled_*_px`` the part of them smooth across the
+    image, the model's own error (:func:`core.orientation.uncertainty.neighbour_covariance`,
+    square-rooted)."""
 
     name: str
     n: int
@@ -104,6 +131,8 @@ class ImageResiduals:
     mean_row_px: float
     col_px: FloatArray = field(repr=False)
     row_px: FloatArray = field(repr=False)
+    unmodelled_col_px: float = 0.0
+    unmodelled_row_px: float = 0.0
 
     def to_dict(self) -> dict[str, Any]:
         return {"name": self.name, "n": self.n, "rms_col_px": self.rms_col_px,
@@ -117,8 +146,9 @@ class AbsoluteOrientation:
 
     ``rejected`` lists the GCP indices removed, with the normalised residual that condemned
     each (``reasons``); ``covariance`` is over the concatenated parameters of all images (in
-    each model's parameter units), ``sigma0`` the a-posteriori standard deviation of unit
-    weight.
+    each model's parameter units), under the GCP sigmas calibrated on the data
+    (``components``; without them, the a-priori sigmas times ``sigma0``); ``sigma0`` the robust
+    a-posteriori standard deviation of unit weight under the a-priori sigmas.
     """
 
     models: tuple[SensorModel, ...]
@@ -133,10 +163,49 @@ class AbsoluteOrientation:
     reasons: dict[int, str]
     n_iterations: int
     converged: bool
+    components: VarianceComponents | None = None
 
     @property
     def rejected(self) -> NDArray[np.intp]:
         return np.flatnonzero(~self.inlier)
+
+    def image_covariance(self, k: int) -> FloatArray:
+        """The covariance of image ``k``'s parameters (its block of ``covariance``)."""
+        start = sum(len(p) for p in self.param_names[:k])
+        stop = start + len(self.param_names[k])
+        return self.covariance[start:stop, start:stop]
+
+    def predict(self, k: int, lon_deg: ArrayLike, lat_deg: ArrayLike, h_m: ArrayLike,
+                reference_sigma_m: tuple[float, float, float], noise_px: float = 0.0
+                ) -> PredictedAccuracy:
+        """Predicted RMS (col, row; px) of check points at these ground points in image ``k``:
+        the parameters' covariance propagated through the model's partial derivatives there,
+        the reference's registration error (``reference_sigma_m``: east, north, up) through
+        the ground's, the model's own error the GCP residuals show (their part smooth across
+        the image) and the check points' own measurement noise ``noise_px``."""
+        model, res = self.models[k], self.residuals[k]
+        return PredictedAccuracy.at(model.jacobian(lon_deg, lat_deg, h_m),
+                                    self.image_covariance(k),
+                                    ground_jacobian(model, lon_deg, lat_deg, h_m),
+                                    reference_sigma_m,
+                                    (res.unmodelled_col_px, res.unmodelled_row_px), noise_px)
+
+    def predict_over_image(self, k: int, size: tuple[int, int], heights_m: ArrayLike,
+                           reference_sigma_m: tuple[float, float, float], n_side: int = 9
+                           ) -> PredictedAccuracy:
+        """:meth:`predict` over a regular ``n_side`` x ``n_side`` grid of image ``k``'s pixels
+        (``size``: cols, rows) at each of ``heights_m``: what error-free check points spread
+        evenly over the image at those heights would show."""
+        c, r = image_grid(size[0], size[1], n_side)
+        model = self.models[k]
+        lon, lat, h = [], [], []
+        for hk in np.asarray(heights_m, dtype=np.float64).ravel():
+            lo, la = model.localize(c, r, np.full(c.shape, hk))
+            lon.append(lo)
+            lat.append(la)
+            h.append(np.full(c.shape, hk))
+        return self.predict(k, np.concatenate(lon), np.concatenate(lat), np.concatenate(h),
+                            reference_sigma_m)
 
     def sigmas(self) -> tuple[FloatArray, ...]:
         """Standard deviation of each image's parameters."""
@@ -159,6 +228,8 @@ class AbsoluteOrientation:
             "rejected": [{"index": int(i), "reason": self.reasons[int(i)]}
                          for i in self.rejected],
             "n_iterations": self.n_iterations, "converged": self.converged,
+            "variance_components": (self.components.to_dict() if self.components is not None
+                                    else None),
         }
 
 
@@ -233,20 +304,9 @@ def absolute_orientation(models: Sequence[SensorModel], obs: Observations,
         converged = False
         for _ in range(config.max_iterations):
             iterations += 1
-            a_blocks, res, wts = [], [], []
-            for m, model in enumerate(models):
-                use = inlier & seen[:, m]
-                pc, pr = model.project(obs.lon_deg[use], obs.lat_deg[use], obs.h_m[use])
-                jac = model.jacobian(obs.lon_deg[use], obs.lat_deg[use], obs.h_m[use])
-                full = np.zeros((use.sum(), 2, offsets[-1]))
-                full[:, :, offsets[m]:offsets[m + 1]] = jac
-                a_blocks.append(full.reshape(-1, offsets[-1]))
-                r = np.stack([col[use, m] - pc, row[use, m] - pr], axis=1).ravel()
-                res.append(r)
-                wts.append(np.repeat(1.0 / sigma[use, m] ** 2, 2))
-            a = np.vstack(a_blocks)
-            r = np.concatenate(res)
-            w0 = np.concatenate(wts)
+            a, r, q, _ = _linearise(models, obs, col, row, sigma, inlier[:, None] & seen,
+                                    offsets)
+            w0 = 1.0 / q
             z = np.abs(r) * np.sqrt(w0)
             w = w0 * huber_weights(z, config.huber_k)
             scale = np.sqrt(np.sum(a**2 * w[:, None], axis=0))
@@ -281,8 +341,14 @@ def absolute_orientation(models: Sequence[SensorModel], obs: Observations,
             reasons[int(k)] = (f"normalised residual {worst[k]:.1f} over {limit:.1f} "
                                f"({config.reject_k} x sigma0 {max(s0, 1.0):.2f})")
     s0 = _sigma0(models, obs, col, row, sigma, seen, inlier, offsets[-1])
-    cov = s0**2 * np.linalg.pinv((a / scale).T @ ((a / scale) * w0[:, None])) / np.outer(scale,
-                                                                                         scale)
+    comps = None
+    if config.variance_components:
+        models[:], cov, comps = _calibrated(models, obs, col, row, sigma,
+                                            inlier[:, None] & seen, offsets, config)
+        iterations += comps.n_iterations
+    else:
+        cov = s0**2 * np.linalg.pinv((a / scale).T @ ((a / scale) * w0[:, None])) / np.outer(
+            scale, scale)
     residuals = []
     for m, model in enumerate(models):
         use = inlier & seen[:, m]
@@ -290,12 +356,72 @@ def absolute_orientation(models: Sequence[SensorModel], obs: Observations,
         dc, dr = col[use, m] - pc, row[use, m] - pr
         residuals.append(ImageResiduals(
             names[m], int(use.sum()), _rms(dc), _rms(dr), float(np.mean(dc)) if dc.size else 0.0,
-            float(np.mean(dr)) if dr.size else 0.0, dc, dr))
+            float(np.mean(dr)) if dr.size else 0.0, dc, dr,
+            float(np.sqrt(neighbour_covariance(col[use, m], row[use, m], dc))),
+            float(np.sqrt(neighbour_covariance(col[use, m], row[use, m], dr)))))
     return AbsoluteOrientation(
         models=tuple(models), names=names, param_names=tuple(m.param_names for m in models),
         params_before=before, params_after=tuple(m.params.copy() for m in models),
         covariance=cov, sigma0=s0, residuals=tuple(residuals), inlier=inlier, reasons=reasons,
-        n_iterations=iterations, converged=converged)
+        n_iterations=iterations, converged=converged, components=comps)
+
+
+def _linearise(models: Sequence[SensorModel], obs: Observations, col: FloatArray,
+               row: FloatArray, sigma: FloatArray, use: NDArray[np.bool_],
+               offsets: NDArray[np.intp]) -> tuple[FloatArray, FloatArray, FloatArray,
+                                                   NDArray[np.intp]]:
+    """The GCP equations of every model at its current parameters: the design (2 rows per
+    measurement, col then row, over all images' parameters), the residuals (measured -
+    projected, px), their a-priori variances (px^2) and the axis of each row (0 col, 1 row).
+    ``use``: (n_gcp, n_model) the measurements taken."""
+    a_blocks, res, var = [], [], []
+    for m, model in enumerate(models):
+        u = use[:, m]
+        pc, pr = model.project(obs.lon_deg[u], obs.lat_deg[u], obs.h_m[u])
+        jac = model.jacobian(obs.lon_deg[u], obs.lat_deg[u], obs.h_m[u])
+        full = np.zeros((u.sum(), 2, offsets[-1]))
+        full[:, :, offsets[m]:offsets[m + 1]] = jac
+        a_blocks.append(full.reshape(-1, offsets[-1]))
+        res.append(np.stack([col[u, m] - pc, row[u, m] - pr], axis=1).ravel())
+        var.append(np.repeat(sigma[u, m] ** 2, 2))
+    r = np.concatenate(res)
+    return np.vstack(a_blocks), r, np.concatenate(var), np.tile([0, 1], r.size // 2)
+
+
+def _calibrated(models: list[SensorModel], obs: Observations, col: FloatArray, row: FloatArray,
+                sigma: FloatArray, use: NDArray[np.bool_], offsets: NDArray[np.intp],
+                config: AbsoluteConfig) -> tuple[list[SensorModel], FloatArray,
+                                                  VarianceComponents]:
+    """The models re-adjusted on the GCPs kept with their sigmas calibrated by variance
+    components (columns and rows apart when the F test separates them, else one factor), the
+    covariance under those components, and the components."""
+
+    def solve(names: tuple[str, ...]) -> tuple[list[SensorModel], FloatArray,
+                                               VarianceComponents]:
+        moved, factors, n_it = list(models), None, 0
+        for _ in range(config.max_iterations):
+            a, r, q, axis = _linearise(moved, obs, col, row, sigma, use, offsets)
+            groups = axis if len(names) == 2 else np.zeros_like(axis)
+            sol = solve_with_components(a, r, q, groups, names, factors)
+            factors, n_it = sol.components.factors, n_it + sol.components.n_iterations
+            moved = _damped_step(moved, sol.dx, offsets, obs, use)
+            if np.max(np.abs(a @ sol.dx)) < config.tol_px:
+                break
+        a, r, q, axis = _linearise(moved, obs, col, row, sigma, use, offsets)
+        groups = axis if len(names) == 2 else np.zeros_like(axis)
+        sol = solve_with_components(a, r, q, groups, names, factors)
+        return moved, sol.covariance, replace(sol.components, n_iterations=n_it)
+
+    split = solve(("gcp_col", "gcp_row"))
+    c = split[2]
+    if components_differ(c, 0, 1, config.split_alpha):
+        return split[0], split[1], replace(
+            c, split=f"columns and rows apart: factors {c.factors[0]:.3g} and "
+                     f"{c.factors[1]:.3g} differ (F test at {config.split_alpha:g})")
+    one = solve(("gcp",))
+    return one[0], one[1], replace(
+        one[2], split=f"one factor: columns {c.factors[0]:.3g} and rows {c.factors[1]:.3g} "
+                      f"alike (F test at {config.split_alpha:g})")
 
 
 def _rms(v: FloatArray) -> float:
@@ -324,7 +450,9 @@ def _sigma0(models: Sequence[SensorModel], obs: Observations, col: FloatArray, r
 @dataclass(frozen=True)
 class CheckPointStats:
     """The paper's Table 2 for one image: residuals (measured - projected, px) of independent
-    check points in P (col) and L (row)."""
+    check points in P (col) and L (row); beside the measured RMS, the RMS the adjustment
+    predicts at those points (:class:`~core.orientation.uncertainty.PredictedAccuracy`), when
+    one was made."""
 
     name: str
     n: int
@@ -338,9 +466,13 @@ class CheckPointStats:
     mean_row_px: float
     std_row_px: float
     rms_row_px: float
+    predicted_rms_col_px: float | None = None
+    predicted_rms_row_px: float | None = None
 
     def to_dict(self) -> dict[str, Any]:
-        return dict(vars(self))
+        """The figures (the predicted RMS only when there is one)."""
+        return {k: v for k, v in vars(self).items()
+                if v is not None or not k.startswith("predicted_")}
 
 
 def check_point_stats(model: SensorModel, lon_deg: ArrayLike, lat_deg: ArrayLike,

@@ -9,7 +9,7 @@ its products written atomically.
 from __future__ import annotations
 
 import csv
-from dataclasses import dataclass
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any
 
@@ -101,18 +101,29 @@ def read_checkpoints(path: str | Path) -> CheckPointSet:
     return points
 
 
-def check_point_report(models: tuple[SensorModel, ...], points: CheckPointSet
+def check_point_report(models: tuple[SensorModel, ...], points: CheckPointSet,
+                       adjustment: AbsoluteOrientation | None = None,
+                       reference_sigma_m: tuple[float, float, float] = (5.0, 5.0, 5.0)
                        ) -> dict[str, dict[str, Any]]:
-    """The paper's Table 2 per image: the check points' residuals under ``models``."""
+    """The paper's Table 2 per image: the check points' residuals under ``models``; with the
+    ``adjustment`` that made them, the RMS it predicts at the same points beside the measured
+    (``predicted_rms_col_px``, ``predicted_rms_row_px``: its covariance and the reference's
+    registration ``reference_sigma_m``; the check points carry no measurement noise of their
+    own, none is added)."""
     out = {}
-    for name, model in zip(NAMES, models, strict=True):
+    for k, (name, model) in enumerate(zip(NAMES, models, strict=True)):
         pts = [p for p in points.points if name in p.image_points]
         if not pts:
             continue
         lon, lat, h, col, row = (np.array(v, dtype=float) for v in zip(
             *[(p.lon_deg, p.lat_deg, p.h_m, p.image_points[name].col, p.image_points[name].row)
               for p in pts], strict=True))
-        out[name] = check_point_stats(model, lon, lat, h, col, row, name).to_dict()
+        stats = check_point_stats(model, lon, lat, h, col, row, name)
+        if adjustment is not None:
+            pred = adjustment.predict(k, lon, lat, h, reference_sigma_m)
+            stats = replace(stats, predicted_rms_col_px=pred.predicted_rms_col_px,
+                            predicted_rms_row_px=pred.predicted_rms_row_px)
+        out[name] = stats.to_dict()
     return out
 
 
@@ -124,6 +135,7 @@ class AbsoluteProducts:
     adjustment: AbsoluteOrientation
     self_calibration: SelfCalibration | None
     model_paths: tuple[Path, ...]
+    predicted: dict[str, Any] = field(default_factory=dict)
 
     def gcp_summary(self, gcps: tuple[ControlPoint, ...]) -> dict[str, Any]:
         """GCPs used and rejected (ids and reasons), over the GCPs given."""
@@ -155,7 +167,27 @@ def orient_absolute(left: LoadedModel, right: LoadedModel, gcps: tuple[ControlPo
     for name, model in zip(NAMES, adj.models, strict=True):
         paths.append(atomic_write_json(Path(out_dir) / f"{name}.json",
                                        model.to_dict()))  # type: ignore[attr-defined]
-    return AbsoluteProducts(tuple(adj.models), adj, calib, tuple(paths))
+    kept = (calib or adj).inlier  # over the GCPs given
+    return AbsoluteProducts(tuple(adj.models), adj, calib, tuple(paths),
+                            predicted_over_images(adj, (left.size, right.size),
+                                                  np.asarray(obs.h_m)[kept], config))
+
+
+GRID_SIDE = 9
+
+
+def predicted_over_images(adj: AbsoluteOrientation, sizes: tuple[tuple[int, int], ...],
+                          h: np.ndarray, config: AbsoluteConfig) -> dict[str, Any]:
+    """report.json's ``absolute.predicted``: per image, the check-point RMS the adjustment
+    predicts over a regular grid of ``GRID_SIDE`` x ``GRID_SIDE`` pixels spanning the image at
+    the scene's heights (the 5th, 50th and 95th percentiles of the heights ``h`` of the GCPs
+    kept)."""
+    heights = [float(v) for v in np.percentile(h, [5.0, 50.0, 95.0])]
+    images = {name: adj.predict_over_image(k, sizes[k], heights, config.reference_sigma_m,
+                                           GRID_SIDE).to_dict()
+              for k, name in enumerate(NAMES)}
+    return {"grid_points_per_side": GRID_SIDE, "heights_m": heights,
+            "reference_sigma_m": list(config.reference_sigma_m), "images": images}
 
 
 def write_gcps(path: Path, gcps: tuple[ControlPoint, ...]) -> Path:

@@ -539,6 +539,45 @@ def test_the_schema_keeps_every_key_its_records_write():
                                   ).check_points["left"] == stats
 
 
+def test_report_json_carries_the_predicted_accuracy_beside_the_measured():
+    """The keys of the true uncertainties: ``check_points.<image>.predicted_rms_col_px`` and
+    ``predicted_rms_row_px`` beside the measured RMS, ``absolute.variance_components`` and
+    ``absolute.predicted`` (per image over a grid, for users with no check point) come back
+    as written; a report without them (older runs) still reads, with None."""
+    from core.orientation.absolute import CheckPointStats
+    from core.orientation.uncertainty import PredictedAccuracy, VarianceComponents
+
+    comps = VarianceComponents(("gcp_col", "gcp_row"), np.array([0.56, 0.21]),
+                               np.array([68, 68]), np.array([60.0, 58.0]), 4, True, "apart")
+    pred = PredictedAccuracy(243, 0.16, 0.14, 0.08, 0.06, 0.14, 0.125, 0.0, 0.0, (5.0, 5.0, 5.0),
+                             0.0)
+    doc = finished_report(12, {"left": (0.25, 0.5)}, {"left": (0.375, 0.625)})
+    doc["absolute"]["variance_components"] = comps.to_dict()
+    doc["absolute"]["predicted"] = {"grid_points_per_side": 9, "heights_m": [1.0, 2.0, 3.0],
+                                    "reference_sigma_m": [5.0, 5.0, 5.0],
+                                    "images": {"left": pred.to_dict()}}
+    stats = CheckPointStats("left", 3, *range(10), predicted_rms_col_px=0.5,
+                            predicted_rms_row_px=0.25)
+    doc["check_points"] = {"left": stats.to_dict()}
+    doc = json.loads(json.dumps(doc))
+    report = OrientReport.from_dict(doc)
+    assert report.to_dict() == doc
+    assert report.check_points["left"].predicted_rms_col_px == 0.5
+    assert report.check_points["left"].predicted_rms_row_px == 0.25
+    assert report.check_points_before["left"].predicted_rms_col_px is None
+    assert "predicted_rms_col_px" not in doc["check_points_before"]["left"]
+    img = report.absolute.predicted["images"]["left"]
+    assert (img["predicted_rms_col_px"], img["predicted_rms_row_px"]) == (0.16, 0.14)
+    assert report.absolute.variance_components["groups"]["gcp_col"]["factor"] == 0.56
+    old = {**doc, "absolute": {k: v for k, v in doc["absolute"].items()
+                               if k not in ("predicted", "variance_components")}}
+    assert OrientReport.from_dict(old).absolute.predicted is None
+    bad = json.loads(json.dumps(doc))
+    bad["absolute"]["predicted"]["images"]["left"]["predicted_rms_row_px"] = "0.1"
+    with pytest.raises(InputError, match="predicted_rms_row_px"):
+        OrientReport.from_dict(bad)
+
+
 # what a reader of the report sees in the browser
 LOOK = """() => ({
   figures: Array.from(document.querySelectorAll('figure')).map(f => {
