@@ -7,7 +7,7 @@ from pathlib import Path
 
 from prefect import flow
 
-from core.simulation.scene import ErrorConfig
+from core.simulation.scene import error_config
 from tasks.io.geoid import BUNDLED_SRTM_DIR
 from tasks.simulate.scene import (
     SimulationSummary,
@@ -41,13 +41,14 @@ class SimulationParams:
     center: tuple[float, float] | None = None
     lidar: bool = True
     dem_vertical: str = "auto"
+    errors: str | None = None  # "realistic" or "simple"; None: the preset's default
 
 
 @flow(name="simulate-scene", log_prints=True)
 def simulate_scene(params: SimulationParams) -> SimulationSummary:
     """Scene and models -> truth surface -> radiance and image per date -> check points, lidar."""
     out = Path(params.out)
-    errors = ErrorConfig(lens=params.lens, jitter=params.jitter)
+    errors = error_config(params.preset, params.errors, lens=params.lens, jitter=params.jitter)
     scene = define_scene(Path(params.dem), out, params.preset, params.seed, errors,
                          params.relief_factor, params.bits, params.date_change, params.center,
                          params.dem_vertical)

@@ -4,7 +4,10 @@ scene record (:class:`SceneDef`, saved as scene.json) and how a scene is sized.
 Pure numerics on the pushbroom model. The truth models carry what the delivered metadata
 lack (lens distortion with ``lens``, high-frequency attitude jitter with ``jitter``); the
 delivered models differ from the truth by attitude biases worth 100-300 m on the ground
-at the scene centre and by attitude drifts, as archive SPOT metadata do.
+at the scene centre and by attitude drifts, as archive SPOT metadata do. With ``realistic``
+(``--errors realistic``, the default of the spot and hrs presets) they also have what real
+products have (:mod:`core.simulation.realistic`): a low-frequency attitude profile measured by
+quantised angular speeds, ephemeris and time-tag errors, detector calibration errors.
 """
 
 from __future__ import annotations
@@ -28,8 +31,12 @@ from core.sensors.pushbroom import PushbroomModel
 from core.sensors.pushbroom_synthetic import SyntheticSpec, synthetic_pushbroom
 from core.simulation.hashing import derive_seed
 from core.simulation.landcover import water_level_for_fraction
+from core.simulation.realistic import RealisticErrors, realistic_models
 
 FloatArray = NDArray[np.float64]
+
+
+ERROR_MODES = ("realistic", "simple")
 
 
 @dataclass(frozen=True)
@@ -58,8 +65,11 @@ class Preset:
     lidar_spacing_m: float = 3.0
     spot_mission: int = 2  # the SPOT product the delivered metadata imitate (METADATA.DIM)
     spot_instrument: str = "HRV"
+    default_errors: str = "realistic"  # ``--errors`` when not given: realistic or simple
 
     def __post_init__(self) -> None:
+        if self.default_errors not in ERROR_MODES:
+            raise InputError(f"preset {self.name!r}: default_errors must be one of {ERROR_MODES}")
         if self.n_cols < 16 or self.n_rows < 16 or self.gsd_m <= 0 or self.truth_res_m <= 0:
             raise InputError(f"preset {self.name!r}: image must be >= 16x16 px with positive GSD")
 
@@ -80,7 +90,9 @@ PRESETS: dict[str, Preset] = {
     ),
     # the same physics at 600x600 px and 40 m, for CI
     # (lidar over the whole scene, its spacing scaled with the GSD to stay CI-sized)
-    "tiny": Preset("tiny", 600, 600, 40.0, 20.0, _ACROSS, None, lidar_spacing_m=20.0),
+    # (simple errors unless asked: the test suite's scenes and CI figures stand on them)
+    "tiny": Preset("tiny", 600, 600, 40.0, 20.0, _ACROSS, None, lidar_spacing_m=20.0,
+                   default_errors="simple"),
 }
 
 
@@ -94,6 +106,7 @@ class ErrorConfig:
     lens_edge_px: float = 1.5  # distortion at the image edge, pixels
     jitter: bool = False  # truth attitude has high-frequency jitter
     jitter_rms_px: float = 0.3  # jitter amplitude as ground displacement, pixels RMS
+    realistic: bool = False  # the errors of real products (core.simulation.realistic)
 
     def __post_init__(self) -> None:
         lo, hi = self.centre_error_m
@@ -101,6 +114,17 @@ class ErrorConfig:
             raise InputError(f"centre_error_m must be (min, max) with 0 <= min <= max, got {lo, hi}")
         if self.drift_m < 0 or self.lens_edge_px < 0 or self.jitter_rms_px < 0:
             raise InputError("drift, lens and jitter magnitudes must be >= 0")
+
+
+def error_config(preset: str, mode: str | None = None, **kw: object) -> ErrorConfig:
+    """The errors of a scene of ``preset`` for ``--errors`` ``mode`` (``"realistic"`` or
+    ``"simple"``; None: the preset's default), other settings from ``kw``."""
+    if preset not in PRESETS:
+        raise InputError(f"unknown preset {preset!r}; choose one of {sorted(PRESETS)}")
+    mode = PRESETS[preset].default_errors if mode is None else mode
+    if mode not in ERROR_MODES:
+        raise InputError(f"--errors must be one of {ERROR_MODES}, got {mode!r}")
+    return ErrorConfig(realistic=mode == "realistic", **kw)  # type: ignore[arg-type]
 
 
 @dataclass(frozen=True)
@@ -116,11 +140,15 @@ class InjectedErrors:
     centre_error_m: float
     jitter: tuple[tuple[int, float, float, float], ...]
     distortion: LensDistortion
+    realistic: RealisticErrors | None = None  # with ``--errors realistic``
 
     def to_dict(self) -> dict:
         d = asdict(self)
         d["jitter"] = [list(t) for t in self.jitter]
         d["distortion"] = self.distortion.to_dict()
+        d.pop("realistic")
+        if self.realistic is not None:
+            d["realistic"] = self.realistic.to_dict()
         return d
 
     @classmethod
@@ -133,6 +161,8 @@ class InjectedErrors:
                 jitter=tuple((int(t[0]), float(t[1]), float(t[2]), float(t[3]))
                              for t in d["jitter"]),
                 distortion=LensDistortion.from_dict(d["distortion"], "injected.distortion"),
+                realistic=(RealisticErrors.from_dict(d["realistic"]) if "realistic" in d
+                           else None),
             )
         except (KeyError, TypeError, ValueError, IndexError) as exc:
             raise InputError(f"injected errors record is malformed ({exc!r}); the scene.json "
@@ -443,12 +473,19 @@ class ImageModels:
 
 def scene_models(preset: Preset, centre: GeoPoint, errors: ErrorConfig,
                  seed: int) -> dict[str, ImageModels]:
-    """Truth and delivered models of each image of ``preset``, drawn from ``seed``."""
+    """Truth and delivered models of each image of ``preset``, drawn from ``seed`` (with
+    ``errors.realistic``, also the errors of :mod:`core.simulation.realistic`)."""
     out = {}
     for spec in preset.images:
         rng = np.random.default_rng(derive_seed(seed, "geometry", spec.name))
         t = truth_model(spec, preset, (centre.lon_deg, centre.lat_deg, centre.h_m), errors, rng)
         d, inj = delivered_model(t, preset, errors, rng, centre.h_m)
+        if errors.realistic:  # its own stream: the simple errors above stay as they were
+            t, d, real = realistic_models(
+                t, d, np.random.default_rng(derive_seed(seed, "realistic", spec.name)),
+                preset.spot_mission, preset.spot_instrument)
+            inj = replace(inj, realistic=real,
+                          centre_error_m=centre_displacement_m(t, d, centre.h_m))
         out[spec.name] = ImageModels(t, d, inj)
     return out
 

@@ -36,6 +36,12 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
                    help="truth camera has lens distortion the delivered metadata lack")
     p.add_argument("--jitter", action="store_true",
                    help="truth attitude has high-frequency jitter the metadata lack")
+    p.add_argument("--errors", choices=("realistic", "simple"), default=None,
+                   help="realistic: the errors real SPOT products and SRTM have (a measured "
+                        "low-frequency attitude profile, ephemeris, time-tag and detector "
+                        "calibration errors, a reference with partial canopy, radar voids and "
+                        "a tilt); simple: attitude biases and drifts only. Default: realistic "
+                        "for spot and hrs, simple for tiny")
     p.add_argument("--date-change", type=float, default=0.0, metavar="F",
                    help="fraction of the scene changed between the dates (vegetation, snow, "
                         "cloud); default 0")
@@ -63,7 +69,7 @@ def run(args: argparse.Namespace) -> int:
         out=args.out, dem=dem, preset=args.preset, seed=args.seed, lens=args.lens,
         jitter=args.jitter, date_change=args.date_change, relief_factor=args.relief_factor,
         bits=args.bits, center=tuple(args.center) if args.center else None,
-        lidar=not args.no_lidar, dem_vertical=args.dem_vertical,
+        lidar=not args.no_lidar, dem_vertical=args.dem_vertical, errors=args.errors,
     ))
     print("\n".join(summary.lines()))
     return 0

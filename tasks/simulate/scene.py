@@ -9,7 +9,7 @@ reading of the DEM the world stands on are in :mod:`tasks.simulate.io`.
 
 from __future__ import annotations
 
-from dataclasses import dataclass, replace
+from dataclasses import asdict, dataclass, replace
 from datetime import date
 from functools import lru_cache, partial
 from pathlib import Path
@@ -35,7 +35,8 @@ from core.simulation.hashing import derive_seed
 from core.simulation.landcover import LandCover
 from core.simulation.lidar import lidar_extent, lidar_tile
 from core.simulation.raycast import ray_levels
-from core.simulation.reference import ReferenceErrors, srtm_like
+from core.simulation.realistic import metadata_scene
+from core.simulation.reference import ReferenceErrors, radar_voids, seen_surface, srtm_like
 from core.simulation.render import ground_radiance, render_dn
 from core.simulation.scene import (
     PRESETS,
@@ -158,7 +159,10 @@ def write_spot_metadata(scene: SceneDef, out: Path) -> tuple[Path, ...]:
         if _exist(paths.dimap(name)):
             continue
         delivered = PushbroomModel.from_json(paths.delivered(name).read_text())
-        spot = spot_scene_from_model(
+        # realistic: the speeds stated as the satellite quantised them (the delivered model was
+        # read from them, so this gives them back)
+        write = metadata_scene if scene.errors.realistic else spot_scene_from_model
+        spot = write(
             delivered, mission_index=preset.spot_mission, instrument=preset.spot_instrument,
             instrument_index=i + 1, dataset_name=(f"SIMULATED {scene.preset} {name} seed "
                                                   f"{scene.seed} (gcpfree simulate)"),
@@ -313,14 +317,22 @@ def make_checkpoints(scene: SceneDef, out: Path, n_wanted: int = 100) -> Path:
 
 @task(name="srtm-like-reference")
 def make_reference(scene: SceneDef, out: Path, errors: ReferenceErrors | None = None) -> Path:
-    """``DIR/reference.tif``: the world's bare terrain as SRTM would show it (3" posting,
-    correlated noise, misregistration, voids on steep slopes; ellipsoidal heights, EPSG:4326),
-    the reference the chain should be tested against; the errors drawn go to
+    """``DIR/reference.tif``: the world as SRTM would show it (3" posting, correlated noise,
+    misregistration, voids; ellipsoidal heights, EPSG:4326), the reference the chain should be
+    tested against: the bare terrain with voids on steep slopes, or with ``--errors realistic``
+    partial canopy, noise growing with slope, radar shadow and layover voids and a tilt
+    (:mod:`core.simulation.reference`); the errors drawn go to
     ``truth/reference_errors.json``."""
     paths = ScenePaths(Path(out))
     target = paths.root / "reference.tif"
     if _exist(target):
         return target
+    proj = Projection(scene.epsg)
+    if errors is None and scene.errors.realistic:
+        cx, cy = proj.to_xy(np.array([scene.centre.lon_deg]), np.array([scene.centre.lat_deg]))
+        x0, _, x1, _ = scene.grid.bounds_m()
+        errors = ReferenceErrors.drawn_realistic(derive_seed(scene.seed, "reference"),
+                                                 (float(cx[0]), float(cy[0])), x1 - x0)
     errors = errors or ReferenceErrors.drawn(derive_seed(scene.seed, "reference"))
     d = 3.0 * ARCSEC
     w = scene.dem_window
@@ -330,18 +342,23 @@ def make_reference(scene: SceneDef, out: Path, errors: ReferenceErrors | None = 
     m_lon, m_lat = metres_per_degree(lat)
     seen_lon = lon - errors.shift_east_m / m_lon  # the node shows the terrain moved
     seen_lat = lat - errors.shift_north_m / m_lat
-    proj = Projection(scene.epsg)
     x, y = proj.to_xy(seen_lon.ravel(), seen_lat.ravel())
     spec = _spec(scene)
     s = sample_surface(spec, x, y, proj.to_lonlat)
-    h = srtm_like(s.dtm_m, x, y, slope_deg(spec, seen_lon.ravel(), seen_lat.ravel()),
-                  derive_seed(scene.seed, "reference"), errors).reshape(lon.shape)
+    seed = derive_seed(scene.seed, "reference")
+    seen = seen_surface(s.dtm_m, s.dsm_m, x, y, seed, errors)
+    h = srtm_like(seen, x, y, slope_deg(spec, seen_lon.ravel(), seen_lat.ravel()),
+                  seed, errors).reshape(lon.shape)
+    mid = lon.shape[0] // 2
+    voids = radar_voids(s.dtm_m.reshape(lon.shape), d * float(m_lon[mid, 0]),
+                        d * float(m_lat[mid, 0]), errors)
+    h[voids] = np.nan
     tags = {"vertical_datum": "WGS84 ellipsoid", "units": "m",
             "source": "SRTM-like reference of the simulated world (gcpfree simulate)"}
     write_arrays_cog([CogItem(h.astype(np.float32), target, CogOptions(
         transform=(d, 0.0, lons[0] - d / 2, 0.0, -d, lats[0] + d / 2), crs="EPSG:4326",
         nodata=np.nan, tags=tags))])
-    atomic_write_json(paths.truth / "reference_errors.json", vars(errors))
+    atomic_write_json(paths.truth / "reference_errors.json", asdict(errors))
     return target
 
 
@@ -407,11 +424,13 @@ class SimulationSummary:
     checkpoints: int
     lidar_points: int
     dsm_range_m: tuple[float, float]
+    errors: str = "simple"
 
     def lines(self) -> list[str]:
         errs = ", ".join(f"{k} {v:.1f} m" for k, v in self.centre_error_m.items())
         return [
-            f"simulated scene  {self.out} (preset {self.preset}, seed {self.seed})",
+            f"simulated scene  {self.out} (preset {self.preset}, seed {self.seed}, "
+            f"{self.errors} errors)",
             f"images           {', '.join(self.images)} (RPC tags inside, metadata .json beside)",
             f"metadata error   at the scene centre: {errs}",
             (f"truth            DSM/DTM {self.dsm_range_m[0]:.0f}..{self.dsm_range_m[1]:.0f} m "
@@ -432,4 +451,5 @@ def summarize(scene: SceneDef, out: Path) -> SimulationSummary:
         centre_error_m={k: v.centre_error_m for k, v in scene.injected.items()},
         images=tuple(str(paths.image(n)) for n in scene.image_names), checkpoints=n_cp,
         lidar_points=n_lidar, dsm_range_m=scene.dsm_range_m,
+        errors="realistic" if scene.errors.realistic else "simple",
     )

@@ -29,10 +29,33 @@ def test_simulate_cli_help_and_bad_dem(tmp_path):
     r = subprocess.run([sys.executable, "-m", "flows.cli", "simulate", "--help"],
                        capture_output=True, text=True, timeout=60, check=False)
     for opt in ("--dem", "--out", "--preset", "--seed", "--lens", "--jitter", "--date-change",
-                "--relief-factor", "--bits", "--center", "--no-lidar"):
+                "--relief-factor", "--bits", "--center", "--no-lidar", "--errors"):
         assert opt in r.stdout
     r = subprocess.run([sys.executable, "-m", "flows.cli", "simulate", "--dem",
                         str(tmp_path / "none.tif"), "--out", str(tmp_path / "o")],
                        capture_output=True, text=True, timeout=60, check=False)
     assert r.returncode == 2 and "does not exist" in r.stderr and "Traceback" not in r.stderr
     assert not Path(tmp_path / "o").exists()
+
+
+def test_simulate_errors_option_reaches_the_flow(monkeypatch, tmp_path):
+    """``--errors`` is passed as given; absent, the flow takes the preset's default."""
+    import flows.simulate_scene as F
+    from flows.cli import main
+
+    seen = []
+
+    class Stop(Exception):
+        pass
+
+    def fake(params):
+        seen.append(params.errors)
+        raise Stop
+
+    monkeypatch.setattr(F, "simulate_scene", fake)
+    for extra in ([], ["--errors", "realistic"], ["--errors", "simple"]):
+        try:
+            main(["simulate", "--out", str(tmp_path / "o"), *extra])
+        except Stop:
+            pass
+    assert seen == [None, "realistic", "simple"]
