@@ -18,11 +18,13 @@ from flows.commands import dsm as dsm_command
 from flows.commands import evaluate as evaluate_command
 from flows.commands import fill_voids as fill_voids_command
 from flows.commands import info as info_command
+from flows.commands import localize as localize_command
 from flows.commands import orient as orient_command
 from flows.commands import ortho as ortho_command
 from flows.commands import ortho_compare as ortho_compare_command
 from flows.commands import pair as pair_command
 from flows.commands import prepare_reference as prepare_reference_command
+from flows.commands import project as project_command
 from flows.commands import relative as relative_command
 from flows.commands import report as report_command
 from flows.commands import serve as serve_command
@@ -46,6 +48,7 @@ def build_parser() -> argparse.ArgumentParser:
 # the registry, in the order of ``gcpfree --help``
 COMMAND_MODULES = {"prepare-reference": prepare_reference_command,
                    "simulate": simulate_command, "info": info_command,
+                   "project": project_command, "localize": localize_command,
                    "relative": relative_command, "evaluate": evaluate_command,
                    "coregister": coregister_command, "dsm": dsm_command,
                    "orient": orient_command, "pair": pair_command,

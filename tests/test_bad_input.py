@@ -67,6 +67,7 @@ GIZEH_GEOM = DATA / "pleiades_gizeh" / "img1.geom"
 DIMAP_V2 = DATA / "dimap" / "RPC_PHR1B_P_201308051042194_SEN_690908101-001.XML"
 REUNION_TIF = DATA / "pleiades_reunion" / "img_01.tif"
 AUTZEN = DATA / "lidar" / "autzen_trim.laz"
+S1_GRD = DATA / "sentinel1" / "s1b-iw-grd-vv-20210401t052623-20210401t052648-026269-032297-001.xml"
 
 # derandomize: the same examples on every run, so CI is reproducible
 SETTINGS = settings(max_examples=25, deadline=None, database=None, derandomize=True,
@@ -213,6 +214,8 @@ READERS = [
     Reader("dimap_v2", "RPC_X.XML", lambda _tmp: DIMAP_V2.read_bytes(),
            lambda p: rpc_from_dimap_file(p), "text"),
     Reader("dimap_v2_load_model", "RPC_X.XML", lambda _tmp: DIMAP_V2.read_bytes(),
+           lambda p: load_model(p), "text"),
+    Reader("sentinel1_load_model", "s1-annotation.xml", lambda _tmp: S1_GRD.read_bytes(),
            lambda p: load_model(p), "text"),
     Reader("dimap_v1", "METADATA.DIM", lambda _tmp: _dimap_v1(), lambda p: read_dimap(p),
            "text"),
@@ -523,6 +526,16 @@ def bad(tmp_path_factory: pytest.TempPathFactory) -> dict[str, Path]:
     files["csv"].write_text("id,lon_deg,lat_deg\n1,5.2,44.2\n")
     files["csv_nan"].write_text(",".join(CSV_COLUMNS) + "\n1,5.2,44.2,nan,1,2,3,4\n")
     files["cp_list"].write_text("[1, 2, 3]")
+    files["pix_nan"] = d / "pix_nan.csv"
+    files["pix_nan"].write_text("col,row,h\n1,2,3\n4,5,nan\n")
+    files["ragged"] = d / "ragged.csv"
+    files["ragged"].write_text("lon,lat,h\n5.2,44.2,100\n5.2,44.2\n")
+    files["lonlat"] = d / "lonlat.csv"
+    files["lonlat"].write_text("lon,lat,h\n5.2,44.2,100\n")
+    files["pix"] = d / "pix.csv"
+    files["pix"].write_text("col,row,h\n1,2,3\n")
+    files["s1_cut"] = d / "s1-cut.xml"
+    files["s1_cut"].write_bytes(S1_GRD.read_bytes()[:300_000])
     return files
 
 
@@ -548,6 +561,26 @@ CLI_CASES = [
     ("sim-utm-dem", ["simulate", "--dem", "{utm}", "--out", "{out}/s"], "EPSG:4326"),
     ("sim-centre-off-dem", ["simulate", "--center", "100", "10", "--out", "{out}/s"],
      "does not cover the scene"),
+    ("project-missing-points", ["project", "--model", str(GIZEH_GEOM), "--points",
+                                "{missing}", "--out", "{out}/p.csv"], "does not exist"),
+    ("project-wrong-header", ["project", "--model", str(GIZEH_GEOM), "--points", "{csv}",
+                              "--out", "{out}/p.csv"], "lacks lon, lat, h"),
+    ("project-ragged", ["project", "--model", str(GIZEH_GEOM), "--points", "{ragged}",
+                        "--out", "{out}/p.csv"], "line 3: 2 fields"),
+    ("project-no-model", ["project", "--model", "{bare}", "--points", "{lonlat}",
+                          "--out", "{out}/p.csv"], "no sensor model found"),
+    ("project-malformed-model", ["project", "--model", "{json}", "--points", "{lonlat}",
+                                 "--out", "{out}/p.csv"], "not valid JSON"),
+    ("localize-nan", ["localize", "--model", str(GIZEH_GEOM), "--points", "{pix_nan}",
+                      "--out", "{out}/p.csv"], "line 3: h = 'nan' is not a finite number"),
+    ("localize-text-model", ["localize", "--model", "{text}", "--points", "{pix}",
+                             "--out", "{out}/p.csv"], "cannot read image"),
+    ("localize-out-is-dir", ["localize", "--model", str(GIZEH_GEOM), "--points", "{pix_nan}",
+                             "--out", "{out}"], "is not a folder (or the path is one)"),
+    ("localize-wrong-header", ["localize", "--model", str(GIZEH_GEOM), "--points", "{lonlat}",
+                               "--out", "{out}/p.csv"], "lacks col, row"),
+    ("localize-damaged-s1", ["localize", "--model", "{s1_cut}", "--points", "{pix}", "--out",
+                             "{out}/p.csv"], "not well-formed XML"),
     ("info-missing", ["info", "{missing}"], "does not exist"),
     ("info-text-image", ["info", "{text}"], "cannot read image"),
     ("info-no-model", ["info", "{bare}"], "no sensor model found"),

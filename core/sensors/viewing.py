@@ -7,7 +7,9 @@ and ``project``), so RPC and rigorous models are treated alike:
 
 - the line of sight of an image point is the straight line through its ground points at two
   heights (``h - dh/2`` and ``h + dh/2``); for a pushbroom model it passes exactly through the
-  satellite, for an RPC it is the RPC's own approximation of the ray;
+  satellite, for an RPC it is the RPC's own approximation of the ray; a model with a
+  ``line_of_sight_ecef(col, row, h)`` method (SAR: its ground points at other heights move
+  along the range circle, not towards the sensor) gives it directly;
 - incidence is the angle at the ground point between the ellipsoid normal and the direction to
   the satellite, azimuth that direction's bearing, clockwise from north; the across-track
   incidence is the incidence in the vertical plane across the image's own along-track
@@ -174,6 +176,9 @@ def point_geometry(model: SensorModel, col: ArrayLike, row: ArrayLike, h_m: Arra
     p = np.stack(geodetic_to_ecef(lon, lat, hh), axis=-1).reshape(7, n, 3)
     d_col, d_row, up = p[2] - p[1], p[4] - p[3], p[6] - p[5]
     los = up / np.linalg.norm(up, axis=-1, keepdims=True)
+    own_los = getattr(model, "line_of_sight_ecef", None)
+    if callable(own_los):
+        los = np.asarray(own_los(c, r, h), dtype=np.float64).reshape(n, 3)
     lon0, lat0 = lon[:n], lat[:n]
     # incidence and across-track incidence as core.geodesy defines them, with the image's
     # along-track direction (d_row) standing for the ground track
@@ -195,7 +200,11 @@ def point_geometry(model: SensorModel, col: ArrayLike, row: ArrayLike, h_m: Arra
 
 def acquisition_time_utc(model: SensorModel, row: float) -> str | None:
     """UTC time (ISO 8601, microseconds, ``Z``) at which ``row`` was acquired, for a pushbroom
-    model whose orbit has an ``epoch_utc`` (its epoch plus the row's line time); else None."""
+    model whose orbit has an ``epoch_utc`` (its epoch plus the row's line time), for a SAR
+    model (the row's azimuth time); else None."""
+    times_of_image = getattr(model, "times_of_image", None)
+    if callable(times_of_image) and getattr(model, "orbit", None) is not None:
+        return model.utc_of_times(times_of_image(0.0, row)[0])[0]  # type: ignore[attr-defined]
     if not isinstance(model, PushbroomModel) or not model.orbit.epoch_utc:
         return None
     text = model.orbit.epoch_utc.strip()

@@ -20,15 +20,18 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
         description=(
             "Find and read the sensor model of an image (SPOT METADATA.DIM or .DIM beside it, "
             "gcpfree pushbroom .json of the same name, RPC .geom or RPC tags) or read a model "
-            "file given alone (.DIM, .json, .geom, DIMAP v2 RPC .XML), and print: the model, "
-            "the acquisition time, the corners at h = 0 (WGS84 ellipsoid), the incidence, "
+            "file given alone (.DIM, .json, .geom, DIMAP v2 RPC .XML, Sentinel-1 annotation "
+            ".xml), and print: the model, the acquisition time, the corners at h = 0 (WGS84 "
+            "ellipsoid), the incidence, "
             "azimuth and GSD at the image centre, the SPOT metadata self-check (stated corners "
-            "against the model), the mean terrain height and the corners at that height "
-            "(--reference). With two images: convergence angle, B/H and overlap."
+            "against the model), the Sentinel-1 grid check (the SAR model against the "
+            "annotation's geolocation grid), the mean terrain height and the corners at that "
+            "height (--reference). With two images: convergence angle, B/H and overlap."
         ),
     )
     p.add_argument("image", type=Path, metavar="IMAGE_OR_MODEL",
-                   help="an image (GeoTIFF...) or a model file (.DIM, .json, .geom, RPC .XML)")
+                   help="an image (GeoTIFF...) or a model file (.DIM, .json, .geom, RPC .XML, "
+                        "Sentinel-1 annotation .xml)")
     p.add_argument("image2", type=Path, nargs="?", default=None, metavar="IMAGE2",
                    help="a second image or model file: adds the pair geometry")
     p.add_argument("--json", type=Path, default=None, metavar="FILE",

@@ -28,6 +28,7 @@ from core.heights import DatumDecision
 from core.jsonio import to_json
 from core.sensors.footprint import ANY_TERRAIN_H_M, footprint_box, scene_height_range_m
 from core.sensors.rpc import RPCModel
+from core.sensors.sar import GridCheck, grid_check
 from core.sensors.spot import frame_errors_m
 from core.sensors.viewing import (
     GroundCorner,
@@ -73,6 +74,7 @@ class ImageInfo:
     view_height: str  # why that height
     corner_check_m: tuple[tuple[float, float, float], ...] | None  # (col, row, error_m)
     reference: ReferenceHeight | None
+    sar_check: GridCheck | None = None  # a SAR model against its annotation's grid
 
     def to_dict(self) -> dict[str, Any]:
         lm, v, spot = self.loaded, self.view, self.loaded.spot
@@ -105,7 +107,15 @@ class ImageInfo:
                 "sun_elevation_deg": spot.sun_elevation_deg},
             "metadata_corner_check_m": None,
             "reference": None,
+            "sar": None,
         }
+        if lm.sar is not None:
+            a = lm.sar
+            d["sar"] = {"mission": a.mission, "mode": a.mode, "product_type": a.product_type,
+                        "polarisation": a.polarisation, "swath": a.swath,
+                        "kind": a.model.kind,
+                        "grid_check": None if self.sar_check is None
+                        else self.sar_check.to_dict()}
         if self.corner_check_m is not None:
             d["metadata_corner_check_m"] = {
                 "max": max(e for _, _, e in self.corner_check_m),
@@ -134,6 +144,10 @@ class ImageInfo:
                 f"SPOT {spot.mission_index} {spot.instrument} {spot.instrument_index}, sensor "
                 f"{spot.sensor_code}, band {lm.band}"
                 + (f" ({spot.dataset_name})" if spot.dataset_name else ""))))
+        if lm.sar is not None:
+            a = lm.sar
+            out.append(_line("mission", f"{a.mission} {a.mode} {a.product_type} "
+                             f"{a.polarisation} (SAR {a.model.kind}, zero-Doppler geometry)"))
         if self.at_zero.acquisition_utc:
             out.append(_line("acquired", f"{self.at_zero.acquisition_utc} (centre row)"))
         out += _corner_lines(self.at_zero)
@@ -154,6 +168,15 @@ class ImageInfo:
             out.append(_line("corner check", (
                 f"max {max(errs):.3f} m, stated corners and centre vs the model "
                 "(as the producer computes them)")))
+        if self.sar_check is not None:
+            g = self.sar_check
+            out.append(_line("grid check", (
+                f"{g.n_points} points of the annotation's geolocation grid against the model: "
+                f"line max {g.line_max_px:.3f} rms {g.line_rms_px:.3f} px, pixel max "
+                f"{g.pixel_max_px:.4f} rms {g.pixel_rms_px:.4f} px")))
+            out.append(_line("", (
+                f"azimuth time max {g.azimuth_max_m * 100:.2f} cm along track, slant range max "
+                f"{g.range_max_mm:.3f} mm, localisation max {g.ground_max_m:.2f} m")))
         if self.reference is not None:
             ref = self.reference
             out.append(_line("reference", f"{ref.path}: " + DatumDecision(
@@ -282,7 +305,12 @@ def describe_image(path: str | Path, *, model: str | Path | None = None, band: i
         errs = frame_errors_m(lm.spot, lm.band)
         check = tuple((p.col - 1.0, p.row - 1.0, float(e))
                       for p, e in zip(lm.spot.frame, errs, strict=True))
-    return ImageInfo(path, lm, at_zero, view, why, check, ref)
+    sar = None
+    if lm.sar is not None:
+        g = lm.sar.grid
+        sar = grid_check(lm.sar.model, g.lon_deg, g.lat_deg, g.h_m, g.pixel, g.line,
+                         g.azimuth_time_s, g.slant_range_time_s)
+    return ImageInfo(path, lm, at_zero, view, why, check, ref, sar)
 
 
 def gather_info(path: str | Path, path2: str | Path | None = None, *,

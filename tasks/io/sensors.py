@@ -1,5 +1,6 @@
 """Read sensor models from files: RPCs (OSSIM ``.geom``, GeoTIFF RPC tags, DIMAP v2 RPC XML),
-SPOT Level 1A ``METADATA.DIM`` and gcpfree JSON; find the model of an image (:func:`load_model`).
+SPOT Level 1A ``METADATA.DIM``, Sentinel-1 annotation XML (a SAR model, recognised by content)
+and gcpfree JSON; find the model of an image (:func:`load_model`).
 
 Where each source's pixel coordinates start, and how :func:`load_model` brings them to the
 raster's own pixels (0-based, pixel centres at integers), whichever way the model is named
@@ -31,9 +32,11 @@ from core.jsonio import parse_json
 from core.sensors.base import SensorModel
 from core.sensors.pushbroom import PushbroomModel
 from core.sensors.rpc import RPCModel
+from core.sensors.sentinel1 import Annotation
 from core.sensors.spot import SpotScene, spot_pushbroom
 from tasks.io.dimap import dimap_beside, read_dimap
 from tasks.io.rasters import open_raster
+from tasks.io.sentinel1 import annotation_beside, is_annotation_file, read_annotation
 
 
 def _read_text(path: Path, what: str) -> str:
@@ -124,12 +127,13 @@ TIFF_SUFFIXES = (".tif", ".tiff")
 class LoadedModel:
     """A sensor model found for an image or read from a model file, and where it came from.
 
-    ``family`` is ``"pushbroom"`` or ``"rpc"``; ``source`` the file the model was read from;
+    ``family`` is ``"pushbroom"``, ``"rpc"`` or ``"sar"``; ``source`` the file the model was
+    read from;
     ``image`` the raster when one was given or found; ``size`` (cols, rows) of the image the
     model describes; ``spot`` the SPOT metadata when the model came from a ``METADATA.DIM``;
     ``band`` the band whose look angles were used; ``crop`` the pixel (col, row) of the model
     file's image at the raster's pixel (0, 0) (``(0, 0)`` when the file describes the raster
-    itself).
+    itself); ``sar`` the Sentinel-1 annotation (model and geolocation grid) of a SAR model.
     """
 
     model: SensorModel
@@ -140,6 +144,7 @@ class LoadedModel:
     spot: SpotScene | None = None
     band: int | None = None
     crop: tuple[float, float] = (0.0, 0.0)
+    sar: Annotation | None = None
 
 
 @dataclass(frozen=True, eq=False)
@@ -161,6 +166,7 @@ class FileModel:
     spot: SpotScene | None = None
     band: int | None = None
     raster_offset: tuple[float, float] = (0.0, 0.0)
+    sar: Annotation | None = None
 
 
 def _from_dimap(path: Path, band: int | None) -> FileModel:
@@ -214,11 +220,16 @@ def read_model_file(path: str | Path, band: int | None = None) -> FileModel:
     if suffix == ".geom":
         return FileModel(rpc_from_geom_file(path), "rpc", path, "product")
     if suffix == ".xml":
+        if is_annotation_file(path):  # recognised by content: a Sentinel-1 annotation
+            ann = read_annotation(path)
+            return FileModel(ann.model, "sar", path, "product",
+                             (ann.model.n_cols, ann.model.n_rows), sar=ann)
         return FileModel(rpc_from_dimap_file(path), "rpc", path, "product")
     if suffix in TIFF_SUFFIXES:
         return _from_tiff(path)
     raise InputError(f"{path}: unknown model format; give a .DIM (SPOT), a gcpfree .json, "
-                     "an OSSIM .geom, a DIMAP v2 RPC .XML or a GeoTIFF with RPC tags")
+                     "an OSSIM .geom, a DIMAP v2 RPC .XML, a Sentinel-1 annotation .xml or a "
+                     "GeoTIFF with RPC tags")
 
 
 #: a Pleiades / SPOT 6-7 DIMAP v2 image file: IMG_<product id>[_R1C1].<ext> (first tile only:
@@ -231,11 +242,15 @@ def model_beside(image: str | Path) -> Path:
     ``IMAGERY.*`` file or a ``.DIM`` of the same name (SPOT Level 1A, rigorous), a gcpfree
     ``.json`` of the same name, an OSSIM ``.geom`` of the same name, the DIMAP v2
     ``RPC_<id>.XML`` of an ``IMG_<id>[_R1C1].*`` image (Pleiades, SPOT 6-7 product layout),
+    the Sentinel-1 ``annotation/<name>.xml`` of a ``measurement/<name>.tiff`` in a ``.SAFE``,
     else the image itself (its GDAL RPC tags)."""
     image = Path(image)
     dim = dimap_beside(image)
     if dim is not None:
         return dim
+    ann = annotation_beside(image)
+    if ann is not None:
+        return ann
     for suffix in (".json", ".geom"):
         if image.with_suffix(suffix).is_file():
             return image.with_suffix(suffix)
@@ -283,6 +298,10 @@ def _place(fm: FileModel, image: Path, size: tuple[int, int], transform: object,
         return fm.model.with_image_offset(*crop), crop
     if isinstance(fm.model, PushbroomModel):
         return fm.model.with_image_window(crop[0], crop[1], *size), crop
+    if fm.family == "sar":
+        raise InputError(f"{fm.path}: a Sentinel-1 annotation describes the whole measurement "
+                         f"image ({fm.size[0]}x{fm.size[1]} px); {image} is {size[0]}x{size[1]}: "
+                         "give the uncropped measurement TIFF")
     raise InputError(f"{fm.path}: a {fm.family} model cannot be placed on a crop")
 
 
@@ -313,7 +332,7 @@ def load_model(path: str | Path, *, model: str | Path | None = None,
         fm = read_model_file(path, band)
         size = fm.size or (_open_raster(path)[0] if fm.path.suffix.lower() in TIFF_SUFFIXES
                            else _rpc_size(fm.model))  # type: ignore[arg-type]
-        return LoadedModel(fm.model, fm.family, path, None, size, fm.spot, fm.band)
+        return LoadedModel(fm.model, fm.family, path, None, size, fm.spot, fm.band, sar=fm.sar)
     image = path
     size, transform, has_crs, tags = _open_raster(image)
     source = Path(model) if model is not None else model_beside(image)
@@ -324,4 +343,5 @@ def load_model(path: str | Path, *, model: str | Path | None = None,
             "it (--left-model/--right-model, --model)")
     fm = read_model_file(source, band)
     placed, crop = _place(fm, image, size, transform, has_crs)
-    return LoadedModel(placed, fm.family, source, image, size, fm.spot, fm.band, crop)
+    return LoadedModel(placed, fm.family, source, image, size, fm.spot, fm.band, crop,
+                       sar=fm.sar if crop == (0.0, 0.0) else None)

@@ -140,7 +140,9 @@ DEM_COMMANDS = {
 }
 #: commands that read no DEM, and why
 NO_DEM = {"ortho-compare": "compares two orthoimages",
-          "prepare-reference": "reads SRTM tiles by name (tested below)"}
+          "prepare-reference": "reads SRTM tiles by name (tested below)",
+          "project": "ellipsoidal heights given per point in the CSV, no DEM",
+          "localize": "ellipsoidal heights given per point in the CSV, no DEM"}
 
 
 def test_every_command_is_classified():
