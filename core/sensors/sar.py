@@ -22,7 +22,31 @@ Correctable parameters (what SAR products really get wrong): an azimuth-time off
 modelled times: ``t_image = t_zero_doppler + azimuth_offset_s``,
 ``tau_image = 2 |P - S| / c + range_delay_s``.
 
+A model may describe a crop of the product (:meth:`SarModel.with_image_window`): ``col0_px``,
+``row0_px`` are the product pixel of the crop's pixel (0, 0), ``n_cols``/``n_rows`` the crop's
+size; the formulas above give product pixels, from which the offsets are subtracted.
+
 Times are seconds since ``orbit.epoch_utc``. Heights ellipsoidal WGS84, lon/lat degrees.
+
+JSON format (:meth:`SarModel.to_dict` / :meth:`SarModel.from_dict`; ``load_model`` recognises
+it by its ``format``)::
+
+    {
+      "format": "gcpfree.sar", "version": 1,
+      "kind": "slc" | "grd" | "tops", "look_side": "right", "mission": "S1B", "mode": "IW",
+      "image": {"n_cols": 25788, "n_rows": 16685, "col0_px": 0.0, "row0_px": 0.0},
+      "timing": {"first_line_time_s": 38.2, "line_interval_s": 0.00206,
+                 "slant_range_time_s": 0.00533, "range_sampling_rate_hz": 64345238.1,
+                 "range_pixel_spacing_m": 10.0},
+      "orbit": {"epoch_utc": "...Z", "times_s": [...], "positions_m": [[x, y, z], ...],
+                "velocities_m_s": [[vx, vy, vz], ...]},                         # ECEF
+      "grd": {"srgr_times_s": [...], "srgr_sr0_m": [...], "srgr_coeffs": [[c0, c1, ...], ...]},
+      "tops": {"burst_times_s": [...], "lines_per_burst": 1500},
+      "corrections": {"azimuth_offset_s": 0.0, "range_delay_s": 0.0}
+    }
+
+``grd`` only for kind ``grd``, ``tops`` only for kind ``tops``; ``corrections`` optional
+(absent = 0). Numbers are written with Python's shortest repr, so a round trip is exact.
 """
 
 from __future__ import annotations
@@ -40,6 +64,8 @@ from core.geodesy import (
     geodetic_to_ecef,
     intersect_ellipsoid,
 )
+from core.jsonio import parse_json, to_json
+from core.sensors._dictio import get_dict, get_float, get_float_array, get_int, get_str
 from core.sensors.orbit import Orbit
 
 FloatArray = NDArray[np.float64]
@@ -48,6 +74,7 @@ SPEED_OF_LIGHT_M_S = 299792458.0
 SAR_KINDS = ("slc", "grd", "tops")
 LOOK_SIDES = ("right", "left")
 PARAM_NAMES = ("azimuth_offset_s", "range_delay_s")
+FORMAT = "gcpfree.sar"
 
 
 def _ro(a: ArrayLike, ndim: int) -> FloatArray:
@@ -71,6 +98,8 @@ class SarModel:
     records ``srgr_times_s`` (m,), ``srgr_sr0_m`` (m,), ``srgr_coeffs`` (m, k) (ground range in
     metres of slant range minus sr0, coefficient of power 0 first); TOPS: ``burst_times_s`` (nb,)
     and ``lines_per_burst``. ``look_side`` ``"right"`` (Sentinel-1) or ``"left"``.
+    ``col0_px``/``row0_px`` the product pixel of this image's pixel (0, 0) (non-zero for a
+    crop, :meth:`with_image_window`; the times above stay the product's).
     """
 
     orbit: Orbit
@@ -92,6 +121,8 @@ class SarModel:
     range_delay_s: float = 0.0
     mission: str = ""
     mode: str = ""
+    col0_px: float = 0.0
+    row0_px: float = 0.0
 
     def __post_init__(self) -> None:
         if self.kind not in SAR_KINDS:
@@ -115,6 +146,23 @@ class SarModel:
                 raise InputError("a GRD model needs a positive range pixel spacing")
         if self.kind == "tops" and (self.burst_times_s.size == 0 or self.lines_per_burst < 1):
             raise InputError("a TOPS SLC model needs its burst list and lines per burst")
+        if not (np.isfinite(self.col0_px) and np.isfinite(self.row0_px)):
+            raise InputError("a SAR model's crop offset (col0_px, row0_px) must be finite")
+
+    def with_image_window(self, col0: float, row0: float, n_cols: int, n_rows: int) -> SarModel:
+        """The same model in the pixels of a crop of ``n_cols`` x ``n_rows`` whose pixel (0, 0)
+        is this model's pixel (``col0``, ``row0``): ``col_crop = col - col0``,
+        ``row_crop = row - row0`` (exact for every kind: the product's timing, range and bursts
+        are kept, the offset applied after them). The crop must lie inside this image."""
+        col0, row0, n_cols, n_rows = float(col0), float(row0), int(n_cols), int(n_rows)
+        if not (col0 >= 0 and row0 >= 0 and col0 + n_cols <= self.n_cols
+                and row0 + n_rows <= self.n_rows and n_cols >= 1 and n_rows >= 1):
+            raise InputError(
+                f"a crop of {n_cols}x{n_rows} px at pixel ({col0:g}, {row0:g}) does not fit the "
+                f"{self.n_cols}x{self.n_rows} image of this SAR model; give the model of this "
+                "image")
+        return replace(self, n_cols=n_cols, n_rows=n_rows, col0_px=self.col0_px + col0,
+                       row0_px=self.row0_px + row0)
 
     # ------------------------------------------------------------------ protocol: parameters
 
@@ -154,7 +202,7 @@ class SarModel:
         ECEF points (n, 3): Newton on ``f(t) = (P - S(t)) . V(t)``,
         ``f'(t) = -|V|^2 + (P - S) . A`` (A from the interpolated velocities)."""
         g = np.atleast_2d(ground_ecef)
-        t = np.full(g.shape[0], self.first_line_time_s + 0.5 * self._span_s())
+        t = np.full(g.shape[0], self._mid_time_s())
         for _ in range(max_iter):
             s, v = self._state(t)
             _, v2 = self._state(t + 1e-3)
@@ -168,11 +216,12 @@ class SarModel:
         raise ConvergenceError(f"zero-Doppler time did not converge to {tol_s} s in {max_iter} "
                                "iterations; the points are probably far outside the orbit span")
 
-    def _span_s(self) -> float:
+    def _mid_time_s(self) -> float:
+        """Azimuth time (s) of this image's middle row: the zero-Doppler start."""
         if self.kind == "tops":
-            return float(self.burst_times_s[-1] - self.burst_times_s[0]
-                         + self.lines_per_burst * self.line_interval_s)
-        return self.n_rows * self.line_interval_s
+            t, _ = self.times_of_image(0.5 * (self.n_cols - 1), 0.5 * (self.n_rows - 1))
+            return float(t)
+        return self.first_line_time_s + (self.row0_px + 0.5 * self.n_rows) * self.line_interval_s
 
     def times(self, lon_deg: ArrayLike, lat_deg: ArrayLike, h_m: ArrayLike
               ) -> tuple[FloatArray, FloatArray]:
@@ -235,11 +284,13 @@ class SarModel:
             col = gr / self.range_pixel_spacing_m
         else:
             col = (tau - self.slant_range_time_s) * self.range_sampling_rate_hz
+        col, row = col - self.col0_px, row - self.row0_px
         return col.reshape(shape), row.reshape(shape)
 
     def times_of_image(self, col: ArrayLike, row: ArrayLike) -> tuple[FloatArray, FloatArray]:
         """Image azimuth time (s since the epoch) and two-way slant-range time of (col, row)."""
         shape, (col, row) = _flat(col, row)
+        col, row = col + self.col0_px, row + self.row0_px
         if self.kind == "tops":
             k = np.clip(np.floor(row / self.lines_per_burst), 0,
                         self.burst_times_s.size - 1).astype(np.intp)
@@ -354,6 +405,86 @@ class SarModel:
         lon, lat, hs = ecef_to_geodetic(s[:, 0], s[:, 1], s[:, 2])
         rs = np.linalg.norm(s, axis=1)
         return np.linalg.norm(v, axis=1) * (rs - hs) / rs
+
+    # ------------------------------------------------------------------ serialisation
+
+    def to_dict(self) -> dict:
+        """The whole model, corrections and crop included, as a JSON-ready dict (format in the
+        module docstring)."""
+        d: dict = {
+            "format": FORMAT, "version": 1, "kind": self.kind, "look_side": self.look_side,
+            "mission": self.mission, "mode": self.mode,
+            "image": {"n_cols": self.n_cols, "n_rows": self.n_rows,
+                      "col0_px": float(self.col0_px), "row0_px": float(self.row0_px)},
+            "timing": {"first_line_time_s": float(self.first_line_time_s),
+                       "line_interval_s": float(self.line_interval_s),
+                       "slant_range_time_s": float(self.slant_range_time_s),
+                       "range_sampling_rate_hz": float(self.range_sampling_rate_hz),
+                       "range_pixel_spacing_m": float(self.range_pixel_spacing_m)},
+            "orbit": self.orbit.to_dict(),
+        }
+        if self.kind == "grd":
+            d["grd"] = {"srgr_times_s": self.srgr_times_s.tolist(),
+                        "srgr_sr0_m": self.srgr_sr0_m.tolist(),
+                        "srgr_coeffs": self.srgr_coeffs.tolist()}
+        if self.kind == "tops":
+            d["tops"] = {"burst_times_s": self.burst_times_s.tolist(),
+                         "lines_per_burst": self.lines_per_burst}
+        d["corrections"] = {n: float(getattr(self, n)) for n in PARAM_NAMES}
+        return d
+
+    @classmethod
+    def from_dict(cls, d: object) -> SarModel:
+        """Read a dict written by :meth:`to_dict`; InputError names a missing or mistyped key."""
+        try:
+            return cls._from_dict(d)
+        except InputError as exc:  # the shared readers name the pushbroom model: say SAR
+            msg = str(exc).replace("pushbroom model:", "SAR model:").replace(
+                "core/sensors/pushbroom.py", "core/sensors/sar.py")
+            raise InputError(msg) from None
+
+    @classmethod
+    def _from_dict(cls, d: object) -> SarModel:
+        fmt = get_str(d, "format", "")
+        if fmt != FORMAT:
+            raise InputError(f"key 'format' is {fmt!r}, not {FORMAT!r}: not a SAR model")
+        kind = get_str(d, "kind", "")
+        image, timing = get_dict(d, "image"), get_dict(d, "timing")
+        corr = d.get("corrections", {})  # type: ignore[union-attr]
+        if not isinstance(corr, dict) or any(k not in PARAM_NAMES for k in corr):
+            raise InputError(f"key 'corrections' must map names among {PARAM_NAMES} to "
+                             f"numbers, got {corr!r:.80}")
+        extra: dict = {}
+        if kind == "grd":
+            grd = get_dict(d, "grd")
+            extra = {k: get_float_array(grd, k, "grd", ndim=n) for k, n in
+                     (("srgr_times_s", 1), ("srgr_sr0_m", 1), ("srgr_coeffs", 2))}
+        elif kind == "tops":
+            tops = get_dict(d, "tops")
+            extra = {"burst_times_s": get_float_array(tops, "burst_times_s", "tops", ndim=1),
+                     "lines_per_burst": get_int(tops, "lines_per_burst", "tops")}
+        return cls(
+            orbit=Orbit.from_dict(get_dict(d, "orbit")), kind=kind,
+            n_cols=get_int(image, "n_cols", "image"), n_rows=get_int(image, "n_rows", "image"),
+            col0_px=get_float(image, "col0_px", "image", default=0.0),
+            row0_px=get_float(image, "row0_px", "image", default=0.0),
+            **{k: get_float(timing, k, "timing") for k in (
+                "first_line_time_s", "line_interval_s", "slant_range_time_s",
+                "range_sampling_rate_hz")},
+            range_pixel_spacing_m=get_float(timing, "range_pixel_spacing_m", "timing",
+                                            default=0.0),
+            look_side=get_str(d, "look_side", "", default="right"),
+            mission=get_str(d, "mission", "", default=""),
+            mode=get_str(d, "mode", "", default=""),
+            **{k: get_float(corr, k, "corrections", default=0.0) for k in PARAM_NAMES},
+            **extra)
+
+    def to_json(self, indent: int | None = None) -> str:
+        return to_json(self.to_dict(), indent=indent)
+
+    @classmethod
+    def from_json(cls, text: str) -> SarModel:
+        return cls.from_dict(parse_json(text, "SAR model JSON"))
 
 
 @dataclass(frozen=True)

@@ -6,14 +6,15 @@ Where each source's pixel coordinates start, and how :func:`load_model` brings t
 raster's own pixels (0-based, pixel centres at integers), whichever way the model is named
 (found beside the image, ``--left-model``/``--model``, a catalog's ``left_model`` column):
 
-- ``.geom``, DIMAP v2 RPC XML, SPOT ``.DIM`` and gcpfree pushbroom ``.json`` files describe the
-  *whole* product image. A crop that stores its position as a pure pixel-offset geotransform
+- ``.geom``, DIMAP v2 RPC XML, SPOT ``.DIM``, Sentinel-1 annotations and gcpfree pushbroom and
+  SAR ``.json`` files describe the *whole* product image. A crop that stores its position as a pure pixel-offset geotransform
   (no CRS, unit pixel size, origin ``(c, f)``: what rasterio's ``window_transform`` writes for a
   raster with no georeferencing) has its pixel ``(0, 0)`` at product pixel ``(c, f)``: the
   half-pixel shifts of the corner-based geotransform cancel, so the model is moved by exactly
-  ``(c, f)`` (:meth:`RPCModel.with_image_offset`, :meth:`PushbroomModel.with_image_window`).
-  The Ventoux crops carry origins such as (5000, 5000). A pushbroom model of the raster's own
-  size is the raster's (a gcpfree model written for a crop).
+  ``(c, f)`` (:meth:`RPCModel.with_image_offset`, :meth:`PushbroomModel.with_image_window`,
+  :meth:`SarModel.with_image_window`). The Ventoux crops carry origins such as (5000, 5000). A
+  pushbroom or SAR model of the raster's own size is the raster's (a gcpfree model written for
+  a crop).
 - RPC tags inside a raster (GDAL RPC metadata domain) describe that raster's pixels (GDAL's RPC
   transformer ignores the geotransform, and GDAL rewrites the tags when it crops), so no offset
   is applied to an image's own tags; another GeoTIFF's tags named as the model are moved by the
@@ -32,6 +33,8 @@ from core.jsonio import parse_json
 from core.sensors.base import SensorModel
 from core.sensors.pushbroom import PushbroomModel
 from core.sensors.rpc import RPCModel
+from core.sensors.sar import FORMAT as SAR_FORMAT
+from core.sensors.sar import SarModel
 from core.sensors.sentinel1 import Annotation
 from core.sensors.spot import SpotScene, spot_pushbroom
 from tasks.io.dimap import dimap_beside, read_dimap
@@ -152,8 +155,8 @@ class FileModel:
     """A model as its file gives it, before it is placed on a raster.
 
     ``frame`` says whose pixels the file's coordinates are: ``"product"`` (the whole vendor
-    image: ``.geom``, DIMAP v2 RPC XML, SPOT ``.DIM``, a pushbroom ``.json``, which knows its
-    image's size) or ``"raster"`` (the raster the file was written for: GeoTIFF RPC tags, a
+    image: ``.geom``, DIMAP v2 RPC XML, SPOT ``.DIM``, a Sentinel-1 annotation, a pushbroom or
+    SAR ``.json``, which knows its image's size) or ``"raster"`` (the raster the file was written for: GeoTIFF RPC tags, a
     gcpfree RPC ``.json``); ``size`` the image size the file states (None for an RPC file);
     ``raster_offset`` a GeoTIFF model's own crop offset.
     """
@@ -178,16 +181,19 @@ def _from_dimap(path: Path, band: int | None) -> FileModel:
 def _from_json(path: Path) -> FileModel:
     d = parse_json(_read_text(path, "model JSON file"), str(path))
     rpc = isinstance(d, dict) and d.get("type") == "rpc"
+    family = "rpc" if rpc else ("sar" if isinstance(d, dict) and d.get("format") == SAR_FORMAT
+                                else "pushbroom")
     try:
         if rpc:
             return FileModel(RPCModel.from_dict(d), "rpc", path, "raster")
-        model = PushbroomModel.from_dict(d)
-        return FileModel(model, "pushbroom", path, "product", (model.n_cols, model.n_rows))
+        model = SarModel.from_dict(d) if family == "sar" else PushbroomModel.from_dict(d)
+        return FileModel(model, family, path, "product", (model.n_cols, model.n_rows))
     except InputError as exc:
         raise InputError(f"{path}: {exc}") from None
     except (KeyError, IndexError, TypeError, ValueError, AttributeError, OverflowError) as exc:
         # the model classes check the keys they expect, not every damaged value
-        raise InputError(f"{path} is not a valid gcpfree {'RPC' if rpc else 'pushbroom'} model "
+        what = {"rpc": "RPC", "sar": "SAR"}.get(family, family)
+        raise InputError(f"{path} is not a valid gcpfree {what} model "
                          f"({type(exc).__name__}: {str(exc).splitlines()[0] if str(exc) else ''})"
                          "; give the model file gcpfree wrote") from None
 
@@ -276,7 +282,7 @@ def _place(fm: FileModel, image: Path, size: tuple[int, int], transform: object,
     tags: moved by the difference of the two rasters' pixel offsets, zero for the image's own
     tags); a ``product``-frame file describes the whole vendor image, and a raster that is a
     crop of it (a pure pixel-offset geotransform, see the module docstring) gets the model
-    moved by that offset. A pushbroom model of the raster's own size is the raster's.
+    moved by that offset. A pushbroom or SAR model of the raster's own size is the raster's.
     """
     if fm.frame == "raster":
         if fm.path.suffix.lower() not in TIFF_SUFFIXES or _same_file(fm.path, image):
@@ -296,12 +302,8 @@ def _place(fm: FileModel, image: Path, size: tuple[int, int], transform: object,
         return fm.model, crop
     if isinstance(fm.model, RPCModel):
         return fm.model.with_image_offset(*crop), crop
-    if isinstance(fm.model, PushbroomModel):
+    if isinstance(fm.model, (PushbroomModel, SarModel)):
         return fm.model.with_image_window(crop[0], crop[1], *size), crop
-    if fm.family == "sar":
-        raise InputError(f"{fm.path}: a Sentinel-1 annotation describes the whole measurement "
-                         f"image ({fm.size[0]}x{fm.size[1]} px); {image} is {size[0]}x{size[1]}: "
-                         "give the uncropped measurement TIFF")
     raise InputError(f"{fm.path}: a {fm.family} model cannot be placed on a crop")
 
 

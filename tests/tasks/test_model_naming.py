@@ -4,7 +4,8 @@ A user names an image's model four ways: found beside the image, ``--left-model`
 (:func:`load_model` with ``model=``), a catalog's ``left_model`` column (read by
 :func:`tasks.archive.catalog.read_catalog`, loaded by :func:`tasks.relative.orientation.load_pair` as the flows
 do), or the model file alone. For every family and format (OSSIM ``.geom``, DIMAP v2 RPC XML,
-GeoTIFF RPC tags, SPOT ``.DIM``, gcpfree pushbroom and RPC ``.json``), on the uncropped raster
+GeoTIFF RPC tags, SPOT ``.DIM``, gcpfree pushbroom, RPC and SAR ``.json``, a Sentinel-1
+annotation found for a ``.SAFE`` measurement TIFF), on the uncropped raster
 and on a crop carrying its pixel offset in its geotransform, the ways must agree; and the
 crop's model must be the product's model moved by the crop offset, computed here from the
 product's model read directly (the vendor reader, not :func:`load_model`), so a placement
@@ -36,6 +37,7 @@ from core.sensors.base import SensorModel
 from core.sensors.linear_array import LookAngleTable
 from core.sensors.pushbroom_synthetic import SyntheticSpec, synthetic_pushbroom
 from core.sensors.rpc import RPCModel
+from core.sensors.sentinel1 import parse_annotation
 from core.sensors.spot import spot_pushbroom, spot_scene_from_model
 from tasks.archive.catalog import read_catalog
 from tasks.io.dimap import read_dimap, write_dimap
@@ -46,6 +48,8 @@ DATA = Path(__file__).resolve().parents[1] / "data"
 VENTOUX = DATA / "pleiades_ventoux"
 DIMAP_V2 = DATA / "dimap" / "RPC_PHR1B_P_201308051042194_SEN_690908101-001.XML"
 REUNION = DATA / "pleiades_reunion" / "img_01.tif"
+S1_GRD = DATA / "sentinel1" / "s1b-iw-grd-vv-20210401t052623-20210401t052648-026269-032297-001.xml"
+S1_SLC = DATA / "sentinel1" / "s1a-s3-slc-vh-20210401t152855-20210401t152914-037258-04638e-001.xml"
 
 
 def _raster(path: Path, width: int, height: int, offset: tuple[float, float] | None = None,
@@ -96,6 +100,10 @@ def cases(tmp_path_factory) -> dict[str, Case]:
         reunion = RPCModel.from_gdal_tags(src.tags(ns="RPC"))
         reunion_size = (src.width, src.height)
     (d / "rpc.json").write_text(json.dumps(reunion.to_dict()))
+    grd = parse_annotation(S1_GRD.read_text(), S1_GRD.name).model
+    # an adjusted SAR model written by gcpfree: its corrections travel with it
+    slc = parse_annotation(S1_SLC.read_text(), S1_SLC.name).model.with_params([1.5e-3, 2e-8])
+    (d / "sar.json").write_text(slc.to_json())
     return {
         "geom": Case("geom", geom, full, VENTOUX / "left_image.geom", _same_stem(".geom"),
                      500.0, (5037.0, 5021.0), (300, 300)),
@@ -111,6 +119,11 @@ def cases(tmp_path_factory) -> dict[str, Case]:
                          lambda _d, stem: (f"{stem}.tif", f"{stem}.tif"), 1295.0),
         "rpc_json": Case("rpc_json", reunion, reunion_size, d / "rpc.json",
                          _same_stem(".json"), 1295.0),
+        "sar_safe": Case("sar_safe", grd, (grd.n_cols, grd.n_rows), S1_GRD,
+                         lambda _d, stem: (f"measurement/{stem}.tiff", f"annotation/{stem}.xml"),
+                         200.0, (5037.0, 4021.0)),
+        "sar_json": Case("sar_json", slc, (slc.n_cols, slc.n_rows), d / "sar.json",
+                         _same_stem(".json"), 200.0, (1037.0, 2021.0)),
     }
 
 
@@ -145,9 +158,9 @@ def _catalog_models(folder: Path, image: Path, model: Path) -> SensorModel:
 def _write_image(case: Case, folder: Path, stem: str, crop: tuple[float, float] | None
                  ) -> tuple[Path, Path]:
     """The raster (uncropped or the case's crop) and its model file placed beside it."""
-    folder.mkdir(parents=True, exist_ok=True)
     image_name, model_name = case.beside(folder, stem)
     image = folder / image_name
+    image.parent.mkdir(parents=True, exist_ok=True)
     if case.name == "rpc_tags":
         # the product's own tags on the uncropped raster; a crop carries its tags re-normalised
         # as GDAL writes them when it crops
@@ -158,6 +171,7 @@ def _write_image(case: Case, folder: Path, stem: str, crop: tuple[float, float] 
     size = case.product_size if crop is None else case.crop_size
     _raster(image, *size, offset=crop)
     model = folder / model_name
+    model.parent.mkdir(parents=True, exist_ok=True)
     if case.name == "rpc_json" and crop is not None:
         # a gcpfree RPC .json is in the pixels of the raster it was written for (rel.json's
         # adjusted model of a crop): write the crop's
@@ -167,7 +181,8 @@ def _write_image(case: Case, folder: Path, stem: str, crop: tuple[float, float] 
     return image, model
 
 
-CASES = ["geom", "dimap_v2", "spot_dim", "pushbroom_json", "rpc_tags", "rpc_json"]
+CASES = ["geom", "dimap_v2", "spot_dim", "pushbroom_json", "rpc_tags", "rpc_json", "sar_safe",
+         "sar_json"]
 
 
 @pytest.mark.parametrize("cropped", [False, True], ids=["uncropped", "cropped"])
@@ -177,7 +192,7 @@ def test_every_way_of_naming_a_model_gives_the_same_model(cases, tmp_path, name,
     crop = case.crop_offset if cropped else None
     pts = _ground(case)
     want = _expected(case, crop, pts)
-    tol = 1e-6 if isinstance(case.product, RPCModel) else 1e-4  # pushbroom: iterative project
+    tol = 1e-6 if isinstance(case.product, RPCModel) else 1e-4  # pushbroom, SAR: iterative
 
     image, model = _write_image(case, tmp_path / "beside", "img", crop)
     found = load_model(image)
@@ -190,13 +205,13 @@ def test_every_way_of_naming_a_model_gives_the_same_model(cases, tmp_path, name,
     named_file = elsewhere / f"named{model.suffix}" if model != image else model
     if named_file != model:
         shutil.copy(model, named_file)
-    other, _ = _write_image(case, tmp_path / "plain", "plain", crop)
+    other, other_model = _write_image(case, tmp_path / "plain", "plain", crop)
     if case.name == "rpc_tags":  # an image without its own tags, the model the tagged raster
         other.unlink()
         _raster(other, *(case.product_size if crop is None else case.crop_size), offset=crop)
         named_file = REUNION if crop is None else _product_tif(tmp_path, case)
     else:
-        (other.parent / _written_model_name(case, other)).unlink()
+        other_model.unlink()
     ways["named"] = load_model(other, model=named_file).model
     ways["catalog"] = _catalog_models(other.parent, other, named_file)
     if crop is None and model != image:
@@ -204,10 +219,6 @@ def test_every_way_of_naming_a_model_gives_the_same_model(cases, tmp_path, name,
     for way, m in ways.items():
         got = np.stack(m.project(*pts))
         np.testing.assert_allclose(got, want, atol=tol, err_msg=f"{name}: {way}")
-
-
-def _written_model_name(case: Case, image: Path) -> str:
-    return case.beside(image.parent, image.stem)[1]
 
 
 def _product_tif(tmp_path: Path, case: Case) -> Path:

@@ -6,11 +6,15 @@ from __future__ import annotations
 
 import json
 import shutil
+import warnings
 from pathlib import Path
 
+import numpy as np
 import pytest
 import rasterio
+from affine import Affine
 from rasterio.control import GroundControlPoint
+from rasterio.errors import NotGeoreferencedWarning
 
 from core.errors import InputError
 from core.sensors.sar import SarModel
@@ -93,3 +97,67 @@ def test_info_reports_the_grid_check(tmp_path, capsys):
     assert "grid check" in capsys.readouterr().out
     g = json.loads(out.read_text())["sar"]["grid_check"]
     assert g["pixel_max_px"] < 0.01 and g["line_max_px"] < 0.25 and g["n_points"] == 210
+
+
+def _offset_tiff(path: Path, width: int, height: int, offset: tuple[float, float]) -> Path:
+    """A crop as rasterio's window_transform writes it for a raster without georeferencing:
+    no CRS, a pure pixel-offset geotransform."""
+    path.parent.mkdir(parents=True, exist_ok=True)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", NotGeoreferencedWarning)
+        with rasterio.open(path, "w", driver="GTiff", width=width, height=height, count=1,
+                           dtype="uint8", tiled=True, sparse_ok=True,
+                           transform=Affine.translation(*offset)):
+            pass
+    return path
+
+
+def test_cropped_measurement_tiff_is_placed(tmp_path):
+    """A crop of a measurement TIFF carrying its pixel offset gets the product's model moved by
+    that offset (as a .geom or .DIM is), found in the .SAFE or named; the grid check, which is
+    in the product's pixels, is not attached to it."""
+    safe = tmp_path / "S1B_IW_GRDH.SAFE"
+    (safe / "annotation").mkdir(parents=True)
+    ann = safe / "annotation" / (GRD.stem + ".xml")
+    shutil.copy(GRD, ann)
+    tif = _offset_tiff(safe / "measurement" / (GRD.stem + ".tiff"), 400, 300, (12000.0, 8000.0))
+    product = load_model(GRD).model
+    c, r = np.meshgrid(np.linspace(0, 399, 3), np.linspace(0, 299, 3))
+    lon, lat = product.localize(c.ravel() + 12000.0, r.ravel() + 8000.0, 150.0)
+    for lm in (load_model(tif), load_model(tif, model=ann)):
+        assert lm.family == "sar" and lm.crop == (12000.0, 8000.0) and lm.sar is None
+        assert (lm.model.n_cols, lm.model.n_rows) == lm.size == (400, 300)
+        np.testing.assert_allclose(np.stack(lm.model.project(lon, lat, 150.0)),
+                                   [c.ravel(), r.ravel()], atol=1e-5)
+    # a crop reaching past the product is refused in one line
+    far = _offset_tiff(tmp_path / "far.tiff", 400, 300, (25500.0, 0.0))
+    with pytest.raises(InputError, match="does not fit") as e:
+        load_model(far, model=ann)
+    assert "\n" not in str(e.value)
+
+
+def test_adjusted_sar_json_reads_back(tmp_path):
+    """An adjusted SAR model written as gcpfree JSON is loaded as a SAR model with its
+    corrections, alone, beside an image of its size, and moved onto a crop of that image."""
+    adjusted = load_model(SLC).model.with_params([2.5e-3, -4e-8])
+    path = tmp_path / "slc.json"
+    path.write_text(adjusted.to_json(indent=1))
+    alone = load_model(path)
+    assert alone.family == "sar" and isinstance(alone.model, SarModel) and alone.image is None
+    np.testing.assert_array_equal(alone.model.params, [2.5e-3, -4e-8])
+    assert alone.size == (adjusted.n_cols, adjusted.n_rows)
+    c, r = np.array([10.0, 5000.0, 15000.0]), np.array([20.0, 3000.0, 9000.0])
+    lon, lat = adjusted.localize(c, r, 100.0)
+    np.testing.assert_allclose(np.stack(alone.model.project(lon, lat, 100.0)), [c, r],
+                               atol=1e-6)
+    crop = _offset_tiff(tmp_path / "crop.tif", 16000, 10000, (7.0, 9.0))
+    placed = load_model(crop, model=path)
+    assert placed.family == "sar" and placed.crop == (7.0, 9.0)
+    np.testing.assert_allclose(np.stack(placed.model.project(lon, lat, 100.0)),
+                               [c - 7.0, r - 9.0], atol=1e-6)
+    bad = tmp_path / "bad.json"
+    d = json.loads(path.read_text())
+    del d["timing"]["line_interval_s"]
+    bad.write_text(json.dumps(d))
+    with pytest.raises(InputError, match="bad.json.*SAR model: key 'timing.line_interval_s'"):
+        load_model(bad)
