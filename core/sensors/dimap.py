@@ -17,6 +17,7 @@ from datetime import datetime, timedelta
 import numpy as np
 
 from core.errors import InputError
+from core.sensors._xmldoc import XmlDoc
 from core.sensors.orbit import Orbit
 from core.sensors.spot import FramePoint, SpotAngles, SpotLookAngles, SpotScene
 
@@ -27,18 +28,12 @@ _TIME = "Data_Strip/Sensor_Configuration/Time_Stamp"
 _SOURCE = "Dataset_Sources/Source_Information/Scene_Source"
 
 
-class _Doc:
-    """Typed look-ups in a DIMAP tree; errors name the file and the missing path."""
+class _Doc(XmlDoc):
+    """A DIMAP tree: :class:`XmlDoc` whose text look-ups may fall back to a default."""
 
     def __init__(self, root: ET.Element, name: str) -> None:
-        self.root, self.name = root, name
-
-    def find(self, path: str, el: ET.Element | None = None) -> ET.Element:
-        found = (self.root if el is None else el).find(path)
-        if found is None:
-            raise InputError(f"{self.name}: <{path}> is missing; the DIMAP file is truncated or "
-                             "not a complete SPOT Level 1A metadata file")
-        return found
+        super().__init__(root, name, "the DIMAP file is truncated or not a complete SPOT "
+                                     "Level 1A metadata file")
 
     def text(self, path: str, el: ET.Element | None = None, default: str | None = None) -> str:
         found = (self.root if el is None else el).find(path)
@@ -48,16 +43,6 @@ class _Doc:
             self.find(path, el)  # raises
             raise InputError(f"{self.name}: <{path}> is empty")
         return found.text.strip()
-
-    def number(self, path: str, el: ET.Element | None = None) -> float:
-        t = self.text(path, el)
-        try:
-            v = float(t)
-        except ValueError:
-            raise InputError(f"{self.name}: <{path}> is {t!r}, not a number") from None
-        if not np.isfinite(v):
-            raise InputError(f"{self.name}: <{path}> is {t!r}, not a finite number")
-        return v
 
     def optional(self, path: str) -> float | None:
         found = self.root.find(path)

@@ -18,6 +18,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from core.errors import InputError
+from core.sensors._xmldoc import XmlDoc
 from core.sensors.orbit import Orbit
 from core.sensors.sar import SarModel
 
@@ -58,30 +59,11 @@ class Annotation:
     first_line_utc: str
 
 
-class _Doc:
+class _Doc(XmlDoc):
+    """A Sentinel-1 annotation tree: :class:`XmlDoc` plus number lists and UTC times."""
+
     def __init__(self, root: ET.Element, name: str) -> None:
-        self.root, self.name = root, name
-
-    def find(self, path: str, el: ET.Element | None = None) -> ET.Element:
-        found = (self.root if el is None else el).find(path)
-        if found is None:
-            raise InputError(f"{self.name}: <{path}> is missing; the Sentinel-1 annotation is "
-                             "damaged or truncated")
-        return found
-
-    def text(self, path: str, el: ET.Element | None = None) -> str:
-        return (self.find(path, el).text or "").strip()
-
-    def float(self, path: str, el: ET.Element | None = None) -> float:
-        txt = self.text(path, el)
-        try:
-            v = float(txt)
-        except (ValueError, OverflowError):
-            raise InputError(f"{self.name}: <{path}> holds {txt[:40]!r}, not a number; the "
-                             "Sentinel-1 annotation is damaged") from None
-        if not np.isfinite(v):
-            raise InputError(f"{self.name}: <{path}> is not finite; the annotation is damaged")
-        return v
+        super().__init__(root, name, "the Sentinel-1 annotation is damaged or truncated")
 
     def floats(self, path: str, el: ET.Element | None = None) -> FloatArray:
         txt = self.text(path, el)
@@ -138,19 +120,19 @@ def _parse(text: str, name: str) -> Annotation:
             raise InputError(f"{name}: orbit frame {frame!r} is not 'Earth Fixed'")
     times = np.array([doc.time("time", o) for o in orbits])
     epoch = times[0]
-    pos = np.array([[doc.float(f"position/{c}", o) for c in "xyz"] for o in orbits])
-    vel = np.array([[doc.float(f"velocity/{c}", o) for c in "xyz"] for o in orbits])
+    pos = np.array([[doc.number(f"position/{c}", o) for c in "xyz"] for o in orbits])
+    vel = np.array([[doc.number(f"velocity/{c}", o) for c in "xyz"] for o in orbits])
     orbit = Orbit(_seconds(times, epoch), pos, vel, epoch_utc=str(epoch) + "Z")
 
     t0 = _seconds(doc.time(f"{_INFO}/productFirstLineUtcTime"), epoch)
     common = dict(
-        orbit=orbit, n_cols=int(doc.float(f"{_INFO}/numberOfSamples")),
-        n_rows=int(doc.float(f"{_INFO}/numberOfLines")), first_line_time_s=float(t0),
-        line_interval_s=doc.float(f"{_INFO}/azimuthTimeInterval"),
-        slant_range_time_s=doc.float(f"{_INFO}/slantRangeTime"),
-        range_sampling_rate_hz=doc.float("generalAnnotation/productInformation/"
+        orbit=orbit, n_cols=int(doc.number(f"{_INFO}/numberOfSamples")),
+        n_rows=int(doc.number(f"{_INFO}/numberOfLines")), first_line_time_s=float(t0),
+        line_interval_s=doc.number(f"{_INFO}/azimuthTimeInterval"),
+        slant_range_time_s=doc.number(f"{_INFO}/slantRangeTime"),
+        range_sampling_rate_hz=doc.number("generalAnnotation/productInformation/"
                                          "rangeSamplingRate"),
-        range_pixel_spacing_m=doc.float(f"{_INFO}/rangePixelSpacing"),
+        range_pixel_spacing_m=doc.number(f"{_INFO}/rangePixelSpacing"),
         mission=mission, mode=mode)
     bursts = doc.find("swathTiming/burstList").findall("burst")
     if ptype == "GRD":
@@ -165,13 +147,13 @@ def _parse(text: str, name: str) -> Annotation:
         model = SarModel(kind="grd", **common,
                          srgr_times_s=_seconds(np.array([doc.time("azimuthTime", r)
                                                          for r in recs]), epoch),
-                         srgr_sr0_m=np.array([doc.float("sr0", r) for r in recs]),
+                         srgr_sr0_m=np.array([doc.number("sr0", r) for r in recs]),
                          srgr_coeffs=np.array(coeffs))
     elif ptype == "SLC" and bursts:
         model = SarModel(kind="tops", **common,
                          burst_times_s=_seconds(np.array([doc.time("azimuthTime", b)
                                                           for b in bursts]), epoch),
-                         lines_per_burst=int(doc.float("swathTiming/linesPerBurst")))
+                         lines_per_burst=int(doc.number("swathTiming/linesPerBurst")))
     elif ptype == "SLC":
         model = SarModel(kind="slc", **common)
     else:
@@ -179,7 +161,7 @@ def _parse(text: str, name: str) -> Annotation:
                          "or GRD annotation")
 
     pts = doc.find("geolocationGrid/geolocationGridPointList").findall("geolocationGridPoint")
-    vals = {k: np.array([doc.float(k, p) for p in pts]) for k in
+    vals = {k: np.array([doc.number(k, p) for p in pts]) for k in
             ("slantRangeTime", "line", "pixel", "longitude", "latitude", "height")}
     grid = GeolocationGrid(
         _seconds(np.array([doc.time("azimuthTime", p) for p in pts], dtype="datetime64[ns]"),
