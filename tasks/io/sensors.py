@@ -25,6 +25,7 @@ raster's own pixels (0-based, pixel centres at integers), whichever way the mode
 from __future__ import annotations
 
 import re
+from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -49,22 +50,22 @@ def _read_text(path: Path, what: str) -> str:
         raise InputError(f"cannot read {what} {path}: {exc.strerror}; check the path") from exc
 
 
-def rpc_from_geom_file(path: str | Path) -> RPCModel:
-    """RPC from an OSSIM keyword-list file (``.geom``), in the full image's pixels."""
+def _rpc_from_file(path: str | Path, what: str, parse: Callable[[str], RPCModel]) -> RPCModel:
     path = Path(path)
     try:
-        return RPCModel.from_geom(_read_text(path, "RPC .geom file"))
+        return parse(_read_text(path, what))
     except InputError as exc:
         raise InputError(f"{path}: {exc}") from exc
+
+
+def rpc_from_geom_file(path: str | Path) -> RPCModel:
+    """RPC from an OSSIM keyword-list file (``.geom``), in the full image's pixels."""
+    return _rpc_from_file(path, "RPC .geom file", RPCModel.from_geom)
 
 
 def rpc_from_dimap_file(path: str | Path) -> RPCModel:
     """RPC from a Pleiades / SPOT 6-7 DIMAP v2 RPC XML file, in the full image's 0-based pixels."""
-    path = Path(path)
-    try:
-        return RPCModel.from_dimap_xml(_read_text(path, "DIMAP RPC file"))
-    except InputError as exc:
-        raise InputError(f"{path}: {exc}") from exc
+    return _rpc_from_file(path, "DIMAP RPC file", RPCModel.from_dimap_xml)
 
 
 def pixel_offset_of(transform: tuple[float, ...] | object, has_crs: bool) -> tuple[float, float]:
