@@ -9,6 +9,7 @@ from prefect import flow
 
 from core.simulation.scene import error_config
 from tasks.io.geoid import BUNDLED_SRTM_DIR
+from tasks.simulate.sar import simulate_sar
 from tasks.simulate.scene import (
     SimulationSummary,
     build_radiance,
@@ -42,11 +43,13 @@ class SimulationParams:
     lidar: bool = True
     dem_vertical: str = "auto"
     errors: str | None = None  # "realistic" or "simple"; None: the preset's default
+    sar: str | None = None  # "ers" or "s1": also a SAR product of the same world
 
 
 @flow(name="simulate-scene", log_prints=True)
 def simulate_scene(params: SimulationParams) -> SimulationSummary:
-    """Scene and models -> truth surface -> radiance and image per date -> check points, lidar."""
+    """Scene and models -> truth surface -> radiance and image per date -> check points, lidar
+    -> (with ``sar``) the SAR product of the same world."""
     out = Path(params.out)
     errors = error_config(params.preset, params.errors, lens=params.lens, jitter=params.jitter)
     scene = define_scene(Path(params.dem), out, params.preset, params.seed, errors,
@@ -61,4 +64,6 @@ def simulate_scene(params: SimulationParams) -> SimulationSummary:
     make_reference(scene, out)
     if params.lidar:
         make_lidar(scene, out)
+    if params.sar:
+        simulate_sar(scene, out, params.sar)
     return summarize(scene, out)

@@ -24,6 +24,8 @@ from core.sensors.sar import SarModel
 
 FloatArray = NDArray[np.float64]
 _INFO = "imageAnnotation/imageInformation"
+#: missionId values read: Sentinel-1, and ERS in the same form (``gcpfree simulate --sar ers``)
+MISSION_PREFIXES = ("S1", "ERS")
 
 
 def looks_like_annotation(head: str) -> bool:
@@ -107,9 +109,9 @@ def _parse(text: str, name: str) -> Annotation:
                          "no <adsHeader>); give the annotation/*.xml of a Sentinel-1 .SAFE")
     doc = _Doc(root, name)
     mission = doc.text("adsHeader/missionId")
-    if not mission.startswith("S1"):
+    if not mission.startswith(MISSION_PREFIXES):
         raise InputError(f"{name}: mission {mission!r} is not Sentinel-1; only Sentinel-1 "
-                         "annotations are read")
+                         "annotations (and the SAR simulator's ERS-like ones) are read")
     ptype, mode = doc.text("adsHeader/productType"), doc.text("adsHeader/mode")
     orbits = doc.find("generalAnnotation/orbitList").findall("orbit")
     if len(orbits) < 2:

@@ -1,5 +1,6 @@
-"""``gcpfree simulate``: a SPOT-like stereo pair rendered with known truth over a real DEM
-(flow ``simulate-scene``, :mod:`flows.simulate_scene`)."""
+"""``gcpfree simulate``: a SPOT-like stereo pair rendered with known truth over a real DEM,
+and with ``--sar ers|s1`` a SAR product of the same world (flow ``simulate-scene``,
+:mod:`flows.simulate_scene`)."""
 
 from __future__ import annotations
 
@@ -49,6 +50,14 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
                    help="scale the relief by K (0.05: nearly flat); default 1")
     p.add_argument("--bits", type=int, choices=(8, 12), default=8, help="image depth (default 8)")
     p.add_argument("--no-lidar", action="store_true", help="skip the truth lidar")
+    p.add_argument("--sar", choices=("ers", "s1"), default=None,
+                   help="also a SAR product of the same world: DIR/sar.tif (amplitude, uint16, "
+                        "sigma0 = (DN/1000)^2) with its Sentinel-1-form annotation DIR/sar.xml "
+                        "and the truth in DIR/truth/sar*. ers: ERS-like slant-range product, "
+                        "23 deg, ~20 m, 5 looks, ~10 m delivered geolocation; s1: Sentinel-1 "
+                        "IW GRD-like, 10 m, 38 deg, a few metres. The tiny preset's pixels are "
+                        "4 times coarser. Rerun the same command with --sar to add it to an "
+                        "existing scene")
 
 
 def run(args: argparse.Namespace) -> int:
@@ -70,6 +79,11 @@ def run(args: argparse.Namespace) -> int:
         jitter=args.jitter, date_change=args.date_change, relief_factor=args.relief_factor,
         bits=args.bits, center=tuple(args.center) if args.center else None,
         lidar=not args.no_lidar, dem_vertical=args.dem_vertical, errors=args.errors,
+        sar=args.sar,
     ))
     print("\n".join(summary.lines()))
+    if args.sar:
+        from tasks.simulate.sar import sar_summary
+
+        print("\n".join(sar_summary(args.out).lines()))
     return 0
