@@ -13,6 +13,13 @@ reason and never stops the others; a rerun processes only the pairs missing or f
 tasks retry (catalog reading, summary writing); the orientation never does, since it would fail
 the same way again.
 
+A worker process that dies (killed, out of memory) takes no pair with it: Dask's scheduler runs
+its pair again on another worker, up to ``distributed.scheduler.allowed-failures`` deaths (3 by
+default); past that the pair is recorded as failed with that reason. Every product is renamed
+into place whole, so a pair run again (or rerun after Ctrl-C) finds only whole products, removes
+the temporary files of the attempt that died and resumes after its last finished step; a pair
+that an attempt finished is kept as it is.
+
 The flow takes flat, JSON-friendly parameters (not one parameter object) so that a deployment
 (``gcpfree serve``, ``prefect.yaml``) can state them and the UI can edit them.
 """
@@ -67,14 +74,25 @@ def run_pair(entry: PairEntry, root: Path, srtm_dir: Path | None, reference: Pat
              reference_vertical: str = "auto", self_calibrate: bool = False) -> None:
     """One pair of the archive through the ``pair`` flow into ``root/<id>`` (one worker: the
     archive's parallelism is over pairs); what :func:`tasks.archive.runs.process_pair` runs
-    in a Dask worker."""
+    in a Dask worker. A pair found complete is left as it is; otherwise the temporary files an
+    interrupted attempt left (its worker killed, the run stopped by Ctrl-C) are removed and the
+    ``pair`` flow resumes at its first missing product."""
     from flows._env import one_line_errors
     from flows.pair import PairParams, pair_flow
+    from tasks.archive.pair import pair_complete, remove_leftovers
 
+    out = Path(root) / entry.id
+    if pair_complete(out):  # an earlier attempt finished it, then its worker died
+        print(f"pair {entry.id} already complete in {out}")
+        return
+    removed = remove_leftovers(out)
+    if removed:
+        print(f"pair {entry.id}: removed {len(removed)} temporary file(s) of an interrupted "
+              f"attempt ({', '.join(p.name for p in removed)})")
     with one_line_errors():
         pair_flow(PairParams(
             pair=entry.pair_inputs(reference, srtm_dir, reference_vertical),
-            out=Path(root) / entry.id, lidar=entry.lidar, landcover=entry.landcover,
+            out=out, lidar=entry.lidar, landcover=entry.landcover,
             checkpoints=entry.checkpoints, self_calibrate=self_calibrate, workers=1,
             progress=False, pair_id=entry.id))
 

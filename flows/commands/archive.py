@@ -3,9 +3,14 @@
 from __future__ import annotations
 
 import argparse
+import sys
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 from flows.commands._pair import VERTICAL_HELP, VERTICALS
+
+if TYPE_CHECKING:
+    from tasks.archive.catalog import Catalog
 
 CATALOG_HELP = ("a folder of pair folders (each with left.tif + right.tif and their models, or "
                 "left/ and right/ folders with IMAGERY.TIF + METADATA.DIM; optional lidar.laz, "
@@ -54,20 +59,21 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
             "printed). A pair that fails is recorded with its reason and never stops the "
             "others. ROOT/summary.csv and ROOT/summary.json list every pair: status (done, "
             "skipped, failed), reason, GCP count, check-point and GCP residual RMS per image, "
-            "LE68. A rerun processes only the pairs missing or failed. Exit code 1 when a pair "
-            "failed."),
+            "LE68. A rerun processes only the pairs missing or failed, and a pair interrupted "
+            "(Ctrl-C, a worker process killed) resumes after its last finished step. Exit code "
+            "1 when a pair failed, 130 when interrupted."),
     )
     add_archive_arguments(p)
     p.add_argument("--no-progress", action="store_true", help="no progress bar")
 
 
-def check_archive_args(args: argparse.Namespace) -> None:
-    """Bad arguments refused in one line before Prefect starts."""
+def check_archive_args(args: argparse.Namespace) -> Catalog:
+    """Bad arguments refused in one line before Prefect starts; the catalog read."""
     from core.errors import InputError
     from tasks.archive.catalog import read_catalog
     from tasks.io.dem import check_reference, dem_datum
 
-    read_catalog(args.catalog)
+    catalog = read_catalog(args.catalog)
     if args.reference is not None:
         check_reference(args.reference)
         print(f"reference      {args.reference}: "
@@ -79,6 +85,7 @@ def check_archive_args(args: argparse.Namespace) -> None:
     if args.dask_address is not None and "://" not in args.dask_address:
         raise InputError(f"--dask-address {args.dask_address}: give the scheduler as "
                          "tcp://HOST:PORT")
+    return catalog
 
 
 def flow_parameters(args: argparse.Namespace) -> dict:
@@ -94,10 +101,25 @@ def flow_parameters(args: argparse.Namespace) -> dict:
             "self_calibrate": args.self_calibrate}
 
 
+def interrupted_line(catalog: Catalog, root: Path) -> str:
+    """What an interrupted run leaves: how many pairs are complete, how to finish the rest."""
+    from tasks.archive.pair import pair_complete
+
+    done = sum(pair_complete(Path(root) / i) for i in catalog.ids)
+    return (f"gcpfree archive: interrupted with {done} of {len(catalog.pairs)} pairs complete "
+            f"in {root}; run the same command again to process the "
+            f"{len(catalog.pairs) - done} others (complete pairs are kept, the others resume "
+            "after their last finished step)")
+
+
 def run(args: argparse.Namespace) -> int:
-    check_archive_args(args)
+    catalog = check_archive_args(args)
     from flows.reprocess_archive import reprocess_archive
 
-    outcome = reprocess_archive(**flow_parameters(args), progress=not args.no_progress)
+    try:
+        outcome = reprocess_archive(**flow_parameters(args), progress=not args.no_progress)
+    except KeyboardInterrupt:  # Ctrl-C: every finished product stays, the rerun resumes
+        print(interrupted_line(catalog, args.out), file=sys.stderr, flush=True)
+        raise
     print("\n".join(outcome.lines()))
     return 1 if outcome.count("failed") else 0

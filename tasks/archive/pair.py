@@ -5,6 +5,9 @@ rasters, the Prefect artifacts, the headline figures; and which pairs of an arch
 A product that exists and reads back (JSON that parses, the orientation's report.json as
 :func:`tasks.absolute.report.read_report` reads it, a raster that opens with its size) is kept;
 :func:`pair_complete` reads the manifest and checks every product it lists with its size.
+Every product is written under a temporary name and renamed into place whole, so a run killed
+mid-way leaves only temporary names behind (:func:`leftovers`), which the next run of the pair
+removes before it resumes.
 """
 
 from __future__ import annotations
@@ -103,6 +106,39 @@ def pair_complete(out: str | Path) -> bool:
         if not product_ok(path) or sizes.get(rel) != path.stat().st_size:
             return False
     return True
+
+
+# what a writer killed mid-way leaves in a pair folder (never a product: each is renamed into
+# place whole): the atomic writers' temporary files and folders (``.<name>.tmp*``,
+# :mod:`tasks.io.rasters`), the dense matching's work folders (``.<dem>.work``, rebuilt by the
+# step that uses them) and the STAC writer's folders (``_stac_tmp_*``, ``_stac_old``,
+# :mod:`tasks.archive.stac`)
+LEFTOVER_PATTERNS = (".*.tmp*", ".*.work", "_stac_tmp_*", "_stac_old")
+
+
+def leftovers(out: str | Path) -> list[Path]:
+    """The temporary files and folders an interrupted run left in the pair folder ``out``
+    (:data:`LEFTOVER_PATTERNS`, at any depth; a folder's own content is not listed again),
+    sorted."""
+    out = Path(out)
+    if not out.is_dir():
+        return []
+    found = sorted({p for pattern in LEFTOVER_PATTERNS for p in out.rglob(pattern)})
+    return [p for p in found if not any(q in p.parents for q in found)]
+
+
+def remove_leftovers(out: str | Path) -> list[Path]:
+    """Remove what :func:`leftovers` lists (the run that wrote them is over: its worker died or
+    it was interrupted); the paths removed. Only one run may work in a pair folder at a time."""
+    import shutil
+
+    gone = leftovers(out)
+    for p in gone:
+        if p.is_dir() and not p.is_symlink():
+            shutil.rmtree(p, ignore_errors=True)
+        else:
+            p.unlink(missing_ok=True)
+    return gone
 
 
 @task(name="find-complete-pairs", cache_policy=NO_CACHE)

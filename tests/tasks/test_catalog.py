@@ -223,3 +223,78 @@ def test_summary_files_round_trip(tmp_path: Path):
     assert doc["counts"] == {"done": 1, "skipped": 1, "failed": 1}
     assert [PairRow(**r) for r in doc["pairs"]] == list(rows)
     assert summary_csv(rows) == csv_path.read_text()
+
+
+# each writer of a pair's products, killed (SIGKILL) at the instant it would rename its
+# temporary result into place: what a worker process killed mid-write leaves behind
+KILLED_WRITERS = {
+    "json": "from tasks.io.rasters import atomic_write_json as w; w(OUT / 'report.json', {})",
+    "cog": ("import numpy as np; from tasks.io.rasters import CogItem, write_arrays_cog as w; "
+            "w([CogItem(np.zeros((8, 8), np.float32), OUT / 'dsm.tif')])"),
+    "stac": "from tasks.archive.stac import write_catalog as w; w(OUT, 'p', [], 'd')",
+}
+KILL_AT_RENAME = """
+import os, signal, sys
+from pathlib import Path
+OUT = Path(sys.argv[1])
+def die(*args, **kwargs):
+    os.kill(os.getpid(), signal.SIGKILL)
+os.replace = os.rename = Path.rename = Path.replace = die
+"""
+
+
+def test_leftovers_of_killed_writers_are_found_and_removed_products_kept(tmp_path: Path):
+    import signal
+    import subprocess
+    import sys
+
+    from tasks.archive.pair import leftovers, remove_leftovers
+
+    out = tmp_path / "p"
+    touch(out / "report.json", "{}"), touch(out / "relative" / "report.json", "{}")
+    touch(out / "stac" / "catalog.json", "{}"), touch(out / "report_files" / "a.png")
+    repo = Path(__file__).resolve().parents[2]
+    children = [subprocess.Popen([sys.executable, "-c", KILL_AT_RENAME + code, str(where)],
+                                 cwd=repo, stderr=subprocess.PIPE, text=True)
+                for where, code in ((out, KILLED_WRITERS["json"]),
+                                    (out / "relative", KILLED_WRITERS["json"]),
+                                    (out, KILLED_WRITERS["cog"]),
+                                    (out, KILLED_WRITERS["stac"]))]
+    for child in children:
+        _, err = child.communicate(timeout=300)
+        assert child.returncode == -signal.SIGKILL, err[-2000:]
+    work = out / ".dsm.tif.work"  # the dense matching's work folder (flows.orient)
+    touch(work / "tile_0.npz")
+    products = {"report.json", "relative", "relative/report.json", "stac", "stac/catalog.json",
+                "report_files", "report_files/a.png"}
+    left = {str(p.relative_to(out)) for p in out.rglob("*")} - products
+    assert len(left) >= 7  # each killed writer left its temporary names behind
+    found = leftovers(out)
+    names = sorted(str(p.relative_to(out)) for p in found)
+    assert [n for n in names if n.startswith(".report.json.tmp")], names
+    assert [n for n in names if n.startswith("relative/.report.json.tmp")], names
+    assert [n for n in names if n.startswith(".dsm.tif.tmp")], names
+    assert [n for n in names if n.startswith("_stac_tmp_")], names
+    assert ".dsm.tif.work" in names
+    # every temporary name is under one of those found (nothing listed twice)
+    assert all(any(p == f or f in p.parents for f in found) for p in out.rglob("*")
+               if str(p.relative_to(out)) not in products)
+    assert remove_leftovers(out) == found
+    assert {str(p.relative_to(out)) for p in out.rglob("*")} == products
+    assert leftovers(out) == [] and remove_leftovers(tmp_path / "none") == []
+
+
+def test_a_pair_whose_workers_kept_dying_is_failed_with_that_reason():
+    from distributed import KilledWorker
+
+    from tasks.archive.runs import failure_reason
+
+    class Worker:  # what KilledWorker's message reads of the scheduler's WorkerState
+        address = "tcp://127.0.0.1:40000"
+
+    reason = failure_reason(KilledWorker("process_pair-1f2e", Worker(), 3))
+    assert reason.startswith("the Dask worker process running this pair died 4 times (out of "
+                             "memory, or killed)") and "rerun" in reason
+    assert failure_reason(InputError("left image x.tif does not exist")) == (
+        "left image x.tif does not exist")
+    assert failure_reason(ValueError("bad\nvalue")) == "ValueError: bad"
