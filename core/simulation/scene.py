@@ -88,6 +88,11 @@ PRESETS: dict[str, Preset] = {
          ImageSpec("right", 0.0, -20.0, "2023-07-12", 140.0, 63.0)),
         (5_000.0, 13_000.0), spot_mission=5, spot_instrument="HRS",
     ),
+    # SPOT 5 HRG across-track pair from two dates: 5 m panchromatic (the 2.5 m THR supermode
+    # aside), 12000 detectors over a 60 km swath, steered within +-27 deg (the same two views as
+    # spot, inside that range); four times the pixels of spot on the same ground
+    "hrg": Preset("hrg", 12000, 12000, 5.0, 5.0, _ACROSS, (5_000.0, 13_000.0),
+                  spot_mission=5, spot_instrument="HRG"),
     # the same physics at 600x600 px and 40 m, for CI
     # (lidar over the whole scene, its spacing scaled with the GSD to stay CI-sized)
     # (simple errors unless asked: the test suite's scenes and CI figures stand on them)

@@ -133,6 +133,32 @@ def test_spot_preset_is_an_across_track_pair():
     assert along < 0.5
 
 
+def _swath_m(preset_name: str) -> float:
+    """Ground distance between the first and the last detector of the centre line of the
+    preset's first image, at the centre's height."""
+    preset = PRESETS[preset_name]
+    m = truth_model(preset.images[0], preset, CENTRE, ErrorConfig(), np.random.default_rng(0))
+    row = 0.5 * (m.n_rows - 1)
+    lon, lat = m.localize(np.array([0.0, m.n_cols - 1.0]), np.array([row, row]), CENTRE[2])
+    a, b = (np.array(geodetic_to_ecef(lon[i], lat[i], CENTRE[2])).ravel() for i in (0, 1))
+    return float(np.linalg.norm(b - a))
+
+
+def test_hrg_preset_is_spot5_hrg_like_four_times_spot_on_the_same_ground():
+    hrg, spot = PRESETS["hrg"], PRESETS["spot"]
+    assert (hrg.n_cols, hrg.n_rows, hrg.gsd_m) == (12000, 12000, 5.0)
+    assert hrg.n_cols * hrg.n_rows == 4 * spot.n_cols * spot.n_rows
+    assert (hrg.spot_mission, hrg.spot_instrument) == (5, "HRG")
+    assert all(abs(s.incidence_deg) <= 27.0 for s in hrg.images)  # HRG steering range
+    assert hrg.images[0].date != hrg.images[1].date
+    # 12000 detectors of 5 m: a 60 km swath, the ground of the spot preset
+    swath = _swath_m("hrg")
+    assert 58_000.0 < swath < 66_000.0
+    assert abs(swath / _swath_m("spot") - 1.0) < 0.01
+    bh, along = _base_to_height("hrg")
+    assert 0.6 < bh < 1.1 and along < 0.5  # across track, two orbits, as spot
+
+
 def test_scene_def_json_keeps_its_documented_layout_and_round_trips():
     from core.geodesy import BBox
     from core.points import GeoPoint
