@@ -91,7 +91,7 @@ def add_run_arguments(p: argparse.ArgumentParser) -> None:
 
 def check_orientation_arguments(args: argparse.Namespace, command: str,
                                 checked=None):  # -> SurfaceMatchConfig
-    """The reference, check points and window settings checked before Prefect starts;
+    """The reference, check points and window settings checked before the flow starts;
     returns the surface-matching settings they make. With ``checked`` (what
     :func:`check_pair` returned: the pair's inputs and its two models), a scene too small for
     one surface-matching window is refused here, in seconds, rather than after its
@@ -154,7 +154,7 @@ def _check_scene_size(surface, pair, left, right) -> None:  # PairInputs, Loaded
 
 def check_pair(args: argparse.Namespace):  # -> tuple[PairInputs, LoadedModel, LoadedModel]
     """The pair's inputs from the options (:class:`tasks.io.pair.PairInputs`), both models
-    loaded and the reference checked before Prefect starts: bad input is one clean line
+    loaded and the reference checked before the flow starts: bad input is one clean line
     (InputError). Returns the inputs, to be passed whole, and the two models."""
     from core.errors import InputError
     from tasks.io.dem import check_reference, dem_datum

@@ -50,25 +50,29 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from core.errors import InputError
-    from tasks.dense.blocks import check_roi
+    from flows._env import prefect_api
 
-    pair, left, _ = check_pair(args)
-    check_roi(tuple(args.roi) if args.roi else None, left.size)
-    out_dir = Path(args.out).resolve().parent
-    if not out_dir.is_dir():
-        raise InputError(f"the folder of --out ({out_dir}) does not exist; create it first")
-    from flows.dsm import DsmParams, dsm_flow
+    with prefect_api() as api:  # a temporary Prefect server boots while the inputs are checked
+        from core.errors import InputError
+        from tasks.dense.blocks import check_roi
 
-    params = DsmParams(
-        pair=pair, out=args.out, roi=tuple(args.roi) if args.roi else None,
-        resolution_m=args.resolution,
-        height_range_m=tuple(args.height_range) if args.height_range else None,
-        vertical=args.vertical, orient=not args.no_orient, margin_m=args.margin,
-        tile_px=args.tile_px, min_match_rate=args.min_match_rate,
-        pointing_correction=not args.no_pointing_correction, workers=args.workers,
-        progress=not args.no_progress)
-    params.config()  # a bad setting is one line too
-    summary = dsm_flow(params)
+        pair, left, _ = check_pair(args)
+        check_roi(tuple(args.roi) if args.roi else None, left.size)
+        out_dir = Path(args.out).resolve().parent
+        if not out_dir.is_dir():
+            raise InputError(f"the folder of --out ({out_dir}) does not exist; create it first")
+        from flows.dsm import DsmParams, dsm_flow
+
+        params = DsmParams(
+            pair=pair, out=args.out, roi=tuple(args.roi) if args.roi else None,
+            resolution_m=args.resolution,
+            height_range_m=tuple(args.height_range) if args.height_range else None,
+            vertical=args.vertical, orient=not args.no_orient, margin_m=args.margin,
+            tile_px=args.tile_px, min_match_rate=args.min_match_rate,
+            pointing_correction=not args.no_pointing_correction, workers=args.workers,
+            progress=not args.no_progress)
+        params.config()  # a bad setting is one line too
+        api.ready()
+        summary = dsm_flow(params)
     print("\n".join(summary.lines()))
     return 0

@@ -119,24 +119,28 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from core.evaluation import StatsConfig
-    from tasks.evaluation.lidar import EvaluationOptions, plan_evaluation
-    from tasks.io.sensor_info import check_json_target
+    from flows._env import prefect_api
 
-    options = EvaluationOptions(
-        dem=args.dem, lidar=args.lidar, out=args.out, landcover=args.landcover,
-        landcover_names=args.landcover_names, lidar_vertical=args.lidar_vertical,
-        dem_vertical=args.dem_vertical, lidar_crs=args.lidar_crs,
-        lidar_z_unit=args.lidar_z_unit, classes=args.classes, mask=args.mask, gcps=args.gcps,
-        chunk_points=args.chunk_points,
-        stats=StatsConfig(ci_level=args.ci_level, seed=args.seed),
-    )
-    # every header read and checked before Prefect starts: bad input is one clean line
-    plan_evaluation(options)
-    check_json_target(args.out)
-    from flows.evaluate import evaluate_flow
+    with prefect_api() as api:  # a temporary Prefect server boots meanwhile
+        from core.evaluation import StatsConfig
+        from tasks.evaluation.lidar import EvaluationOptions, plan_evaluation
+        from tasks.io.sensor_info import check_json_target
 
-    report = evaluate_flow(options)
-    print("\n".join(report_lines(report)))
-    print(f"{'json':<14} {args.out}")
+        options = EvaluationOptions(
+            dem=args.dem, lidar=args.lidar, out=args.out, landcover=args.landcover,
+            landcover_names=args.landcover_names, lidar_vertical=args.lidar_vertical,
+            dem_vertical=args.dem_vertical, lidar_crs=args.lidar_crs,
+            lidar_z_unit=args.lidar_z_unit, classes=args.classes, mask=args.mask, gcps=args.gcps,
+            chunk_points=args.chunk_points,
+            stats=StatsConfig(ci_level=args.ci_level, seed=args.seed),
+        )
+        # every header read and checked before the flow starts: bad input is one clean line
+        plan_evaluation(options)
+        check_json_target(args.out)
+        from flows.evaluate import evaluate_flow
+
+        api.ready()
+        report = evaluate_flow(options)
+        print("\n".join(report_lines(report)))
+        print(f"{'json':<14} {args.out}")
     return 0

@@ -57,23 +57,27 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from core.void_fill import FillConfig
-    from tasks.evaluation.void_fill import FillOptions, plan_fill
-    from tasks.io.sensor_info import check_json_target
+    from flows._env import prefect_api
 
-    options = FillOptions(
-        srtm=args.srtm, dem=args.dem, out=args.out, srtm_vertical=args.srtm_vertical,
-        dem_vertical=args.dem_vertical, geoid=args.geoid,
-        config=FillConfig(border_cells=args.border_cells, outlier_nmad=args.outlier_nmad,
-                          smooth_cells=args.smooth_cells))
-    # the tile, the DSM and the output checked before Prefect starts: bad input is one line
-    plan_fill(options)
-    check_json_target(options.json_path)
-    if args.geoid is not None:
-        from tasks.io.geoid import read_gtx
-        read_gtx(args.geoid)
-    from flows.fill_voids import fill_voids_flow
+    with prefect_api() as api:  # a temporary Prefect server boots meanwhile
+        from core.void_fill import FillConfig
+        from tasks.evaluation.void_fill import FillOptions, plan_fill
+        from tasks.io.sensor_info import check_json_target
 
-    summary = fill_voids_flow(options)
-    print("\n".join(summary.lines()))
+        options = FillOptions(
+            srtm=args.srtm, dem=args.dem, out=args.out, srtm_vertical=args.srtm_vertical,
+            dem_vertical=args.dem_vertical, geoid=args.geoid,
+            config=FillConfig(border_cells=args.border_cells, outlier_nmad=args.outlier_nmad,
+                              smooth_cells=args.smooth_cells))
+        # the tile, the DSM and the output checked before the flow: bad input is one line
+        plan_fill(options)
+        check_json_target(options.json_path)
+        if args.geoid is not None:
+            from tasks.io.geoid import read_gtx
+            read_gtx(args.geoid)
+        from flows.fill_voids import fill_voids_flow
+
+        api.ready()
+        summary = fill_voids_flow(options)
+        print("\n".join(summary.lines()))
     return 0

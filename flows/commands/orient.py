@@ -37,15 +37,19 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    checked = check_pair(args)
-    surface = check_orientation_arguments(args, "orient", checked)
-    pair = checked[0]
-    from flows.orient import OrientParams, orient_flow
+    from flows._env import prefect_api
 
-    outcome = orient_flow(OrientParams(
-        pair=pair, out=args.out, checkpoints=args.checkpoints, self_calibrate=args.self_calibrate,
-        corrections=args.corrections, spacing_m=args.window_spacing,
-        min_windows=args.min_windows, workers=args.workers, progress=not args.no_progress,
-        surface=surface))
-    print("\n".join(outcome.lines()))
+    with prefect_api() as api:  # a temporary Prefect server boots meanwhile
+        checked = check_pair(args)
+        surface = check_orientation_arguments(args, "orient", checked)
+        pair = checked[0]
+        from flows.orient import OrientParams, orient_flow
+
+        api.ready()
+        outcome = orient_flow(OrientParams(
+            pair=pair, out=args.out, checkpoints=args.checkpoints, self_calibrate=args.self_calibrate,
+            corrections=args.corrections, spacing_m=args.window_spacing,
+            min_windows=args.min_windows, workers=args.workers, progress=not args.no_progress,
+            surface=surface))
+        print("\n".join(outcome.lines()))
     return 0

@@ -72,12 +72,16 @@ def options_from(args: argparse.Namespace) -> OrthoOptions:
 
 
 def run(args: argparse.Namespace) -> int:
-    from tasks.ortho.orthorectify import check_ortho_options
+    from flows._env import prefect_api
 
-    options = options_from(args)
-    check_ortho_options(options)  # bad input is one line, before Prefect starts
-    from flows.ortho import ortho_flow
+    with prefect_api() as api:  # a temporary Prefect server boots meanwhile
+        from tasks.ortho.orthorectify import check_ortho_options
 
-    summary = ortho_flow(options)
-    print("\n".join(summary.lines()))
+        options = options_from(args)
+        check_ortho_options(options)  # bad input is one line, before the flow starts
+        from flows.ortho import ortho_flow
+
+        api.ready()
+        summary = ortho_flow(options)
+        print("\n".join(summary.lines()))
     return 0

@@ -47,21 +47,25 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from core.errors import InputError
-    from flows.ortho import CompareOptions, ortho_compare_flow
-    from tasks.io.sensor_info import check_json_target
-    from tasks.ortho.compare import plan_compare
+    from flows._env import prefect_api
 
-    options = CompareOptions(
-        left=args.left, right=args.right, out=args.out, map=args.map, quiver=args.quiver,
-        window_px=args.window, step_px=args.step, search_px=args.search,
-        min_ncc=args.min_ncc, workers=args.workers)
-    plan_compare.fn(options.left, options.right, options.config())  # bad input: one line
-    check_json_target(options.out)
-    for path, what in ((options.map, "--map"), (options.quiver, "--quiver")):
-        if path is not None and not Path(path).resolve().parent.is_dir():
-            raise InputError(f"the folder of {what} ({Path(path).resolve().parent}) does not "
-                             "exist; create it first")
-    summary = ortho_compare_flow(options)
-    print("\n".join(summary.lines()))
+    with prefect_api() as api:  # a temporary Prefect server boots meanwhile
+        from core.errors import InputError
+        from flows.ortho import CompareOptions, ortho_compare_flow
+        from tasks.io.sensor_info import check_json_target
+        from tasks.ortho.compare import plan_compare
+
+        options = CompareOptions(
+            left=args.left, right=args.right, out=args.out, map=args.map, quiver=args.quiver,
+            window_px=args.window, step_px=args.step, search_px=args.search,
+            min_ncc=args.min_ncc, workers=args.workers)
+        plan_compare.fn(options.left, options.right, options.config())  # bad input: one line
+        check_json_target(options.out)
+        for path, what in ((options.map, "--map"), (options.quiver, "--quiver")):
+            if path is not None and not Path(path).resolve().parent.is_dir():
+                raise InputError(f"the folder of {what} ({Path(path).resolve().parent}) does not "
+                                 "exist; create it first")
+        api.ready()
+        summary = ortho_compare_flow(options)
+        print("\n".join(summary.lines()))
     return 0

@@ -44,32 +44,37 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from core.errors import InputError
+    from flows._env import prefect_api
 
-    checked = check_pair(args)
-    for name in ("lidar", "landcover"):
-        path = getattr(args, name)
-        if path is not None and not path.is_file():
-            raise InputError(f"--{name} {path} does not exist; give an existing file")
-    if args.landcover is not None and args.lidar is None:
-        raise InputError("--landcover classifies the lidar evaluation: give --lidar too")
-    if args.lidar is not None:  # its header now, not after the orientation's minutes
-        from tasks.io.lidar import inspect_lidar
+    with prefect_api() as api:  # a temporary Prefect server boots meanwhile
+        from core.errors import InputError
 
-        inspect_lidar(args.lidar, vertical=args.lidar_vertical)
-    if args.landcover is not None:
-        from tasks.io.rasters import open_raster
+        checked = check_pair(args)
+        for name in ("lidar", "landcover"):
+            path = getattr(args, name)
+            if path is not None and not path.is_file():
+                raise InputError(f"--{name} {path} does not exist; give an existing file")
+        if args.landcover is not None and args.lidar is None:
+            raise InputError("--landcover classifies the lidar evaluation: give --lidar too")
+        if args.lidar is not None:  # its header now, not after the orientation's minutes
+            from tasks.io.lidar import inspect_lidar
 
-        with open_raster(args.landcover, "land cover"):
-            pass
-    surface = check_orientation_arguments(args, "pair", checked)
-    from flows.pair import PairParams, pair_flow
+            inspect_lidar(args.lidar, vertical=args.lidar_vertical)
+        if args.landcover is not None:
+            from tasks.io.rasters import open_raster
 
-    outcome = pair_flow(PairParams(
-        pair=checked[0], out=args.out, lidar=args.lidar, landcover=args.landcover,
-        lidar_vertical=args.lidar_vertical, checkpoints=args.checkpoints,
-        self_calibrate=args.self_calibrate, corrections=args.corrections, workers=args.workers, progress=not args.no_progress,
-        pair_id=args.pair_id, surface=surface, spacing_m=args.window_spacing,
-        min_windows=args.min_windows))
-    print("\n".join(outcome.lines()))
+            with open_raster(args.landcover, "land cover"):
+                pass
+        surface = check_orientation_arguments(args, "pair", checked)
+        from flows.pair import PairParams, pair_flow
+
+        api.ready()
+        outcome = pair_flow(PairParams(
+            pair=checked[0], out=args.out, lidar=args.lidar, landcover=args.landcover,
+            lidar_vertical=args.lidar_vertical, checkpoints=args.checkpoints,
+            self_calibrate=args.self_calibrate, corrections=args.corrections,
+            workers=args.workers, progress=not args.no_progress,
+            pair_id=args.pair_id, surface=surface, spacing_m=args.window_spacing,
+            min_windows=args.min_windows))
+        print("\n".join(outcome.lines()))
     return 0

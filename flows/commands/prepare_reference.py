@@ -36,31 +36,35 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from core.geodesy import BBox
-    from tasks.io.geoid import BUNDLED_SRTM_DIR
-    from tasks.io.srtm import find_tiles
+    from flows._env import prefect_api
 
-    params_box = BBox(*args.bbox).expanded(args.margin_deg)
-    # check inputs before starting Prefect, so bad input is one clean line
-    tiles = find_tiles(args.srtm_dir or BUNDLED_SRTM_DIR, params_box,
-                       allow_missing=args.allow_missing_tiles)
-    from tasks.io.dem import check_srtm_tiles
+    with prefect_api() as api:  # a temporary Prefect server boots meanwhile
+        from core.geodesy import BBox
+        from tasks.io.geoid import BUNDLED_SRTM_DIR
+        from tasks.io.srtm import find_tiles
 
-    check_srtm_tiles(tiles)
-    print(f"heights        {len(tiles)} SRTM tile(s): EGM96 orthometric heights, converted with "
-          "h = H + N")
-    if args.geoid is not None:
-        from tasks.io.geoid import read_gtx
-        read_gtx(args.geoid)
+        params_box = BBox(*args.bbox).expanded(args.margin_deg)
+        # check inputs before the flow starts, so bad input is one clean line
+        tiles = find_tiles(args.srtm_dir or BUNDLED_SRTM_DIR, params_box,
+                           allow_missing=args.allow_missing_tiles)
+        from tasks.io.dem import check_srtm_tiles
 
-    from flows.prepare_reference import ReferenceParams, prepare_reference
+        check_srtm_tiles(tiles)
+        print(f"heights        {len(tiles)} SRTM tile(s): EGM96 orthometric heights, converted with "
+              "h = H + N")
+        if args.geoid is not None:
+            from tasks.io.geoid import read_gtx
+            read_gtx(args.geoid)
 
-    summary = prepare_reference(ReferenceParams(
-        bbox=tuple(args.bbox), out=args.out, srtm_dir=args.srtm_dir, margin_deg=args.margin_deg,
-        allow_missing_tiles=args.allow_missing_tiles, geoid=args.geoid,
-        hillshade_png=args.hillshade,
-    ))
-    print("\n".join(summary.lines()))
-    if args.hillshade:
-        print(f"hillshade      {args.hillshade}")
+        from flows.prepare_reference import ReferenceParams, prepare_reference
+
+        api.ready()
+        summary = prepare_reference(ReferenceParams(
+            bbox=tuple(args.bbox), out=args.out, srtm_dir=args.srtm_dir, margin_deg=args.margin_deg,
+            allow_missing_tiles=args.allow_missing_tiles, geoid=args.geoid,
+            hillshade_png=args.hillshade,
+        ))
+        print("\n".join(summary.lines()))
+        if args.hillshade:
+            print(f"hillshade      {args.hillshade}")
     return 0

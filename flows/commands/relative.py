@@ -41,13 +41,17 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    pair, _, _ = check_pair(args)
-    from flows.relative import RelativeParams, relative_flow
+    from flows._env import prefect_api
 
-    outcome = relative_flow(RelativeParams(
-        pair=pair, out=args.out,
-        height_range_m=tuple(args.height_range) if args.height_range else None,
-        corrections=args.corrections, cell_m=args.cell_m,
-        search_radius_m=args.search_radius_m))
-    print("\n".join(outcome.lines))
+    with prefect_api() as api:  # a temporary Prefect server boots meanwhile
+        pair, _, _ = check_pair(args)
+        from flows.relative import RelativeParams, relative_flow
+
+        api.ready()
+        outcome = relative_flow(RelativeParams(
+            pair=pair, out=args.out,
+            height_range_m=tuple(args.height_range) if args.height_range else None,
+            corrections=args.corrections, cell_m=args.cell_m,
+            search_radius_m=args.search_radius_m))
+        print("\n".join(outcome.lines))
     return 0

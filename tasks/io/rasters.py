@@ -13,15 +13,12 @@ import warnings
 from collections.abc import Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
-import dask
-import dask.array as darr
 import numpy as np
 import rasterio
 import rasterio.io
 import rasterio.shutil
-import xarray as xr
 from affine import Affine
 from rasterio.errors import NotGeoreferencedWarning, RasterioIOError
 from rasterio.windows import Window
@@ -29,6 +26,10 @@ from rasterio.windows import Window
 from core.dem import SurfaceGrid
 from core.errors import InputError
 from core.jsonio import parse_json, to_json
+
+if TYPE_CHECKING:  # Dask and xarray are imported where arrays are written, not to read one
+    import dask.array as darr
+    import xarray as xr
 
 # GDAL block cache while building a COG: bounded so memory stays flat on large rasters
 COG_CACHE_MB = 256
@@ -92,6 +93,9 @@ def write_arrays_cog(items: list[CogItem], extra: list[Any] | None = None) -> tu
     replaces its output by a rename, so a failure never leaves a half-written product and
     an earlier product survives a failed rerun.
     """
+    import dask
+    import dask.array as darr
+
     with contextlib.ExitStack() as stack:
         sources, targets, jobs = [], [], []
         for item in items:

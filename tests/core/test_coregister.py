@@ -12,7 +12,7 @@ import rasterio
 from affine import Affine
 from scipy.ndimage import shift as nd_shift
 
-from core.coregister import nuth_kaab
+from core.coregister import _Sampler, _weighted_median, nuth_kaab
 from core.dem import GeoDEM, SurfaceGrid
 from core.errors import InputError, InsufficientDataError
 from core.geodesy import metres_per_degree
@@ -50,6 +50,45 @@ def test_known_subpixel_shift_recovered(srtm, col, row, dz, noise):
     assert r.shift_east_m == pytest.approx(col * D * float(me), rel=0.01)
     assert r.shift_north_m == pytest.approx(-row * D * float(mn), rel=0.01)
     assert r.nmad_after_m < max(noise, 0.01) * 1.6
+
+
+def test_translated_samples_are_the_general_lookups(srtm):
+    """The separable resampling of a grid with the reference's steps gives what
+    ``map_coordinates`` gives at the same points, voids, borders and beyond included."""
+    z = srtm.copy()
+    z[100:104, 200:203] = np.nan
+    z[0:2, 50:60] = np.nan
+    ref = GeoDEM(z, 5.25, 44.75, D, -D)
+    sample = _Sampler(ref)
+    for row0, col0, shape in [(0.3, -0.45, (500, 500)), (-2.7, 5.2, (300, 400)),
+                              (10.0, 3.0, (50, 60)), (490.2, -3.5, (30, 30)),
+                              (97.5, 196.25, (10, 10)), (600.0, 0.0, (5, 5))]:
+        i, j = np.mgrid[0:shape[0], 0:shape[1]]
+        general = sample(5.25 + (col0 + j) * D, 44.75 - (row0 + i) * D)
+        fast = sample.translated(row0, col0, shape)
+        np.testing.assert_array_equal(np.isnan(fast), np.isnan(general))
+        np.testing.assert_allclose(fast, general, rtol=0, atol=1e-6, equal_nan=True)
+    assert np.isnan(sample.translated(97.5, 196.25, (10, 10))[3:6, 3:6]).all()  # the void
+
+
+@pytest.mark.parametrize("seed", range(5))
+def test_weighted_median_is_the_median_of_the_repeated_values(seed):
+    rng = np.random.default_rng(seed)
+    values = rng.normal(size=int(rng.integers(1, 30)))
+    counts = rng.integers(0, 6, size=values.size).astype(float)
+    counts[0] += 1  # at least one value
+    assert _weighted_median(values, counts) == np.median(np.repeat(values, counts.astype(int)))
+
+
+def test_a_dem_on_another_grid_with_voids(srtm):
+    """A DEM with twice the reference's step (the general look-up) and voids: the shift is
+    still recovered to 0.01 reference pixels."""
+    moved = shifted(srtm, 0.42, -0.31, 5.0, noise_m=0.3)[::2, ::2].copy()
+    moved[40:60, 100:130] = np.nan
+    r = nuth_kaab(GeoDEM(srtm, 5.25, 44.75, D, -D), GeoDEM(moved, 5.25, 44.75, 2 * D, -2 * D))
+    assert r.shift_col_px == pytest.approx(0.42, abs=0.01)
+    assert r.shift_row_px == pytest.approx(-0.31, abs=0.01)
+    assert r.shift_up_m == pytest.approx(5.0, abs=0.05)
 
 
 def test_projected_grids(srtm):

@@ -6,6 +6,9 @@ from __future__ import annotations
 
 import argparse
 import json
+import os
+import subprocess
+import sys
 import types
 from pathlib import Path
 
@@ -24,6 +27,55 @@ from tasks.io.sensors import LoadedModel
 from tests.scenes import dsm_against_truth
 
 SRTM = BUNDLED_SRTM_DIR / "N44E005.hgt"
+REPO = Path(__file__).resolve().parents[2]
+# a command's Prefect API when none is configured: a flow that logs, run between
+# prefect_api() and ready(), then the run and its log read back from a second temporary server
+# on the same PREFECT_HOME (what a dashboard started later would show)
+PROBE = """
+import json, os, sys
+from flows._env import configure_environment, prefect_api
+configure_environment(verbose=False)
+
+out = {}
+with prefect_api() as api:  # as a command does: before Prefect is imported
+    from prefect import flow, get_run_logger
+    from prefect.client.orchestration import get_client
+
+    @flow(name="probe-flow")
+    def probe(x: int) -> int:
+        get_run_logger().warning("probe says %d", x)
+        return x + 1
+
+    out["temporary"] = api.temporary
+    out["url"] = api.ready()
+    out["env_url_inside"] = os.environ.get("PREFECT_API_URL")
+    out["result"] = probe(41)
+    pid = api.process.pid
+out["server_gone"] = not os.path.exists(f"/proc/{pid}") or \\
+    open(f"/proc/{pid}/stat").read().split()[2] == "Z"
+out["env_url_after"] = os.environ.get("PREFECT_API_URL")
+out["server_module_imported"] = "prefect.server.api.server" in sys.modules
+with prefect_api() as api:  # Prefect imported by now
+    out["second_url"] = api.ready()
+    with get_client(sync_client=True) as client:
+        runs = [r for r in client.read_flow_runs() if r.name and r.state_name]
+        out["runs"] = [(client.read_flow(r.flow_id).name, r.state_name) for r in runs]
+        logs = client.read_logs()
+        out["logs"] = [lg.message for lg in logs]
+print("PROBE " + json.dumps(out))
+"""
+# a server named by a Prefect profile only (not the environment): the temporary server started
+# before Prefect's import is stopped again and the profile's server is the API
+PROFILE_PROBE = """
+import json, os
+from flows._env import configure_environment, prefect_api
+configure_environment(verbose=False)
+with prefect_api() as api:
+    out = {"url": api.ready(), "temporary": api.temporary}
+tasks = os.listdir("/proc/self/task")
+out["children"] = "".join(open(f"/proc/self/task/{t}/children").read() for t in tasks).split()
+print("PROBE " + json.dumps(out))
+"""
 
 
 def parse(*argv: str) -> argparse.Namespace:
@@ -164,3 +216,49 @@ def test_dsm_with_its_own_relative_orientation(prefect_harness, tiny_scene, tmp_
     assert n > 50_000 and abs(median) < 15.0 and nmad < 90.0, figures
     median, _, _ = figures["delivered"]
     assert median < -100.0, figures  # the relative orientation is what puts it on the ground
+
+
+def test_without_a_server_the_command_starts_prefects_temporary_server_at_once(tmp_path):
+    """No Prefect server configured: ``prefect_api`` starts Prefect's temporary server itself
+    (this process never imports the server), the flow runs against it, its log is drained
+    into it before it stops, and the run is in PREFECT_HOME's database afterwards, where a
+    later server (here a second temporary one) reads it back."""
+    env = {k: v for k, v in os.environ.items() if not k.startswith("PREFECT_API_")}
+    env.update(PREFECT_HOME=str(tmp_path / "prefect"))
+    proc = subprocess.run([sys.executable, "-c", PROBE], cwd=REPO, env=env,
+                          capture_output=True, text=True, timeout=600, check=False)
+    assert proc.returncode == 0, proc.stderr[-3000:]
+    out = json.loads(next(ln for ln in proc.stdout.splitlines()
+                          if ln.startswith("PROBE "))[len("PROBE "):])
+    assert out["temporary"] and out["url"].startswith("http://127.0.0.1:")
+    assert out["env_url_inside"] == out["url"] and out["env_url_after"] is None
+    assert out["result"] == 42 and out["server_gone"]
+    assert not out["server_module_imported"]
+    assert out["second_url"] != out["url"]
+    assert ["probe-flow", "Completed"] in out["runs"]
+    assert "probe says 41" in out["logs"]
+    assert "Traceback" not in proc.stderr
+
+
+def test_a_server_in_a_prefect_profile_is_used(tmp_path):
+    profiles = tmp_path / "profiles.toml"
+    profiles.write_text('active = "remote"\n[profiles.remote]\n'
+                        'PREFECT_API_URL = "http://127.0.0.1:9/api"\n')
+    env = {k: v for k, v in os.environ.items() if not k.startswith("PREFECT_API_")}
+    env.update(PREFECT_HOME=str(tmp_path / "prefect"), PREFECT_PROFILES_PATH=str(profiles))
+    proc = subprocess.run([sys.executable, "-c", PROFILE_PROBE], cwd=REPO, env=env,
+                          capture_output=True, text=True, timeout=300, check=False)
+    assert proc.returncode == 0, proc.stderr[-3000:]
+    out = json.loads(proc.stdout.split("PROBE ", 1)[1])
+    assert out == {"url": "http://127.0.0.1:9/api", "temporary": False, "children": []}
+
+
+def test_with_a_server_configured_nothing_is_started(prefect_harness):
+    """The test harness's server is configured: the runs go there, no process is started."""
+    from prefect.settings import PREFECT_API_URL
+
+    from flows._env import prefect_api
+
+    with prefect_api() as api:
+        assert not api.temporary and api.process is None
+        assert api.ready() == PREFECT_API_URL.value()
