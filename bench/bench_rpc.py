@@ -4,7 +4,12 @@ Run from the repository root::
 
     .venv/bin/python bench/bench_rpc.py [--n 1000000] [--repeat 3]
 
-Prints best-of-``repeat`` wall times, ratios and the largest disagreement; asserts nothing.
+Prints best-of-``repeat`` wall times, ratios (with the load average: the machine's other work
+slows every figure; read the ratios of one run) and the largest disagreement; asserts nothing.
+``gcpfree`` is the compiled kernel (:func:`core.kernels.rpc_project`, split over the cores);
+``gcpfree NumPy`` the same model evaluated with NumPy, the reference the kernel is tested
+against. The first call's time (Numba's import, then loading the kernel from its on-disk
+cache, or compiling it the first time) is printed apart.
 rpcm is optional (``pip install --no-deps rpcm``). Its package ``__init__`` imports ``srtm4``
 (which does not build here) and ``geojson``, so only its ``rpc_model`` module is loaded, through
 a bare package stub that skips that ``__init__``.
@@ -15,6 +20,7 @@ from __future__ import annotations
 import argparse
 import importlib
 import importlib.util
+import os
 import sys
 import time
 import types
@@ -40,6 +46,7 @@ def load_rpcm_model_module() -> types.ModuleType | None:
     if "rpcm" not in sys.modules:
         stub = types.ModuleType("rpcm")
         stub.__path__ = list(spec.submodule_search_locations)
+        stub.__spec__ = spec
         sys.modules["rpcm"] = stub
     try:
         return importlib.import_module("rpcm.rpc_model")
@@ -69,10 +76,17 @@ def main() -> None:
     lon = model.lon_off + model.lon_scale * rng.uniform(-1, 1, n)
     lat = model.lat_off + model.lat_scale * rng.uniform(-1, 1, n)
     h = model.alt_off + model.alt_scale * rng.uniform(-1, 1, n)
-    print(f"RPC: {GEOM.name}; projecting {n:,} points, best of {args.repeat}")
+    print(f"RPC: {GEOM.name}; projecting {n:,} points, best of {args.repeat}; "
+          f"{os.cpu_count()} cores, load average {os.getloadavg()[0]:.1f}")
 
+    t_first, _ = best_time(lambda: model.project(lon[:10], lat[:10], h[:10]), 1)
+    print(f"  first call (Numba import + kernel load or compile): {t_first:.2f} s")
     t_ours, (c_ours, r_ours) = best_time(lambda: model.project(lon, lat, h), args.repeat)
     results = {"gcpfree": t_ours}
+    t, (c, r) = best_time(lambda: model._project_numpy(lon, lat, h), args.repeat)
+    results["gcpfree NumPy"] = t
+    print(f"  max |gcpfree - gcpfree NumPy| = "
+          f"{max(np.max(np.abs(c - c_ours)), np.max(np.abs(r - r_ours))):.2e} px")
 
     rpcm_mod = load_rpcm_model_module()
     if rpcm_mod is not None:
@@ -90,6 +104,9 @@ def main() -> None:
     print(f"{'implementation':<22}{'time [s]':>10}{'M points/s':>12}{'time / gcpfree':>16}")
     for name, t in results.items():
         print(f"{name:<22}{t:>10.3f}{n / t / 1e6:>12.2f}{t / t_ours:>16.1f}")
+    if "rpcm" in results:
+        print(f"gcpfree is {results['rpcm'] / t_ours:.1f}x rpcm (target >= 10); load average "
+              f"{os.getloadavg()[0]:.1f}")
 
     # localisation, for information (Newton on project, from the affine first guess)
     t_loc, _ = best_time(lambda: model.localize(c_ours, r_ours, h), args.repeat)

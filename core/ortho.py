@@ -34,9 +34,8 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import NDArray
 from scipy.ndimage import maximum_filter
-from scipy.sparse import csr_matrix
 
-from core.dem import GeoDEM, SurfaceGrid, sample_bilinear
+from core.dem import GeoDEM, SurfaceGrid
 from core.errors import InputError
 from core.geoid import GeoidGrid
 from core.matching.grid import GridSpec
@@ -118,8 +117,11 @@ class TileDEM:
         return self.geoid.undulation_m(lon, lat)
 
     def height(self, fi: FloatArray, fj: FloatArray, n_m: FloatArray) -> FloatArray:
-        """Ellipsoidal height at grid indices, N given; NaN off the grid or next to a void."""
-        return sample_bilinear(self.z, fi, fj) + n_m
+        """Ellipsoidal height at grid indices, N given; NaN off the grid or next to a void
+        (the rule of :func:`core.dem.sample_bilinear`, compiled)."""
+        from core.kernels import bilinear  # imports Numba: only when a tile is computed
+
+        return bilinear(self.z, fi, fj) + n_m
 
 
 @dataclass(frozen=True, eq=False)
@@ -158,12 +160,13 @@ def _keys_weights(t: FloatArray) -> tuple[FloatArray, ...]:
 class _Axis:
     """Lattice nodes along one axis of ``n`` cells: every ``step`` cells from one step before
     the first cell to two steps past the last, so cubic convolution (4 taps) reaches every
-    cell; ``weights`` (n, n_nodes, sparse) interpolates node values at the cells."""
+    cell; cell ``k`` takes ``sum_a weights[k, a] * node_value[taps[k, a]]`` (both (n, 4))."""
 
     n: int
     step: int
     nodes: FloatArray
-    weights: csr_matrix
+    taps: NDArray[np.intp]
+    weights: FloatArray
 
     @classmethod
     def make(cls, n: int, step: int) -> _Axis:
@@ -171,10 +174,8 @@ class _Axis:
         m = -(-(n - 1) // step)  # last regular node at or past the last cell
         nodes = step * np.arange(-1, m + 3, dtype=np.float64)
         taps, w = cls._taps(step, np.arange(n, dtype=np.float64))
-        cells = np.tile(np.arange(n), 4)
-        weights = csr_matrix((np.concatenate(w), (cells, np.concatenate(taps))),
-                             shape=(n, nodes.size))
-        return cls(n, step, nodes, weights)
+        return cls(n, step, nodes, np.ascontiguousarray(np.stack(taps, axis=1)),
+                   np.ascontiguousarray(np.stack(w, axis=1)))
 
     @staticmethod
     def _taps(step: int, t: FloatArray) -> tuple[list[NDArray[np.intp]], tuple[FloatArray, ...]]:
@@ -196,8 +197,23 @@ class _Axis:
 
 
 def _upsample(node_values: FloatArray, rows: _Axis, cols: _Axis) -> FloatArray:
-    """Node values (ny, nx) interpolated at every cell (n_rows, n_cols)."""
-    return np.ascontiguousarray((cols.weights @ (rows.weights @ node_values).T).T)
+    """Node values (..., ny, nx) interpolated at every cell (..., n_rows, n_cols)."""
+    from core.kernels import upsample
+
+    v = np.asarray(node_values, dtype=np.float64)
+    out = upsample(v.reshape(-1, *v.shape[-2:]), rows.taps, rows.weights, cols.taps,
+                   cols.weights)
+    return out.reshape(*v.shape[:-2], rows.n, cols.n)
+
+
+def _cell_heights(dem: TileDEM, dem_nodes: tuple[FloatArray, FloatArray, FloatArray],
+                  rows: _Axis, cols: _Axis) -> FloatArray:
+    """Height of every cell: the DEM indices and undulation interpolated from the nodes, then
+    :meth:`TileDEM.height` there (one compiled pass, :func:`core.kernels.cell_heights`)."""
+    from core.kernels import cell_heights
+
+    return cell_heights(np.stack(dem_nodes), rows.taps, rows.weights, cols.taps, cols.weights,
+                        dem.z)
 
 
 def _at_points(node_values: FloatArray, rows: _Axis, cols: _Axis, i: FloatArray,
@@ -230,12 +246,11 @@ def _between_levels(degree: int) -> FloatArray:
     return np.cos(np.pi * (np.arange(degree) + 0.5) / degree)
 
 
-def _horner(coeffs: list[Callable[[], FloatArray]] | FloatArray, u: FloatArray) -> FloatArray:
-    """sum_k c_k u^k; ``coeffs`` (d + 1, ...) or a list of callables making each c_k."""
-    get = (lambda k: coeffs[k]()) if isinstance(coeffs, list) else (lambda k: coeffs[k])
-    acc = get(len(coeffs) - 1)
+def _horner(coeffs: FloatArray, u: FloatArray) -> FloatArray:
+    """sum_k c_k u^k; ``coeffs`` (d + 1, ...)."""
+    acc = coeffs[-1]
     for k in range(len(coeffs) - 2, -1, -1):
-        acc = acc * u + get(k)
+        acc = acc * u + coeffs[k]
     return acc
 
 
@@ -292,7 +307,7 @@ def tile_geometry(model: SensorModel, cells: GridSpec, dem: TileDEM, to_lonlat: 
         gi, gj = np.meshgrid(rows.nodes, cols.nodes, indexing="ij")
         lon_n, lat_n = (np.asarray(v, float) for v in to_lonlat(*_cell_xy(cells, gi, gj)))
         dem_nodes = (*dem.indices(lon_n, lat_n), dem.undulation(lon_n, lat_n))
-        h = dem.height(*(_upsample(v, rows, cols) for v in dem_nodes))
+        h = _cell_heights(dem, dem_nodes, rows, cols)
         finite = np.isfinite(h)
         if not finite.any():
             nan = np.full(cells.shape, np.nan)
@@ -316,11 +331,10 @@ def tile_geometry(model: SensorModel, cells: GridSpec, dem: TileDEM, to_lonlat: 
         if not any(refine):
             break
         steps = [max(1, s // 2) if r else s for s, r in zip(steps, refine, strict=True)]
-    u = fit.u(h)
-    col = _horner([lambda k=k: _upsample(fit.coeffs[0, k], rows, cols)
-                   for k in range(degree + 1)], u)
-    row = _horner([lambda k=k: _upsample(fit.coeffs[1, k], rows, cols)
-                   for k in range(degree + 1)], u)
+    from core.kernels import image_position
+
+    col, row = image_position(fit.coeffs, rows.taps, rows.weights, cols.taps, cols.weights, h,
+                              fit.h_mid, fit.h_half)
     occluded = None
     if config.occlusion:
         occluded = _occlusion(model, dem, fit, rows, cols, lon_n, lat_n, dem_nodes, h,
@@ -410,7 +424,10 @@ def _occlusion(model: SensorModel, dem: TileDEM, fit: _Fit, rows: _Axis, cols: _
     lon2, lat2 = model.localize(c, r, np.full(lon_n.shape, fit.h_mid + dh))
     gi0, gj0 = dem.indices(lon_n, lat_n)
     gi1, gj1 = dem.indices(np.asarray(lon2, float), np.asarray(lat2, float))
-    rays = [_upsample(v, rows, cols) for v in (*dem_nodes, (gi1 - gi0) / dh, (gj1 - gj0) / dh)]
+    rays = list(_upsample(np.stack([*dem_nodes, (gi1 - gi0) / dh, (gj1 - gj0) / dh]), rows,
+                          cols))
+    from core.kernels import bilinear
+
     occluded = np.zeros(h.shape, bool)
     z = np.asarray(dem.z, dtype=np.float64)
     top = _block_tops(z, OCCLUSION_BLOCK)
@@ -428,7 +445,7 @@ def _occlusion(model: SensorModel, dem: TileDEM, fit: _Fit, rows: _Axis, cols: _
         clear[on] = ray[on] > top[bi[on].astype(np.intp), bj[on].astype(np.intp)] + n_m[on]
         hidden = np.zeros(idx.size, bool)
         look = on & ~clear
-        zz = sample_bilinear(z, pi[look], pj[look]) + n_m[look]
+        zz = bilinear(z, pi[look], pj[look]) + n_m[look]
         hidden[look] = zz > ray[look] + tol_m
         occluded.ravel()[idx[hidden]] = True
         keep = on & ~hidden & (ray < z_top)
@@ -472,28 +489,22 @@ class SourceWindow:
                 self.row0 + self.n_rows * self.factor)
 
 
-def _inside_image(col: FloatArray, row: FloatArray, image_size: tuple[int, int]
-                  ) -> NDArray[np.bool_]:
-    w, hgt = image_size
-    with np.errstate(invalid="ignore"):
-        return (col >= -0.5) & (col <= w - 0.5) & (row >= -0.5) & (row <= hgt - 0.5)
-
-
 def source_window(col: FloatArray, row: FloatArray, image_size: tuple[int, int],
                   resampling: str) -> SourceWindow | None:
     """The window of the image (``image_size`` = (cols, rows)) the positions need, with the
     resampling kernel's margin; None when no position falls in the image."""
-    inside = _inside_image(col, row, image_size)
-    if not inside.any():
+    from core.kernels import footprint_bounds
+
+    n_inside, c_min, c_max, r_min, r_max = footprint_bounds(col, row, image_size)
+    if n_inside == 0:
         return None
     factor = _decimation(col, row)
     margin = (KERNEL_RADIUS[resampling] + 1) * factor
-    c, r = col[inside], row[inside]
     w, hgt = image_size
-    c0 = max(0, math.floor(c.min()) - margin)
-    r0 = max(0, math.floor(r.min()) - margin)
-    c1 = min(w, math.ceil(c.max()) + margin + 1)
-    r1 = min(hgt, math.ceil(r.max()) + margin + 1)
+    c0 = max(0, math.floor(c_min) - margin)
+    r0 = max(0, math.floor(r_min) - margin)
+    c1 = min(w, math.ceil(c_max) + margin + 1)
+    r1 = min(hgt, math.ceil(r_max) + margin + 1)
     n_c, n_r = max(1, (c1 - c0) // factor), max(1, (r1 - r0) // factor)
     return SourceWindow(c0, r0, n_c, n_r, factor)
 
@@ -517,49 +528,17 @@ def resample(window: NDArray, win: SourceWindow, col: FloatArray, row: FloatArra
     """Image values at (col, row) from ``window`` (the pixels of ``win``); NaN outside the
     image footprint, where the position is NaN, or where the kernel touches ``nodata``.
 
-    ``nearest`` takes the pixel holding the point, ``bilinear`` the one bilinear sampler
-    (:func:`core.dem.sample_bilinear`), ``cubic`` cubic convolution (Keys, a = -0.5). The
-    window is padded by repeating its edges so the whole pixel footprint has values.
+    ``nearest`` takes the pixel holding the point, ``bilinear`` the bilinear sampler of
+    :func:`core.dem.sample_bilinear` (NaN next to a nodata pixel), ``cubic`` cubic
+    convolution (Keys, a = -0.5). The window's edges repeat beyond it so the whole pixel
+    footprint has values. One compiled pass over the cells
+    (:func:`core.kernels.resample_window`).
     """
-    src = np.asarray(window, dtype=np.float64)
-    if nodata is not None and not math.isnan(nodata):
-        src = np.where(window == nodata, np.nan, src)
-    p = KERNEL_RADIUS[resampling] + 1
-    src = np.pad(src, p, mode="edge")
-    f = win.factor
-    lc = (col - win.col0 - 0.5 * (f - 1)) / f + p
-    lr = (row - win.row0 - 0.5 * (f - 1)) / f + p
-    out = np.full(col.shape, np.nan)
-    ok = _inside_image(col, row, image_size) & np.isfinite(col) & np.isfinite(row)
-    if not ok.any():
-        return out
-    lc, lr = lc[ok], lr[ok]
-    if resampling == "nearest":
-        i = np.clip(np.floor(lr + 0.5).astype(np.intp), 0, src.shape[0] - 1)
-        j = np.clip(np.floor(lc + 0.5).astype(np.intp), 0, src.shape[1] - 1)
-        out[ok] = src[i, j]
-    elif resampling == "bilinear":
-        out[ok] = sample_bilinear(src, lr, lc)
-    else:
-        out[ok] = _cubic(src, lr, lc)
-    return out
+    from core.kernels import BILINEAR, CUBIC, NEAREST, resample_window
 
-
-def _cubic(src: FloatArray, fi: FloatArray, fj: FloatArray) -> FloatArray:
-    """Cubic convolution at fractional (row, col) indices of ``src`` (NaN taps give NaN)."""
-    i0, j0 = np.floor(fi), np.floor(fj)
-    wi, wj = _keys_weights(fi - i0), _keys_weights(fj - j0)
-    i0, j0 = i0.astype(np.intp), j0.astype(np.intp)
-    n_r, n_c = src.shape
-    flat = src.ravel()
-    out = np.zeros(fi.shape)
-    for a in range(4):
-        ii = np.clip(i0 + a - 1, 0, n_r - 1) * n_c
-        row_sum = np.zeros(fi.shape)
-        for b in range(4):
-            row_sum += wj[b] * flat[ii + np.clip(j0 + b - 1, 0, n_c - 1)]
-        out += wi[a] * row_sum
-    return out
+    kind = {"nearest": NEAREST, "bilinear": BILINEAR, "cubic": CUBIC}[resampling]
+    return resample_window(np.asarray(window), col, row, (win.col0, win.row0), win.factor,
+                           image_size, nodata, kind, KERNEL_RADIUS[resampling] + 1)
 
 
 def to_dtype(values: FloatArray, dtype: np.dtype | str, nodata: float | None) -> NDArray:
@@ -569,14 +548,12 @@ def to_dtype(values: FloatArray, dtype: np.dtype | str, nodata: float | None) ->
     dtype = np.dtype(dtype)
     if dtype.kind in "iu":
         info = np.iinfo(dtype)
-        v = np.clip(np.rint(values), info.min, info.max)
-        if nodata is not None and not math.isnan(nodata):
-            bump = 1 if nodata < info.max else -1
-            v = np.where(v == nodata, nodata + bump, v)
-            v = np.where(np.isnan(values), nodata, v)
-        else:
-            v = np.where(np.isnan(values), 0, v)
-        return v.astype(dtype)
+        if nodata is None or math.isnan(nodata) or info.min <= nodata <= info.max:
+            from core.kernels import to_integer
+
+            return to_integer(values, dtype, nodata)  # one compiled pass
+        v = np.clip(np.rint(values), info.min, info.max)  # a nodata the type cannot hold
+        return np.where(np.isnan(values), nodata, v).astype(dtype)
     out = values.astype(np.float32)
     if nodata is not None and not math.isnan(nodata):
         out[np.isnan(out)] = nodata

@@ -228,6 +228,22 @@ class RPCModel:
             np.asarray(lat_deg, dtype=np.float64),
             np.asarray(h_m, dtype=np.float64),
         )
+        from core.kernels import rpc_project  # imports Numba: only when projecting
+
+        col, row = rpc_project(self._forward, lon.ravel(), lat.ravel(), h.ravel(),
+                               self._ground_norm, self._image_affine)
+        return col.reshape(lon.shape), row.reshape(lon.shape)
+
+    def _project_numpy(
+        self, lon_deg: ArrayLike, lat_deg: ArrayLike, h_m: ArrayLike
+    ) -> tuple[FloatArray, FloatArray]:
+        """:meth:`project` evaluated with NumPy (:func:`~core.sensors.rpc00b.rational_functions`):
+        the reference the compiled kernel is tested against."""
+        lon, lat, h = np.broadcast_arrays(
+            np.asarray(lon_deg, dtype=np.float64),
+            np.asarray(lat_deg, dtype=np.float64),
+            np.asarray(h_m, dtype=np.float64),
+        )
         shape = lon.shape
         v = rational_functions(
             self._forward, lon.ravel(), lat.ravel(), h.ravel(),
@@ -241,6 +257,20 @@ class RPCModel:
         row += self.row_off
         col, row = self._apply_bias(col, row)
         return col.reshape(shape), row.reshape(shape)
+
+    @cached_property
+    def _ground_norm(self) -> FloatArray:
+        """lon_off, lat_off, alt_off, lon_scale, lat_scale, alt_scale (the compiled kernel's)."""
+        return np.array([self.lon_off, self.lat_off, self.alt_off,
+                         self.lon_scale, self.lat_scale, self.alt_scale])
+
+    @cached_property
+    def _image_affine(self) -> FloatArray:
+        """col_scale, col_off, row_scale, row_off, then the bias A (row-major), t and 1.0
+        when there is a bias (0.0 when none)."""
+        a, t = self._bias_matrix()
+        return np.array([self.col_scale, self.col_off, self.row_scale, self.row_off,
+                         *a.ravel(), *t, float(self.bias_mode != "none")])
 
     @cached_property
     def _forward_with_derivatives(self) -> FloatArray:

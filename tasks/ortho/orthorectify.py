@@ -290,6 +290,17 @@ def _as_type(values: np.ndarray, out_dtype: np.dtype, nodata: float | None) -> n
     return to_dtype(values, out_dtype, nodata)
 
 
+def _tile_extreme(block: np.ndarray, ufunc: np.ufunc, initial: float) -> np.ndarray:
+    return np.full((1, 1), ufunc.reduce(block.ravel(), initial=initial))
+
+
+def _per_tile(plane: darr.Array, ufunc: np.ufunc, initial: float) -> darr.Array:
+    """One value per tile: ``ufunc`` (np.fmax or np.fmin: NaN skipped) over the tile's cells,
+    ``initial`` when all are NaN; one pass, no temporary array of the tile's size."""
+    return plane.map_blocks(_tile_extreme, ufunc, initial, dtype=plane.dtype,
+                            chunks=tuple((1,) * len(c) for c in plane.chunks))
+
+
 def _occlusion_codes(occluded: np.ndarray) -> np.ndarray:
     return np.where(np.isnan(occluded), OCCLUSION_NODATA, occluded).astype(np.uint8)
 
@@ -325,8 +336,7 @@ def orthorectify(plan: OrthoPlan, out: Path, config: OrthoConfig = DEFAULT_CONFI
             tags={"values": "0 seen, 1 hidden from the sensor by relief, 255 no data"},
             **georef)))
     counts = [darr.isfinite(values).sum(), (stack[1] == 1).sum(),
-              darr.where(darr.isnan(stack[2]), -1.0, stack[2]).max(),
-              darr.where(darr.isnan(stack[3]), np.inf, stack[3]).min()]
+              _per_tile(stack[2], np.fmax, -1.0).max(), _per_tile(stack[3], np.fmin, np.inf).min()]
     with threads(num_workers):
         n_valid, n_hidden, err, step = write_arrays_cog(items, extra=counts)
     n_valid = int(n_valid)
