@@ -185,7 +185,7 @@ def dense_tile(
         rw2, rv2 = warp(half)[2:]
         second = sgbm_disparity(l8, prepared(rw2, rv2)[0], plan.n_disp, cfg,
                                 upside_down=cfg.second_upside_down)
-        disp = average_half_pixel(disp, second, cfg.lr_max_diff_px)
+        disp = average_half_pixel(disp, second)
     disp = outside_prior(disp, plan.d_pred_px)
     u0, v0, w, _ = plan.window
     uu, vv, core = core_pixels(rect, plan.window, plan.core)

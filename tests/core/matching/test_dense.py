@@ -163,7 +163,7 @@ def test_averaging_with_a_half_pixel_shift_cancels_the_pull_to_whole_pixels(scen
     first = match_disparity(quantize(lz, ok), quantize(rz, ok), ok, ok, 32, MatchingConfig(),
                             lz, rz)
     second = sgbm_disparity(quantize(lz, ok), quantize(rz2, ok), 32)
-    both = average_half_pixel(first, second, 1.0)
+    both = average_half_pixel(first, second)
     v, u = np.mgrid[0:H, 0:W]
     front = (u > SQ[2] + 8) & (u < SQ[3] - 8) & (v > SQ[0] + 8) & (v < SQ[1] - 8)
     err1 = np.nanmedian(first.disparity_px[front]) - D_FRONT
