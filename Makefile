@@ -23,8 +23,8 @@ demo: $(STAMP)
 	mkdir -p $(OUT)
 	$(VENV)/bin/gcpfree prepare-reference --bbox 5.0 44.0 6.0 45.0 \
 	    --out $(OUT)/reference.tif --hillshade $(OUT)/reference.png
-	$(VENV)/bin/gcpfree simulate --preset tiny --seed 1 --center 5.25 44.2 \
-	    --lens --jitter --date-change 0.1 --out $(OUT)/scene_tiny
+	$(VENV)/bin/gcpfree simulate --preset tiny --seed 1 --center 5.75 44.75 \
+	    --lens --date-change 0.1 --out $(OUT)/scene_tiny
 	$(VENV)/bin/gcpfree pair --left $(OUT)/scene_tiny/left.tif \
 	    --right $(OUT)/scene_tiny/right.tif --reference $(OUT)/scene_tiny/reference.tif \
 	    --checkpoints $(OUT)/scene_tiny/truth/checkpoints.json \

@@ -33,7 +33,9 @@ class OrientParams:
 
     ``corrections``: the terms adjusted per image (``linear``: pushbroom attitude biases and
     rates, RPC affine; ``offset``: biases, RPC shift). ``self_calibrate``: try lens terms on
-    pushbroom images, keep the significant ones. ``spacing_m``: distance between surface
+    pushbroom images, keep the significant ones. ``along_track``: estimate the attitude's
+    along-track profile of pushbroom images (harmonics in time, as many as the data choose,
+    none included). ``spacing_m``: distance between surface
     matching windows (default their radius). ``min_windows``: windows whose relief must
     qualify, else InsufficientReliefError.
     """
@@ -42,6 +44,7 @@ class OrientParams:
     out: Path
     checkpoints: Path | None = None
     self_calibrate: bool = False
+    along_track: bool = True
     corrections: str = "linear"
     spacing_m: float | None = None
     min_windows: int = 8
@@ -128,7 +131,8 @@ def orient_flow(params: OrientParams) -> OrientOutcome:
             f"{verdict.relief_found_m:.1f} m per window), clouds, voids or a wrong reference")
     write_gcps(out / "gcps.json", gcps)
     absolute = orient_absolute(rel.left, rel.right, gcps, out, params.corrections,
-                               params.self_calibrate, params.absolute)
+                               params.self_calibrate, params.absolute, ties,
+                               params.along_track)
     final = {}
     for vert, name in (("ellipsoidal", "dsm.tif"), ("egm96", "dsm_egm96.tif")):
         vcfg = replace(dense_cfg, vertical=vert)

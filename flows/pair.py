@@ -40,6 +40,7 @@ class PairParams:
     lidar_vertical: str = "auto"
     checkpoints: Path | None = None
     self_calibrate: bool = False
+    along_track: bool = True
     corrections: str = "linear"
     surface: SurfaceMatchConfig | None = None
     spacing_m: float | None = None
@@ -161,7 +162,8 @@ def pair_flow(params: PairParams) -> PairOutcome:
     else:
         orient_flow(OrientParams(
             pair=pair, out=out, checkpoints=params.checkpoints,
-            self_calibrate=params.self_calibrate, corrections=params.corrections,
+            self_calibrate=params.self_calibrate, along_track=params.along_track,
+            corrections=params.corrections,
             workers=params.workers, progress=params.progress, spacing_m=params.spacing_m,
             min_windows=params.min_windows, surface=params.surface or SurfaceMatchConfig()))
     done("orient")

@@ -23,6 +23,8 @@ from numpy.typing import ArrayLike, NDArray
 
 from core.errors import ConvergenceError, GeometryError, InputError, InsufficientDataError
 from core.geodesy import geodetic_to_ecef
+from core.orientation.equations import GROUPS, Equations, prior_rows
+from core.orientation.ties import TieObservations
 from core.orientation.uncertainty import (
     PredictedAccuracy,
     VarianceComponents,
@@ -53,7 +55,13 @@ class AbsoluteConfig(RobustAdjustment):
     Off: today's robust solution and its covariance scaled by the robust ``sigma0``.
     ``reference_sigma_m``: the reference's registration error (east, north, up; m, 1 sigma),
     common to every GCP and so invisible in their residuals, which the predicted check-point
-    RMS adds (:meth:`AbsoluteOrientation.predict`); 5 m as the relative orientation assumes."""
+    RMS adds (:meth:`AbsoluteOrientation.predict`); 5 m as the relative orientation assumes.
+    ``prior_px``, ``prior_terms``: the adjusted parameters named in ``prior_terms`` (the
+    additional parameters of self-calibration: lens, look-angle scale, bow) are constrained to
+    their delivered values, their joint effect on the image beyond what the attitude absorbs
+    worth ``prior_px`` pixels RMS, 1 sigma (:func:`core.orientation.equations.prior_rows`):
+    a calibration error the producer left larger than that would have been
+    seen, and a term the GCPs cannot determine stays put instead of running away."""
 
     huber_k: float = 2.0
     reject_k: float = 3.5
@@ -63,6 +71,8 @@ class AbsoluteConfig(RobustAdjustment):
     variance_components: bool = True
     split_alpha: float = 0.01
     reference_sigma_m: tuple[float, float, float] = (5.0, 5.0, 5.0)
+    prior_px: float = 2.0
+    prior_terms: tuple[str, ...] = ("focal_scale", "k1", "k3", "p1", "p2")
 
     def __post_init__(self) -> None:
         super().__post_init__()
@@ -70,6 +80,8 @@ class AbsoluteConfig(RobustAdjustment):
             raise InputError("need matching_sigma_px > 0 and min_gcps >= 1")
         if len(self.reference_sigma_m) != 3 or min(self.reference_sigma_m) < 0:
             raise InputError("reference_sigma_m is (east, north, up) in metres, each >= 0")
+        if not self.prior_px > 0:
+            raise InputError(f"prior_px is a sigma in pixels, > 0; got {self.prior_px}")
         if not 0.0 < self.split_alpha < 1.0:
             raise InputError(f"split_alpha is a probability in (0, 1), got {self.split_alpha}")
 
@@ -164,6 +176,8 @@ class AbsoluteOrientation:
     n_iterations: int
     converged: bool
     components: VarianceComponents | None = None
+    n_ties: int = 0
+    tie_rms_px: float | None = None
 
     @property
     def rejected(self) -> NDArray[np.intp]:
@@ -228,6 +242,8 @@ class AbsoluteOrientation:
             "rejected": [{"index": int(i), "reason": self.reasons[int(i)]}
                          for i in self.rejected],
             "n_iterations": self.n_iterations, "converged": self.converged,
+            "tie_points": ({"n": self.n_ties, "rms_px": self.tie_rms_px} if self.n_ties
+                           else None),
             "variance_components": (self.components.to_dict() if self.components is not None
                                     else None),
         }
@@ -274,11 +290,19 @@ def _damped_step(models: list[SensorModel], dp: FloatArray, offsets: NDArray[np.
 
 def absolute_orientation(models: Sequence[SensorModel], obs: Observations,
                          names: Sequence[str] | None = None,
-                         config: AbsoluteConfig = AbsoluteConfig()) -> AbsoluteOrientation:
-    """Adjust every model's current parameters to the GCPs (robust, with blunder rejection).
+                         config: AbsoluteConfig = AbsoluteConfig(),
+                         ties: TieObservations | None = None) -> AbsoluteOrientation:
+    """Adjust every model's current parameters to the GCPs (robust, with blunder rejection),
+    and to the tie points ``ties`` when given (their ground unknowns removed:
+    :mod:`core.orientation.ties`), the additional parameters held by their priors
+    (``config.prior_terms``).
+
+    Levenberg-Marquardt on the parameters scaled to their effect in pixels (each column of the
+    design over its weighted norm), the robust weights of each iteration fixed while its step is
+    searched: a step is taken only when it lowers the weighted squares.
 
     Raises InsufficientDataError with fewer than ``config.min_gcps`` GCPs kept and
-    ConvergenceError when Gauss-Newton does not settle.
+    ConvergenceError when the adjustment does not settle.
     """
     models = list(models)
     names = tuple(names) if names is not None else tuple(f"image{i}" for i in range(len(models)))
@@ -294,29 +318,46 @@ def absolute_orientation(models: Sequence[SensorModel], obs: Observations,
     sigma = observation_sigmas_px(models, obs, config.matching_sigma_px)
     seen = np.isfinite(col) & np.isfinite(row)
     inlier = seen.any(axis=1)
+    eqs = Equations(obs, col, row, sigma, seen, offsets, ties,
+                     prior_rows(models, obs, config.prior_px, config.prior_terms))
     reasons: dict[int, str] = {}
     iterations, converged = 0, False
+    lam = 1e-4
     for _ in range(config.max_rejection_rounds + 1):
         if inlier.sum() < config.min_gcps:
             raise InsufficientDataError(
                 f"only {int(inlier.sum())} of {n_gcp} GCPs agree with one another "
                 f"({config.min_gcps} needed); the GCPs are unreliable")
         converged = False
+        system = eqs.build(models, inlier)
         for _ in range(config.max_iterations):
             iterations += 1
-            a, r, q, _ = _linearise(models, obs, col, row, sigma, inlier[:, None] & seen,
-                                    offsets)
-            w0 = 1.0 / q
-            z = np.abs(r) * np.sqrt(w0)
-            w = w0 * huber_weights(z, config.huber_k)
+            a, r = system.a, system.r
+            w0 = 1.0 / system.q
+            w = w0 * huber_weights(np.abs(r) * np.sqrt(w0), config.huber_k)
             scale = np.sqrt(np.sum(a**2 * w[:, None], axis=0))
             scale = np.where(scale > 0, scale, 1.0)
             normal = (a / scale).T @ ((a / scale) * w[:, None])
-            dp = np.linalg.lstsq(normal, (a / scale).T @ (w * r), rcond=1e-12)[0] / scale
-            models[:] = _damped_step(models, dp, offsets, obs, inlier[:, None] & seen)
+            grad = (a / scale).T @ (w * r)
+            cost = float(np.sum(w * r**2))
+            for _ in range(12):  # Levenberg-Marquardt: damp until the step lowers the cost
+                damped = normal + lam * np.diag(np.diag(normal))
+                dp = np.linalg.lstsq(damped, grad, rcond=1e-12)[0] / scale
+                trial = _damped_step(models, dp, offsets, obs, inlier[:, None] & seen)
+                trial_system = eqs.build(trial, inlier, jacobian=False)
+                if float(np.sum(w * trial_system.r**2)) <= cost * (1.0 + 1e-9):
+                    lam = max(lam / 10.0, 1e-9)
+                    break
+                lam *= 10.0
+            else:  # no step lowers the cost: at its minimum
+                converged = True
+                break
+            models[:] = trial
+            eqs.accept(trial_system)
             if np.max(np.abs(a @ dp)) < config.tol_px:
                 converged = True
                 break
+            system = eqs.build(models, inlier)
         if not converged:
             raise ConvergenceError(
                 f"absolute orientation did not converge in {config.max_iterations} iterations; "
@@ -343,12 +384,15 @@ def absolute_orientation(models: Sequence[SensorModel], obs: Observations,
     s0 = _sigma0(models, obs, col, row, sigma, seen, inlier, offsets[-1])
     comps = None
     if config.variance_components:
-        models[:], cov, comps = _calibrated(models, obs, col, row, sigma,
-                                            inlier[:, None] & seen, offsets, config)
+        models[:], cov, comps = _calibrated(models, eqs, inlier, offsets, obs, seen, config)
         iterations += comps.n_iterations
     else:
-        cov = s0**2 * np.linalg.pinv((a / scale).T @ ((a / scale) * w0[:, None])) / np.outer(
-            scale, scale)
+        system = eqs.build(models, inlier)
+        w0 = 1.0 / system.q
+        scale = np.sqrt(np.sum(system.a**2 * w0[:, None], axis=0))
+        scale = np.where(scale > 0, scale, 1.0)
+        a_s = system.a / scale
+        cov = s0**2 * np.linalg.pinv(a_s.T @ (a_s * w0[:, None])) / np.outer(scale, scale)
     residuals = []
     for m, model in enumerate(models):
         use = inlier & seen[:, m]
@@ -359,66 +403,64 @@ def absolute_orientation(models: Sequence[SensorModel], obs: Observations,
             float(np.mean(dr)) if dr.size else 0.0, dc, dr,
             float(np.sqrt(neighbour_covariance(col[use, m], row[use, m], dc))),
             float(np.sqrt(neighbour_covariance(col[use, m], row[use, m], dr)))))
+    n_ties, tie_rms = 0, None
+    if ties is not None and ties.n:
+        final = eqs.build(models, inlier, jacobian=False)
+        n_ties = ties.n
+        tie_rms = _rms(final.r[final.group == 2]) * ties.sigma_px
     return AbsoluteOrientation(
         models=tuple(models), names=names, param_names=tuple(m.param_names for m in models),
         params_before=before, params_after=tuple(m.params.copy() for m in models),
         covariance=cov, sigma0=s0, residuals=tuple(residuals), inlier=inlier, reasons=reasons,
-        n_iterations=iterations, converged=converged, components=comps)
+        n_iterations=iterations, converged=converged, components=comps, n_ties=n_ties,
+        tie_rms_px=tie_rms)
 
 
-def _linearise(models: Sequence[SensorModel], obs: Observations, col: FloatArray,
-               row: FloatArray, sigma: FloatArray, use: NDArray[np.bool_],
-               offsets: NDArray[np.intp]) -> tuple[FloatArray, FloatArray, FloatArray,
-                                                   NDArray[np.intp]]:
-    """The GCP equations of every model at its current parameters: the design (2 rows per
-    measurement, col then row, over all images' parameters), the residuals (measured -
-    projected, px), their a-priori variances (px^2) and the axis of each row (0 col, 1 row).
-    ``use``: (n_gcp, n_model) the measurements taken."""
-    a_blocks, res, var = [], [], []
-    for m, model in enumerate(models):
-        u = use[:, m]
-        pc, pr = model.project(obs.lon_deg[u], obs.lat_deg[u], obs.h_m[u])
-        jac = model.jacobian(obs.lon_deg[u], obs.lat_deg[u], obs.h_m[u])
-        full = np.zeros((u.sum(), 2, offsets[-1]))
-        full[:, :, offsets[m]:offsets[m + 1]] = jac
-        a_blocks.append(full.reshape(-1, offsets[-1]))
-        res.append(np.stack([col[u, m] - pc, row[u, m] - pr], axis=1).ravel())
-        var.append(np.repeat(sigma[u, m] ** 2, 2))
-    r = np.concatenate(res)
-    return np.vstack(a_blocks), r, np.concatenate(var), np.tile([0, 1], r.size // 2)
-
-
-def _calibrated(models: list[SensorModel], obs: Observations, col: FloatArray, row: FloatArray,
-                sigma: FloatArray, use: NDArray[np.bool_], offsets: NDArray[np.intp],
+def _calibrated(models: list[SensorModel], eqs: Equations, inlier: NDArray[np.bool_],
+                offsets: NDArray[np.intp], obs: Observations, seen: NDArray[np.bool_],
                 config: AbsoluteConfig) -> tuple[list[SensorModel], FloatArray,
                                                   VarianceComponents]:
-    """The models re-adjusted on the GCPs kept with their sigmas calibrated by variance
-    components (columns and rows apart when the F test separates them, else one factor), the
-    covariance under those components, and the components."""
+    """The models re-adjusted on the GCPs kept (and the tie points and priors) with their
+    sigmas calibrated by variance components: GCP columns and rows apart when the F test
+    separates them, else one factor; the tie points their own; the priors fixed. The covariance
+    under those components, and the components."""
+    use = inlier[:, None] & seen
 
-    def solve(names: tuple[str, ...]) -> tuple[list[SensorModel], FloatArray,
-                                               VarianceComponents]:
+    present = np.unique(eqs.build(models, inlier, jacobian=False).group)
+
+    def solve(split: bool) -> tuple[list[SensorModel], FloatArray, VarianceComponents]:
         moved, factors, n_it = list(models), None, 0
+        kept = [k for k in present if split or k != 1]  # one GCP group: rows join columns
+        names = tuple(("gcp_col" if split else "gcp") if k == 0 else GROUPS[k] for k in kept)
+        lookup = np.zeros(len(GROUPS), dtype=np.intp)
+        lookup[kept] = np.arange(len(kept))
+        if not split:
+            lookup[1] = 0
+
+        def grouped(g: NDArray[np.intp]) -> NDArray[np.intp]:
+            return lookup[g]
+
         for _ in range(config.max_iterations):
-            a, r, q, axis = _linearise(moved, obs, col, row, sigma, use, offsets)
-            groups = axis if len(names) == 2 else np.zeros_like(axis)
-            sol = solve_with_components(a, r, q, groups, names, factors)
+            sys_ = eqs.build(moved, inlier)
+            sol = solve_with_components(sys_.a, sys_.r, sys_.q, grouped(sys_.group), names,
+                                        factors, fixed=("prior",))
             factors, n_it = sol.components.factors, n_it + sol.components.n_iterations
             moved = _damped_step(moved, sol.dx, offsets, obs, use)
-            if np.max(np.abs(a @ sol.dx)) < config.tol_px:
+            eqs.accept(sys_)
+            if np.max(np.abs(sys_.a @ sol.dx)) < config.tol_px:
                 break
-        a, r, q, axis = _linearise(moved, obs, col, row, sigma, use, offsets)
-        groups = axis if len(names) == 2 else np.zeros_like(axis)
-        sol = solve_with_components(a, r, q, groups, names, factors)
+        sys_ = eqs.build(moved, inlier)
+        sol = solve_with_components(sys_.a, sys_.r, sys_.q, grouped(sys_.group), names, factors,
+                                    fixed=("prior",))
         return moved, sol.covariance, replace(sol.components, n_iterations=n_it)
 
-    split = solve(("gcp_col", "gcp_row"))
+    split = solve(True)
     c = split[2]
     if components_differ(c, 0, 1, config.split_alpha):
         return split[0], split[1], replace(
             c, split=f"columns and rows apart: factors {c.factors[0]:.3g} and "
                      f"{c.factors[1]:.3g} differ (F test at {config.split_alpha:g})")
-    one = solve(("gcp",))
+    one = solve(False)
     return one[0], one[1], replace(
         one[2], split=f"one factor: columns {c.factors[0]:.3g} and rows {c.factors[1]:.3g} "
                       f"alike (F test at {config.split_alpha:g})")

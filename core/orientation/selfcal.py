@@ -1,11 +1,21 @@
-"""Lens self-calibration inside the absolute orientation (Toutin 2006).
+"""Self-calibration of the cameras inside the absolute orientation (Toutin 2006).
 
-The rigorous models' radial symmetric (``k1 r + k3 r^3``) and decentering (``p1, p2``) terms
-(:mod:`core.sensors.linear_array`) are added to the adjusted parameters of every pushbroom
-image; a term is kept only when its estimate is significant against its own sigma
-(``|estimate| > t sigma``), and the adjustment is redone with the significant terms alone.
-RPC models have no lens: an affine image correction cannot absorb a distortion, and their
-images are left as they are (the report says so).
+The rigorous models' distortion terms (:mod:`core.sensors.linear_array`) are added to the
+adjusted parameters of every pushbroom image. Over a detector line (along the focal plane's
+``y``) they are the calibration errors real products carry (:data:`TERMS`, the menu): the
+look-angle scale (``k1``: across-track angles scaled about the principal point), the bow of the
+line (``p1``: an along-track displacement growing with the square of the distance to the
+centre), the cubic radial term (``k3``) and an across-track quadratic (``p2``). Each term is held
+by a prior worth a couple of pixels (:class:`~core.orientation.absolute.AbsoluteConfig`), so
+one the data cannot determine stays put.
+
+An image's terms are kept when they are significant together (a Wald test) and worth it: they
+lower its GCP column RMS, or the tie points' parallax RMS, by ``min_col_drop``. With tie points
+(``ties``) the adjustment carries the images' relative geometry, which the reference DEM's
+errors never reach: their parallax RMS falling significantly with the terms (an F test) keeps
+the terms of every pushbroom image, whatever the GCPs' noise. RPC models have no lens: an
+affine image correction cannot absorb a distortion, and their images are left as they are (the
+report says so).
 """
 
 from __future__ import annotations
@@ -23,10 +33,12 @@ from core.orientation.absolute import (
     Observations,
     absolute_orientation,
 )
+from core.orientation.ties import TieObservations
 from core.sensors.base import SensorModel
 from core.sensors.pushbroom import PushbroomModel
 
 LENS_TERMS = ("k1", "k3", "p1", "p2")
+TERMS = {"look_scale": "k1", "bow": "p1", "radial_cubic": "k3", "across_quadratic": "p2"}
 
 
 @dataclass(frozen=True, eq=False)
@@ -42,6 +54,9 @@ class SelfCalibration:
     with_lens: AbsoluteOrientation | None
     significant: dict[str, dict[str, tuple[float, float]]] = field(default_factory=dict)
     t_threshold: float = 3.0
+    wald: dict[str, float] = field(default_factory=dict)
+    wald_limit: float = float("nan")
+    ties: dict[str, float] = field(default_factory=dict)
 
     @property
     def applied(self) -> bool:
@@ -86,8 +101,12 @@ class SelfCalibration:
 
     def to_dict(self) -> dict[str, Any]:
         return {"applied": self.applied, "t_threshold": self.t_threshold,
-                "significant": {n: {k: {"estimate": e, "sigma": s} for k, (e, s) in terms.items()}
+                "significant": {n: {k: {"estimate": e, "sigma": s,
+                                        "term": next((t for t, v in TERMS.items() if v == k), k)}
+                                    for k, (e, s) in terms.items()}
                                 for n, terms in self.significant.items()},
+                "wald": self.wald, "wald_limit": self.wald_limit,
+                "tie_points": self.ties or None,
                 "improvement": self.improvement()}
 
 
@@ -115,7 +134,8 @@ def _wald(result: AbsoluteOrientation, name: str, terms: Sequence[str]) -> float
 
 def self_calibrate(models: Sequence[SensorModel], obs: Observations, names: Sequence[str],
                    config: AbsoluteConfig = AbsoluteConfig(), terms: Sequence[str] = LENS_TERMS,
-                   t_threshold: float = 3.0, min_col_drop: float = 0.15) -> SelfCalibration:
+                   t_threshold: float = 3.0, min_col_drop: float = 0.15,
+                   ties: TieObservations | None = None) -> SelfCalibration:
     """Orient without lens terms, then with ``terms`` on every pushbroom image; keep an
     image's terms when they are significant together and worth it, and orient again with
     those.
@@ -131,10 +151,10 @@ def self_calibrate(models: Sequence[SensorModel], obs: Observations, names: Sequ
     (``--lens``, 1.5 px at the CCD ends) lowered it by 39-58 % (``spot``, ``tiny``). GCPs
     rejected without lens terms stay rejected (blunders, not distortion).
     """
-    from scipy.stats import chi2, norm
+    from scipy.stats import chi2, f, norm
 
     names = tuple(names)
-    without = absolute_orientation(models, obs, names, config)
+    without = absolute_orientation(models, obs, names, config, ties)
     trial_models = [_with_terms(m, terms) for m in without.models]
     if all(tm is m for tm, m in zip(trial_models, without.models, strict=True)):
         return SelfCalibration(without, None, {}, t_threshold)
@@ -143,29 +163,52 @@ def self_calibrate(models: Sequence[SensorModel], obs: Observations, names: Sequ
                              np.asarray(obs.col)[keep], np.asarray(obs.row)[keep],
                              obs.sigma_xy_m[keep], obs.sigma_h_m[keep])
     try:
-        trial = absolute_orientation(trial_models, trial_obs, names, config)
+        trial = absolute_orientation(trial_models, trial_obs, names, config, ties)
     except (ConvergenceError, GeometryError):  # lens terms the GCPs cannot carry: none kept
         return SelfCalibration(without, None, {}, t_threshold)
-    limit = float(chi2.ppf(1.0 - 2.0 * norm.sf(t_threshold), len(terms)))
-    chosen = [n for n, m in zip(names, trial_models, strict=True)
-              if isinstance(m, PushbroomModel) and _wald(trial, n, terms) > limit]
+    p_two = 2.0 * norm.sf(t_threshold)
+    limit = float(chi2.ppf(1.0 - p_two, len(terms)))
+    calibrated = [n for n, m in zip(names, trial_models, strict=True)
+                  if isinstance(m, PushbroomModel)]
+    wald = {n: _wald(trial, n, terms) for n in calibrated}
+    chosen = [n for n in calibrated if wald[n] > limit]
+    tie_info: dict[str, float] = {}
+    tie_evidence = False
+    if ties is not None and without.tie_rms_px and trial.tie_rms_px is not None:
+        k = len(terms) * len(calibrated)
+        dof = max(without.n_ties - k, 1)
+        r0, r1 = without.tie_rms_px**2, max(trial.tie_rms_px**2, 1e-30)
+        stat = ((r0 - r1) / k) / (r1 / dof)
+        tie_info = {"n": float(without.n_ties), "rms_px_without": without.tie_rms_px,
+                    "rms_px_trial": trial.tie_rms_px, "f_statistic": float(stat),
+                    "f_limit": float(f.ppf(1.0 - p_two, k, dof)),
+                    "drop": 1.0 - trial.tie_rms_px / without.tie_rms_px}
+        # the tie points' parallax says the cameras need the terms: every pushbroom image's
+        tie_evidence = stat > tie_info["f_limit"] and tie_info["drop"] >= min_col_drop
+        tie_info["evidence"] = float(tie_evidence)
+        if tie_evidence:
+            chosen = list(calibrated)
     with_lens = None
     while chosen:
         final_models = [_with_terms(m, terms if n in chosen else ())
                         for m, n in zip(without.models, names, strict=True)]
-        with_lens = absolute_orientation(final_models, trial_obs, names, config)
+        with_lens = absolute_orientation(final_models, trial_obs, names, config, ties)
         drops = {a.name: 1.0 - b.rms_col_px / a.rms_col_px if a.rms_col_px else 0.0
                  for a, b in zip(without.residuals, with_lens.residuals, strict=True)}
-        weak = [n for n in chosen if drops[n] < min_col_drop]
+        tie_drop = (1.0 - with_lens.tie_rms_px / without.tie_rms_px
+                    if tie_evidence and with_lens.tie_rms_px is not None else 0.0)
+        weak = [n for n in chosen if drops[n] < min_col_drop and tie_drop < min_col_drop]
         if not weak:
             break
         chosen.remove(min(weak, key=lambda n: drops[n]))
     if not chosen or with_lens is None:
-        return SelfCalibration(without, None, {}, t_threshold)
+        return SelfCalibration(without, None, {}, t_threshold, wald, limit, tie_info)
+    if with_lens.tie_rms_px is not None:
+        tie_info["rms_px_with"] = with_lens.tie_rms_px
     significant: dict[str, dict[str, tuple[float, float]]] = {}
     for name, pn, pa, sd in zip(names, with_lens.param_names, with_lens.params_after,
                                 with_lens.sigmas(), strict=True):
         if name in chosen:
             significant[name] = {t: (float(pa[pn.index(t)]), float(sd[pn.index(t)]))
                                  for t in terms}
-    return SelfCalibration(without, with_lens, significant, t_threshold)
+    return SelfCalibration(without, with_lens, significant, t_threshold, wald, limit, tie_info)

@@ -85,12 +85,15 @@ class ComponentSolution:
 
 def solve_with_components(a: ArrayLike, r: ArrayLike, q: ArrayLike, groups: ArrayLike,
                           names: Sequence[str], factors: ArrayLike | None = None,
-                          max_iterations: int = 50, tol: float = 1e-4) -> ComponentSolution:
+                          max_iterations: int = 50, tol: float = 1e-4,
+                          fixed: Sequence[str] = ()) -> ComponentSolution:
     """Least squares ``a dx = r`` (``a`` (n, u), ``r`` (n,)) with the a-priori variances ``q``
     (n,) of the observations scaled per group (``groups`` (n,) indices into ``names``) by
     factors estimated from the residuals (Förstner's iteration, from ``factors`` or 1).
 
-    A group with no redundancy of its own (``r_g`` under 0.5) keeps its starting factor.
+    A group with no redundancy of its own (``r_g`` under 0.5) keeps its starting factor, and
+    so do the groups named in ``fixed`` (prior constraints: their sigma is a statement about the
+    parameters, not a noise to estimate).
     """
     a = np.asarray(a, dtype=np.float64)
     r = np.asarray(r, dtype=np.float64)
@@ -110,7 +113,7 @@ def solve_with_components(a: ArrayLike, r: ArrayLike, q: ArrayLike, groups: Arra
     n_obs = np.bincount(g, minlength=n_groups)
     red = np.zeros(n_groups)
     converged, it = False, 0
-    for it in range(1, max_iterations + 1):  # noqa: B007 (the count is reported)
+    for it in range(1, max_iterations + 1):
         w = 1.0 / (theta[g] * q)
         n_inv = np.linalg.pinv(a_s.T @ (a_s * w[:, None]), rcond=1e-12)
         dx_s = n_inv @ (a_s.T @ (w * r))
@@ -118,7 +121,7 @@ def solve_with_components(a: ArrayLike, r: ArrayLike, q: ArrayLike, groups: Arra
         lev = w * np.einsum("ij,jk,ik->i", a_s, n_inv, a_s)  # w_i a_i N^-1 a_i'
         red = n_obs - np.bincount(g, weights=lev, minlength=n_groups)
         quad = np.bincount(g, weights=w * v**2, minlength=n_groups)
-        ok = red > 0.5
+        ok = (red > 0.5) & ~np.isin(np.asarray(names), list(fixed))
         ratio = np.where(ok, quad / np.where(ok, red, 1.0), 1.0)
         theta = theta * ratio
         if np.max(np.abs(ratio - 1.0)) < tol:

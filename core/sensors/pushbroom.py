@@ -17,8 +17,15 @@ Adjustable parameters (:data:`PARAM_NAMES`, a selection of which is ``model.adju
 - ``orbit_along_m, orbit_across_m, orbit_radial_m``: a constant position offset along the
   orbital frame axes X, Y and -Z (radial = up) of the delivered orbit (the frame itself is not
   re-rotated);
-- ``focal_scale`` (focal length ``f (1 + focal_scale)``), ``k1, k3, p1, p2``: added to the
-  delivered lens distortion (see :mod:`core.sensors.linear_array`).
+- ``focal_scale`` (focal length ``f (1 + focal_scale)``); ``k1, k3, p1, p2``: the same
+  polynomial as the lens distortion (see :mod:`core.sensors.linear_array`) but about the
+  detector line's centre (``correction_centre``, normalised focal-plane x, y; by default the
+  middle column's position), added to the delivered distortion: over a line along y they are
+  its look-angle scale (``k1``), cubic (``k3``), bow (``p1``, along track, growing with the
+  square of the distance to the centre) and across-track quadratic (``p2``), whatever steering
+  the look angles carry (SPOT's DIMAP look angles include the mirror's: about the optical
+  axis, a cubic of the line takes a scale and a quadratic of hundreds of pixels to cancel).
+  A model file without ``correction_centre`` (written before it existed) means (0, 0).
 
 JSON format (``to_json`` / ``from_json``; also what the scene simulator writes)::
 
@@ -48,7 +55,7 @@ value of the wrong type raises :class:`~core.errors.InputError` naming the key p
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field, fields, replace
+from dataclasses import dataclass, field, replace
 from typing import Literal
 
 import numpy as np
@@ -65,6 +72,24 @@ from core.jsonio import parse_json, to_json
 from core.sensors import base
 from core.sensors._dictio import get_dict, get_float, get_int, get_str, get_str_tuple
 from core.sensors.base import CORRECTION_KINDS
+from core.sensors.corrections import (
+    ATTITUDE_BIASES,
+    ATTITUDE_HARMONICS,
+    ATTITUDE_QUADS,
+    ATTITUDE_RATES,
+    ATTITUDE_TERMS,
+    DEFAULT_ADJUST,
+    LENS,
+    N_HARMONICS,
+    ORBIT_OFFSETS,
+    ORBIT_TERMS,
+    PARAM_NAMES,
+    PARAM_UNITS,
+    Corrections,
+    check_adjust,
+    correction_centre_of,
+    harmonic_span_of,
+)
 from core.sensors.linear_array import (
     Camera,
     LensDistortion,
@@ -87,76 +112,7 @@ from core.sensors.orbit import (
 FloatArray = NDArray[np.float64]
 
 FORMAT = "gcpfree.pushbroom"
-ATTITUDE_BIASES = ("roll_bias", "pitch_bias", "yaw_bias")
-ATTITUDE_RATES = ("roll_rate", "pitch_rate", "yaw_rate")
-ATTITUDE_QUADS = ("roll_quad", "pitch_quad", "yaw_quad")
-ORBIT_OFFSETS = ("orbit_along_m", "orbit_across_m", "orbit_radial_m")
-LENS = ("focal_scale", "k1", "k3", "p1", "p2")
-DEFAULT_ADJUST = ATTITUDE_BIASES + ATTITUDE_RATES
-# how each attitude correction enters the polynomials: (axis: 0 roll, 1 pitch, 2 yaw; power of
-# t - t_ref: 0 bias, 1 rate, 2 quad)
-ATTITUDE_TERMS: dict[str, tuple[int, int]] = {
-    name: (axis, power)
-    for power, group in enumerate((ATTITUDE_BIASES, ATTITUDE_RATES, ATTITUDE_QUADS))
-    for axis, name in enumerate(group)
-}
-# orbit offsets: (axis of the orbital frame X, Y, Z; sign of the offset along it)
-ORBIT_TERMS: dict[str, tuple[int, float]] = {
-    "orbit_along_m": (0, 1.0), "orbit_across_m": (1, 1.0), "orbit_radial_m": (2, -1.0),
-}
 _FD_TIME_S = 0.01  # time step of the finite differences in time (the motion is smooth)
-
-
-@dataclass(frozen=True)
-class Corrections:
-    """Corrections to the delivered model, one per adjustable parameter (units: module doc)."""
-
-    roll_bias: float = 0.0
-    pitch_bias: float = 0.0
-    yaw_bias: float = 0.0
-    roll_rate: float = 0.0
-    pitch_rate: float = 0.0
-    yaw_rate: float = 0.0
-    roll_quad: float = 0.0
-    pitch_quad: float = 0.0
-    yaw_quad: float = 0.0
-    orbit_along_m: float = 0.0
-    orbit_across_m: float = 0.0
-    orbit_radial_m: float = 0.0
-    focal_scale: float = 0.0
-    k1: float = 0.0
-    k3: float = 0.0
-    p1: float = 0.0
-    p2: float = 0.0
-
-    def values(self, names: tuple[str, ...]) -> FloatArray:
-        return np.array([getattr(self, n) for n in names], dtype=np.float64)
-
-    def attitude_delta(self) -> FloatArray:
-        """(3, 3): [roll, pitch, yaw] x [bias, rate, quad]."""
-        delta = np.zeros((3, 3))
-        for name, (axis, power) in ATTITUDE_TERMS.items():
-            delta[axis, power] = getattr(self, name)
-        return delta
-
-
-PARAM_NAMES: tuple[str, ...] = tuple(f.name for f in fields(Corrections))
-PARAM_UNITS: dict[str, str] = {
-    **{n: ("rad", "rad/s", "rad/s^2")[power] for n, (_, power) in ATTITUDE_TERMS.items()},
-    **{n: "m" for n in ORBIT_TERMS}, **{n: "1" for n in LENS},
-}
-
-
-def _check_adjust(names: tuple[str, ...]) -> tuple[str, ...]:
-    names = tuple(names)
-    bad = [n for n in names if n not in PARAM_NAMES]
-    if bad or len(set(names)) != len(names):
-        raise InputError(
-            f"adjust names {bad or names} are unknown or repeated; choose distinct names "
-            f"among {PARAM_NAMES}"
-        )
-    return names
-
 
 def _rotation_axes(ang: FloatArray) -> tuple[FloatArray, FloatArray, FloatArray]:
     """Axes (m, 3) of roll, pitch and yaw, in the camera frame, at angles ``ang`` (3, m): a change
@@ -190,6 +146,8 @@ class PushbroomModel:
     distortion: LensDistortion = field(default_factory=LensDistortion)
     adjust: tuple[str, ...] = DEFAULT_ADJUST
     corrections: Corrections = field(default_factory=Corrections)
+    correction_centre: tuple[float, float] | None = None
+    harmonic_span: tuple[float, float] | None = None
 
     def __post_init__(self) -> None:
         if int(self.n_rows) < 1:
@@ -199,7 +157,16 @@ class PushbroomModel:
         object.__setattr__(self, "n_rows", int(self.n_rows))
         object.__setattr__(self, "t0_s", float(self.t0_s))
         object.__setattr__(self, "line_period_s", float(self.line_period_s))
-        object.__setattr__(self, "adjust", _check_adjust(self.adjust))
+        object.__setattr__(self, "adjust", check_adjust(self.adjust))
+        span = (self.harmonic_span if self.harmonic_span is not None
+                else (self.t0_s, self.n_rows * self.line_period_s))
+        object.__setattr__(self, "harmonic_span", (float(span[0]), float(span[1])))
+        if self.correction_centre is None:  # the line's centre, in normalised focal-plane units
+            x0, y0 = self.camera.detector_xy(np.array([0.5 * (self.camera.n_cols - 1)]))
+            object.__setattr__(self, "correction_centre", (float(x0[0]), float(y0[0])))
+        else:
+            object.__setattr__(self, "correction_centre",
+                               tuple(float(v) for v in self.correction_centre))
 
     # -- parameters ---------------------------------------------------------------------------
     @property
@@ -264,11 +231,31 @@ class PushbroomModel:
         return self.t0_s + np.asarray(row, dtype=np.float64) * self.line_period_s
 
     def _lens(self) -> tuple[float, float, float, float, float]:
-        c, d = self.corrections, self.distortion
-        return d.k1 + c.k1, d.k3 + c.k3, d.p1 + c.p1, d.p2 + c.p2, c.focal_scale
+        """The delivered distortion (about the optical axis) and the focal scale."""
+        d = self.distortion
+        return d.k1, d.k3, d.p1, d.p2, self.corrections.focal_scale
+
+    def _centred(self, x: FloatArray, y: FloatArray) -> tuple[FloatArray, FloatArray]:
+        """Focal-plane positions relative to :attr:`correction_centre`."""
+        x0, y0 = self.correction_centre  # type: ignore[misc]
+        return x - x0, y - y0
+
+    def _with_corrections_terms(self, x: FloatArray, y: FloatArray
+                                ) -> tuple[FloatArray, FloatArray]:
+        """Ideal coordinates: the delivered distortion about the optical axis plus the
+        corrections' ``k1, k3, p1, p2`` about the line's centre (the look-angle scale, cubic,
+        bow and quadratic of the line itself, whatever steering its look angles carry)."""
+        c = self.corrections
+        xi, yi = ideal_from_detector(x, y, *self._lens())
+        if c.k1 or c.k3 or c.p1 or c.p2:
+            u, w = self._centred(x, y)
+            ui, wi = ideal_from_detector(u, w, c.k1, c.k3, c.p1, c.p2, 0.0)
+            s = 1.0 + c.focal_scale
+            xi, yi = xi + (ui - u) / s, yi + (wi - w) / s
+        return xi, yi
 
     def _ideal(self, col: FloatArray) -> tuple[FloatArray, FloatArray]:
-        return ideal_from_detector(*self.camera.detector_xy(col), *self._lens())
+        return self._with_corrections_terms(*self.camera.detector_xy(col))
 
     def _platform(self, t: FloatArray) -> tuple[FloatArray, FloatArray, FloatArray, FloatArray]:
         """Position (m, 3), camera->ECEF (m, 3, 3), camera->orbital (m, 3, 3), angles (3, m)."""
@@ -280,9 +267,36 @@ class PushbroomModel:
             off[axis] = sign * getattr(c, name)
         if np.any(off):
             pos = pos + frame @ off
-        ang = self.attitude.angles(t, c.attitude_delta())
+        ang = self.attitude_angles(t)
         rot = rotation_rpy(*ang)
         return pos, frame @ rot, rot, ang
+
+    def _harmonic_basis(self, t: FloatArray, derivative: bool = False
+                        ) -> tuple[FloatArray, FloatArray]:
+        """(N_HARMONICS, m) cos(pi k u) at times t (u = 0..1 over ``harmonic_span``), or its
+        time derivative; and the (3, N_HARMONICS) coefficients of the corrections."""
+        t0, span = self.harmonic_span  # type: ignore[misc]
+        u = (np.asarray(t, dtype=np.float64) - t0) / span
+        k = np.arange(1, N_HARMONICS + 1)[:, None]
+        basis = (-np.pi * k / span * np.sin(np.pi * k * u) if derivative
+                 else np.cos(np.pi * k * u))
+        coef = np.zeros((3, N_HARMONICS))
+        for name, (axis, kk) in ATTITUDE_HARMONICS.items():
+            coef[axis, kk - 1] = getattr(self.corrections, name)
+        return basis, coef
+
+    def attitude_angles(self, t: FloatArray) -> FloatArray:
+        """(3, m) roll, pitch, yaw (rad) at times t: the delivered attitude with the
+        corrections (polynomial and along-track harmonics)."""
+        ang = self.attitude.angles(t, self.corrections.attitude_delta())
+        basis, coef = self._harmonic_basis(t)
+        return ang + coef @ basis if np.any(coef) else ang
+
+    def attitude_rates(self, t: FloatArray) -> FloatArray:
+        """(3, m) time derivatives of :meth:`attitude_angles`."""
+        rates = self.attitude.rates(t, self.corrections.attitude_delta())
+        basis, coef = self._harmonic_basis(t, derivative=True)
+        return rates + coef @ basis if np.any(coef) else rates
 
     def localize_time(
         self, col: ArrayLike, t_s: ArrayLike, h_m: ArrayLike
@@ -339,7 +353,7 @@ class PushbroomModel:
             held.append((w[:, 0] / w[:, 2], w[:, 1] / w[:, 2]))
         dx = (held[0][0] - held[1][0]) / (2 * _FD_TIME_S)
         dy = (held[0][1] - held[1][1]) / (2 * _FD_TIME_S)
-        rates = self.attitude.rates(t, self.corrections.attitude_delta())
+        rates = self.attitude_rates(t)
         for axis, rate in zip(_rotation_axes(ang), rates, strict=True):
             dv = -np.cross(axis, v) * rate[:, None]
             dx = dx + (dv[:, 0] * v[:, 2] - v[:, 0] * dv[:, 2]) / v[:, 2] ** 2
@@ -348,9 +362,14 @@ class PushbroomModel:
 
     def _ideal_and_dcol(self, col: FloatArray) -> tuple[FloatArray, ...]:
         x, y = self.camera.detector_xy(col)
-        lens = self._lens()
-        xi, yi = ideal_from_detector(x, y, *lens)
-        a, b, c, d = ideal_dxy(x, y, *lens)
+        xi, yi = self._with_corrections_terms(x, y)
+        a, b, c, d = ideal_dxy(x, y, *self._lens())
+        k = self.corrections
+        if k.k1 or k.k3 or k.p1 or k.p2:
+            u, w = self._centred(x, y)
+            s = 1.0 + k.focal_scale
+            ca, cb, cc, cd = ideal_dxy(u, w, k.k1, k.k3, k.p1, k.p2, 0.0)
+            a, b, c, d = a + (ca - 1.0) / s, b + cb / s, c + cc / s, d + (cd - 1.0) / s
         dx, dy = self.camera.detector_xy_dcol(col)
         return xi, yi, a * dx + b * dy, c * dx + d * dy
 
@@ -459,7 +478,7 @@ class PushbroomModel:
         pos, cam2ecef, rot, ang = self._platform(t)
         v = np.einsum("mji,mj->mi", cam2ecef, g - pos)
         dox, doy = self._d_observe_dt(t, g)
-        xd, yd = self.camera.detector_xy(col)
+        xd, yd = self._centred(*self.camera.detector_xy(col))
         xi, yi, dxi, dyi = self._ideal_and_dcol(col)
         axes = _rotation_axes(ang)
         lens = ideal_partials(xd, yd, xi, yi, self.corrections.focal_scale)
@@ -472,6 +491,10 @@ class PushbroomModel:
             if name in ORBIT_TERMS:  # the camera moves by the offset: v changes by -R^T off
                 axis, sign = ORBIT_TERMS[name]
                 dv = -sign * rot[:, axis, :]
+            elif name in ATTITUDE_HARMONICS:
+                axis, kk = ATTITUDE_HARMONICS[name]
+                t0, span = self.harmonic_span  # type: ignore[misc]
+                dv = -np.cross(axes[axis], v) * np.cos(np.pi * kk * (t - t0) / span)[:, None]
             else:
                 axis, power = ATTITUDE_TERMS[name]
                 dv = -np.cross(axes[axis], v) * (dt_ref ** power)[:, None]
@@ -488,8 +511,8 @@ class PushbroomModel:
         """Finite-difference steps of the adjusted parameters (each moves ~1 px at most)."""
         ifov = self.camera.ifov_rad
         half_s = max(0.5 * self.n_rows * self.line_period_s, 1.0)
-        x, y = self.camera.detector_xy(np.array([0.0, self.n_cols - 1.0]))
-        r = max(float(np.max(np.hypot(x, y))), 1e-3)
+        x, y = self._centred(*self.camera.detector_xy(np.array([0.0, self.n_cols - 1.0])))
+        r = max(float(np.max(np.hypot(x, y))), 1e-4)
         by_power = (ifov, ifov / half_s, ifov / half_s**2)
         lens = {"focal_scale": ifov / r, "k1": ifov / r, "k3": ifov / r**3,
                 "p1": ifov / r**2, "p2": ifov / r**2}
@@ -499,6 +522,8 @@ class PushbroomModel:
                 out.append(lens[name])
             elif name in ORBIT_TERMS:
                 out.append(ifov * 5e5)  # ~0.5 px at a typical range
+            elif name in ATTITUDE_HARMONICS:
+                out.append(ifov)
             else:
                 out.append(by_power[ATTITUDE_TERMS[name][1]])
         return np.array(out)
@@ -516,7 +541,10 @@ class PushbroomModel:
             "camera": self.camera.to_dict(),
             "distortion": self.distortion.to_dict(),
             "adjust": list(self.adjust),
-            "corrections": {n: getattr(self.corrections, n) for n in PARAM_NAMES},
+            "corrections": {n: getattr(self.corrections, n) for n in PARAM_NAMES
+                            if n not in ATTITUDE_HARMONICS or getattr(self.corrections, n)},
+            "correction_centre": list(self.correction_centre),  # type: ignore[arg-type]
+            "harmonic_span_s": list(self.harmonic_span),  # type: ignore[arg-type]
         }
 
     @classmethod
@@ -547,6 +575,9 @@ class PushbroomModel:
             distortion=LensDistortion.from_dict(get_dict(d, "distortion")),
             adjust=get_str_tuple(d, "adjust", ""),
             corrections=Corrections(**{k: get_float(corr, k, "corrections") for k in corr}),
+            # files written before the key existed put the lens corrections about the axis
+            correction_centre=correction_centre_of(d),
+            harmonic_span=harmonic_span_of(d),
         )
 
     def to_json(self, indent: int | None = None) -> str:
@@ -558,18 +589,7 @@ class PushbroomModel:
 
 
 __all__ = [
-    "ATTITUDE_BIASES",
-    "ATTITUDE_QUADS",
-    "ATTITUDE_RATES",
-    "DEFAULT_ADJUST",
-    "LENS",
-    "ORBIT_OFFSETS",
-    "PARAM_NAMES",
-    "Attitude",
-    "Corrections",
-    "LensDistortion",
-    "LookAngleTable",
-    "Orbit",
-    "ParametricCamera",
-    "PushbroomModel",
+    "ATTITUDE_BIASES", "ATTITUDE_HARMONICS", "ATTITUDE_QUADS", "ATTITUDE_RATES", "DEFAULT_ADJUST",
+    "LENS", "ORBIT_OFFSETS", "PARAM_NAMES", "Attitude", "Corrections", "LensDistortion",
+    "LookAngleTable", "Orbit", "ParametricCamera", "PushbroomModel",
 ]

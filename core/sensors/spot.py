@@ -322,7 +322,7 @@ def _pointing(model: PushbroomModel, t: FloatArray, inertial: bool) -> FloatArra
     """(m, 3, 3): the model's camera -> orbital rotation re-expressed in the orbital frame built
     from the velocity a SPOT 1-4 file states (inertial when ``inertial``)."""
     pos, vel = model.orbit.interpolate(t)
-    att = rotation_rpy(*model.attitude.angles(t, model.corrections.attitude_delta()))
+    att = rotation_rpy(*model.attitude_angles(t))
     stated = vel + np.cross([0.0, 0.0, OMEGA_EARTH_RAD_S], pos) if inertial else vel
     rel = np.einsum("mji,mjk->mik", orbital_frame(pos, stated), orbital_frame(pos, vel))
     return rel @ att

@@ -65,8 +65,12 @@ def add_orientation_arguments(p: argparse.ArgumentParser) -> None:
                         "CSV id,lon_deg,lat_deg,h_m,left_col,left_row,right_col,right_row "
                         "(ellipsoidal heights, 0-based pixels)")
     p.add_argument("--self-calibrate", action="store_true",
-                   help="estimate lens distortion (k1, k3, p1, p2) of pushbroom images, kept "
-                        "only where significant")
+                   help="estimate the cameras' calibration errors of pushbroom images (look-angle "
+                        "scale k1, bow p1, cubic k3, across-track quadratic p2), kept only where "
+                        "significant (GCPs, or the tie points' parallax)")
+    p.add_argument("--no-along-track", dest="along_track", action="store_false",
+                   help="do not estimate the attitude's along-track profile of pushbroom images "
+                        "(harmonics in time, as many as the data choose: none included)")
     p.add_argument("--corrections", choices=("offset", "linear"), default="linear",
                    help="terms adjusted per image: linear (default, attitude biases and rates / "
                         "RPC affine) or offset (biases / RPC shift)")

@@ -48,6 +48,7 @@ def run(args: argparse.Namespace) -> int:
         api.ready()
         outcome = orient_flow(OrientParams(
             pair=pair, out=args.out, checkpoints=args.checkpoints, self_calibrate=args.self_calibrate,
+            along_track=args.along_track,
             corrections=args.corrections, spacing_m=args.window_spacing,
             min_windows=args.min_windows, workers=args.workers, progress=not args.no_progress,
             surface=surface))

@@ -72,7 +72,8 @@ def run(args: argparse.Namespace) -> int:
         outcome = pair_flow(PairParams(
             pair=checked[0], out=args.out, lidar=args.lidar, landcover=args.landcover,
             lidar_vertical=args.lidar_vertical, checkpoints=args.checkpoints,
-            self_calibrate=args.self_calibrate, corrections=args.corrections,
+            self_calibrate=args.self_calibrate, along_track=args.along_track,
+            corrections=args.corrections,
             workers=args.workers, progress=not args.no_progress,
             pair_id=args.pair_id, surface=surface, spacing_m=args.window_spacing,
             min_windows=args.min_windows))

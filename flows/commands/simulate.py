@@ -27,9 +27,10 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--dem-vertical", choices=VERTICALS, default="auto",
                    help=VERTICAL_HELP.replace("REF", "DEM"))
     p.add_argument("--out", type=Path, required=True, help="output folder DIR")
-    p.add_argument("--preset", choices=("tiny", "spot", "hrs"), default="tiny",
+    p.add_argument("--preset", choices=("tiny", "spot", "hrs", "hrg"), default="tiny",
                    help="tiny: 600x600 px at 40 m (CI); spot: 6000x6000 px at 10 m, "
-                        "across-track +25.5/-20 deg from two dates; hrs: along-track +-20 deg")
+                        "across-track +25.5/-20 deg from two dates; hrs: along-track +-20 deg; "
+                        "hrg: SPOT 5 HRG-like, 12000x12000 px at 5 m, the spot geometry")
     p.add_argument("--seed", type=int, default=0, help="random seed (default 0)")
     p.add_argument("--center", nargs=2, type=float, metavar=("LON", "LAT"), default=None,
                    help="scene centre in degrees (default: the DEM's centre)")

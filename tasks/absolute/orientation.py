@@ -26,7 +26,9 @@ from core.orientation.absolute import (
     absolute_orientation,
     check_point_stats,
 )
+from core.orientation.along_track import AlongTrack, estimate_along_track
 from core.orientation.selfcal import SelfCalibration, self_calibrate
+from core.orientation.ties import TieObservations
 from core.points import (
     CheckPoint,
     CheckPointSet,
@@ -35,6 +37,8 @@ from core.points import (
     control_points_to_dict,
 )
 from core.sensors.base import SensorModel
+from core.sensors.pushbroom import PushbroomModel
+from tasks.absolute.surface_match import TieGround
 from tasks.io.rasters import atomic_write_json
 from tasks.io.sensors import LoadedModel
 
@@ -136,11 +140,15 @@ class AbsoluteProducts:
     self_calibration: SelfCalibration | None
     model_paths: tuple[Path, ...]
     predicted: dict[str, Any] = field(default_factory=dict)
+    along_track: AlongTrack | None = None
+    inlier: np.ndarray | None = None
+    reasons: dict[int, str] | None = None
 
     def gcp_summary(self, gcps: tuple[ControlPoint, ...]) -> dict[str, Any]:
         """GCPs used and rejected (ids and reasons), over the GCPs given."""
         src = self.self_calibration or self.adjustment
-        inlier, reasons = src.inlier, src.reasons
+        inlier = src.inlier if self.inlier is None else self.inlier
+        reasons = src.reasons if self.reasons is None else self.reasons
         return {"given": len(gcps), "used": int(inlier.sum()), "rejected": int((~inlier).sum()),
                 "rejected_ids": [{"id": gcps[int(i)].id, "reason": reasons[int(i)]}
                                  for i in np.flatnonzero(~inlier)]}
@@ -149,28 +157,52 @@ class AbsoluteProducts:
 @task(name="absolute-orientation", cache_policy=NO_CACHE)
 def orient_absolute(left: LoadedModel, right: LoadedModel, gcps: tuple[ControlPoint, ...],
                     out_dir: Path, corrections: str = "linear", lens: bool = False,
-                    config: AbsoluteConfig | None = None) -> AbsoluteProducts:
+                    config: AbsoluteConfig | None = None,
+                    ties: TieGround | None = None, along_track: bool = False
+                    ) -> AbsoluteProducts:
     """Both models adjusted to the GCPs (``corrections``: ``offset`` or ``linear`` terms of
-    each model; ``lens``: lens self-calibration, kept only where significant), written as
+    each model; ``lens``: self-calibration of the cameras, kept only where significant) and,
+    with ``ties`` (the relative orientation's tie points), to the images' relative geometry
+    too; ``along_track``: then the attitude's along-track profile, harmonics in time as many
+    as the data choose (:mod:`core.orientation.along_track`); written as
     ``out_dir/left.json`` and ``out_dir/right.json`` (gcpfree model files)."""
     config = config or AbsoluteConfig()
     models = (left.model.with_corrections(corrections),
               right.model.with_corrections(corrections))
     obs = Observations.from_control_points(gcps, NAMES)
+    tie_obs = None
+    if ties is not None and ties.lon_deg.size:
+        tie_obs = TieObservations(np.stack([ties.left_col, ties.right_col], axis=1),
+                                  np.stack([ties.left_row, ties.right_row], axis=1),
+                                  ties.lon_deg, ties.lat_deg, ties.h_m, config.matching_sigma_px)
     calib = None
     if lens:
-        calib = self_calibrate(models, obs, NAMES, config)
+        calib = self_calibrate(models, obs, NAMES, config, ties=tie_obs)
         adj = calib.result
     else:
-        adj = absolute_orientation(models, obs, NAMES, config)
+        adj = absolute_orientation(models, obs, NAMES, config, tie_obs)
+    kept = (calib or adj).inlier  # over the GCPs given
+    reasons = dict((calib or adj).reasons)
+    at = None
+    if along_track and any(isinstance(m, PushbroomModel) for m in adj.models):
+        idx = np.flatnonzero(kept)
+        sub = Observations(obs.lon_deg[idx], obs.lat_deg[idx], obs.h_m[idx],
+                           np.asarray(obs.col)[idx], np.asarray(obs.row)[idx],
+                           obs.sigma_xy_m[idx], obs.sigma_h_m[idx])
+        base = adj if adj.inlier.size == idx.size else None
+        at = estimate_along_track(adj.models, sub, NAMES, config, tie_obs, base=base)
+        adj = at.result
+        kept = np.zeros_like(kept)
+        kept[idx[adj.inlier]] = True
+        reasons.update({int(idx[i]): r for i, r in adj.reasons.items()})
     paths = []
     for name, model in zip(NAMES, adj.models, strict=True):
         paths.append(atomic_write_json(Path(out_dir) / f"{name}.json",
                                        model.to_dict()))  # type: ignore[attr-defined]
-    kept = (calib or adj).inlier  # over the GCPs given
     return AbsoluteProducts(tuple(adj.models), adj, calib, tuple(paths),
                             predicted_over_images(adj, (left.size, right.size),
-                                                  np.asarray(obs.h_m)[kept], config))
+                                                  np.asarray(obs.h_m)[kept], config),
+                            at, kept, reasons)
 
 
 GRID_SIDE = 9

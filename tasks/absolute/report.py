@@ -173,11 +173,26 @@ class OrientReport:
         for name, a in self.absolute.images.items():
             out.append(f"GCP residuals {name:<6}  P {a.rms_col_px:.3f} px  "
                        f"L {a.rms_row_px:.3f} px RMS")
+        ties = self.absolute.tie_points
+        if ties is not None:
+            out.append(f"tie points            {ties['n']} in the adjustment, parallax "
+                       f"{ties['rms_px']:.3f} px RMS")
         lens = self.absolute.self_calibration
         if lens is not None:
+            why = ""
+            if lens.tie_points is not None and lens.tie_points.get("evidence"):
+                why = (f" (tie-point parallax {lens.tie_points['rms_px_without']:.3f} -> "
+                       f"{lens.tie_points.get('rms_px_with', lens.tie_points['rms_px_trial']):.3f}"
+                       " px with them)")
             out.append("lens terms            " + (
-                ", ".join(f"{n}: {', '.join(t)}" for n, t in lens.significant.items())
+                ", ".join(f"{n}: {', '.join(t)}" for n, t in lens.significant.items()) + why
                 if lens.applied else "none significant (not applied)"))
+        at = self.absolute.along_track
+        if at is not None:
+            rows = ", ".join(f"{n} {at['rms_row_px_without'][n]:.3f} -> "
+                             f"{at['rms_row_px_with'][n]:.3f}" for n in at["rms_row_px_with"])
+            out.append(f"along-track attitude  {at['harmonics']} harmonics (BIC over "
+                       f"{', '.join(map(str, at['orders_tried']))}); GCP rows {rows} px")
         for name, c in (self.check_points or {}).items():
             out.append(f"check points {name:<6}  P {c.rms_col_px:.3f} px  "
                        f"L {c.rms_row_px:.3f} px RMS ({c.n} points)")

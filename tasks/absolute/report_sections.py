@@ -194,23 +194,35 @@ class ImageFit:
 class LensCalibration:
     """The lens self-calibration (:meth:`core.orientation.selfcal.SelfCalibration.to_dict`):
     whether terms were ``applied``, the terms kept per image (``significant``: term ->
-    estimate, sigma), and the GCP residual RMS without and with them per image."""
+    estimate, sigma, the term's name in the menu), the GCP residual RMS without and with them
+    per image, each image's Wald statistic against its limit, and the tie points' evidence
+    (their parallax RMS without and with the terms, the F test; null without tie points)."""
 
     applied: bool
     t_threshold: float
-    significant: Mapping[str, Mapping[str, Mapping[str, float]]]
+    significant: Mapping[str, Mapping[str, Mapping[str, Any]]]
     improvement: Mapping[str, Mapping[str, float]]
+    wald: Mapping[str, float] | None = None
+    wald_limit: float | None = None
+    tie_points: Mapping[str, float] | None = None
 
     def to_dict(self) -> dict[str, Any]:
         return {"applied": self.applied, "t_threshold": self.t_threshold,
                 "significant": {k: dict(v) for k, v in self.significant.items()},
-                "improvement": {k: dict(v) for k, v in self.improvement.items()}}
+                "improvement": {k: dict(v) for k, v in self.improvement.items()},
+                "wald": dict(self.wald) if self.wald is not None else None,
+                "wald_limit": self.wald_limit,
+                "tie_points": dict(self.tie_points) if self.tie_points is not None else None}
 
     @classmethod
     def from_dict(cls, d: Doc, where: str = "absolute.self_calibration") -> LensCalibration:
+        limit = d.get("wald_limit")
         return cls(_get(d, "applied", where, bool), _get(d, "t_threshold", where, NUMBER),
                    dict(_get(d, "significant", where, Mapping)),
-                   dict(_get(d, "improvement", where, Mapping)))
+                   dict(_get(d, "improvement", where, Mapping)),
+                   _optional(d, "wald", where),
+                   float(limit) if isinstance(limit, (int, float)) else None,
+                   _optional(d, "tie_points", where))
 
 
 @dataclass(frozen=True)
@@ -228,6 +240,8 @@ class Absolute:
     self_calibration: LensCalibration | None = None
     variance_components: Mapping[str, Any] | None = None
     predicted: Mapping[str, Any] | None = None
+    tie_points: Mapping[str, Any] | None = None
+    along_track: Mapping[str, Any] | None = None
 
     @classmethod
     def of(cls, absolute: AbsoluteProducts, corrections: str) -> Absolute:
@@ -235,7 +249,9 @@ class Absolute:
         lens = absolute.self_calibration
         return cls.from_dict(_json({**absolute.adjustment.to_dict(), "corrections": corrections,
                                     "self_calibration": lens.to_dict() if lens else None,
-                                    "predicted": absolute.predicted or None}))
+                                    "predicted": absolute.predicted or None,
+                                    "along_track": (absolute.along_track.to_dict()
+                                                    if absolute.along_track else None)}))
 
     def to_dict(self) -> dict[str, Any]:
         return {"images": {n: f.to_dict() for n, f in self.images.items()},
@@ -246,7 +262,9 @@ class Absolute:
                 "self_calibration": (self.self_calibration.to_dict()
                                      if self.self_calibration is not None else None),
                 **{k: dict(v) for k, v in (("variance_components", self.variance_components),
-                                           ("predicted", self.predicted)) if v is not None}}
+                                           ("predicted", self.predicted),
+                                           ("tie_points", self.tie_points),
+                                           ("along_track", self.along_track)) if v is not None}}
 
     @classmethod
     def from_dict(cls, d: Doc, where: str = "absolute") -> Absolute:
@@ -261,7 +279,8 @@ class Absolute:
             corrections=_get(d, "corrections", where, str),
             self_calibration=LensCalibration.from_dict(lens) if lens is not None else None,
             variance_components=_optional(d, "variance_components", where),
-            predicted=_predicted(d, where))
+            predicted=_predicted(d, where), tie_points=_optional(d, "tie_points", where),
+            along_track=_optional(d, "along_track", where))
 
 
 @dataclass(frozen=True)

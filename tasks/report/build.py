@@ -324,6 +324,17 @@ def _gcps(rep: _Report, inp: ReportInputs) -> list[F.Residuals]:
         rep.figure("gcp_residuals", F.residual_vectors_figure(
             panels, "GCP residuals after the absolute orientation (measured - projected)"),
             "Residual vectors at the simulated GCPs, magnified; red: rejected as blunders.")
+    at = rep.orientation.absolute.along_track
+    if at is not None:
+        rep.add(Table.flat({k: at[k] for k in ("harmonics", "bic", "rms_row_px_without",
+                                               "rms_row_px_with", "tie_rms_px_without",
+                                               "tie_rms_px_with")},
+                           "Along-track attitude: harmonics chosen by BIC"))
+        rep.figure("row_profile", F.row_profile_figure(
+            at["row_profile_without"], at["row_profile_with"],
+            f"GCP row residuals against row: {at['harmonics']} along-track harmonics"),
+            "The GCPs' row residuals averaged in ten bands of image rows, without and with the "
+            "attitude's along-track profile (harmonics in time, as many as the data choose).")
     return panels
 
 

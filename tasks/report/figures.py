@@ -6,8 +6,9 @@ draws them; no pyplot, so no global state and no display is needed.
 from __future__ import annotations
 
 import io
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 from matplotlib.figure import Figure
@@ -132,6 +133,31 @@ def profile_figure(lines: Sequence[Profile], title: str) -> Figure:
     ax.grid(alpha=0.3)
     ax.legend(fontsize=8)
     ax.set_title(title)
+    return fig
+
+
+def row_profile_figure(before: Mapping[str, Any], after: Mapping[str, Any],
+                       title: str) -> Figure:
+    """The GCPs' row residuals averaged in bands of image rows, per image, without and with the
+    along-track attitude (``absolute.along_track.row_profile_without`` / ``_with``): an
+    unmodelled attitude profile shows as a wave."""
+    fig = Figure(figsize=(11, 4.0))
+    names = list(before)
+    for k, name in enumerate(names):
+        ax = fig.add_subplot(1, len(names), k + 1)
+        for prof, style, label in ((before[name], "o--", "without"),
+                                   (after.get(name, {}), "s-", "with")):
+            rows = np.asarray(prof.get("row_centres", []), dtype=float)
+            v = np.array([np.nan if x is None else x
+                          for x in prof.get("mean_row_residual_px", [])], dtype=float)
+            if rows.size:
+                ax.plot(rows, v, style, lw=1.2, label=f"{label} along-track attitude")
+        ax.axhline(0.0, color="k", lw=0.6)
+        ax.set_xlabel(f"{name} image row")
+        ax.set_ylabel("mean GCP row residual (px)")
+        ax.grid(alpha=0.3)
+        ax.legend(fontsize=8, loc="upper right")
+    fig.suptitle(title)
     return fig
 
 

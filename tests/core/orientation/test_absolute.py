@@ -26,18 +26,25 @@ def models(n_px=3000, gsd=10.0):
         epoch_utc="2023-07-12T10:00:00Z")) for inc in (25.5, -20.0))
 
 
-def gcps(truth, n=60, sxy=3.0, sh=2.0, blunders=0, seed=1, n_px=3000):
-    """GCPs: true ground points (+ ground noise) measured in both images by the truth models
-    (+ 0.2 px matching noise); ``blunders`` of them moved 50-200 m."""
-    rng = np.random.default_rng(seed)
+def measured(truth, n, rng, n_px=3000, noise_px=0.2):
+    """``n`` true ground points spread over the images (heights 500-1300 m) and their
+    positions in every image of ``truth`` plus matching noise: lon, lat, h, cols, rows."""
     lc, lr = rng.uniform(50, n_px - 50, n), rng.uniform(50, n_px - 50, n)
     h = 500.0 + 800.0 * rng.uniform(size=n)
     lon, lat = truth[0].localize(lc, lr, h)
     cols, rows = [], []
     for m in truth:
         c, r = m.project(lon, lat, h)
-        cols.append(c + rng.normal(0, 0.2, n))
-        rows.append(r + rng.normal(0, 0.2, n))
+        cols.append(c + rng.normal(0, noise_px, n))
+        rows.append(r + rng.normal(0, noise_px, n))
+    return lon, lat, h, cols, rows
+
+
+def gcps(truth, n=60, sxy=3.0, sh=2.0, blunders=0, seed=1, n_px=3000):
+    """GCPs: true ground points (+ ground noise) measured in both images by the truth models
+    (+ 0.2 px matching noise); ``blunders`` of them moved 50-200 m."""
+    rng = np.random.default_rng(seed)
+    lon, lat, h, cols, rows = measured(truth, n, rng, n_px)
     glon = lon + rng.normal(0, sxy, n) / M_LON
     glat = lat + rng.normal(0, sxy, n) / M_LAT
     bad = rng.choice(n, blunders, replace=False)
@@ -59,14 +66,6 @@ def check(oriented, truth, n=300, seed=5, n_px=3000):
         c, r = t.project(lon, lat, h)
         out.append(check_point_stats(m, lon, lat, h, c, r, name))
     return out
-
-
-@pytest.fixture(scope="module")
-def pair():
-    delivered = models()
-    truth = (delivered[0].with_params([1.2e-4, -0.8e-4, 0.5e-4, 1e-6, -2e-6, 0.0]),
-             delivered[1].with_params([-0.9e-4, 1.5e-4, -0.7e-4, -2e-6, 1e-6, 0.0]))
-    return delivered, truth
 
 
 def test_pushbroom_pair_oriented_to_check_points(pair):

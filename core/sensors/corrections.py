@@ -1,0 +1,133 @@
+"""The corrections a pushbroom model adjusts (:class:`core.sensors.pushbroom.PushbroomModel`):
+their names, units, how each enters the model, and their values (:class:`Corrections`); see
+that module's docstring for their meaning."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, fields
+
+import numpy as np
+from numpy.typing import NDArray
+
+from core.errors import InputError
+
+FloatArray = NDArray[np.float64]
+
+ATTITUDE_BIASES = ("roll_bias", "pitch_bias", "yaw_bias")
+ATTITUDE_RATES = ("roll_rate", "pitch_rate", "yaw_rate")
+ATTITUDE_QUADS = ("roll_quad", "pitch_quad", "yaw_quad")
+ORBIT_OFFSETS = ("orbit_along_m", "orbit_across_m", "orbit_radial_m")
+LENS = ("focal_scale", "k1", "k3", "p1", "p2")
+DEFAULT_ADJUST = ATTITUDE_BIASES + ATTITUDE_RATES
+# the attitude's along-track profile: cos(pi k u) on each axis, u = 0..1 over the image's time
+# span (``harmonic_span``), k = 1..N_HARMONICS
+N_HARMONICS = 8
+ATTITUDE_HARMONICS: dict[str, tuple[int, int]] = {
+    f"{axis}_h{k}": (a, k) for a, axis in enumerate(("roll", "pitch", "yaw"))
+    for k in range(1, N_HARMONICS + 1)
+}
+# how each attitude correction enters the polynomials: (axis: 0 roll, 1 pitch, 2 yaw; power of
+# t - t_ref: 0 bias, 1 rate, 2 quad)
+ATTITUDE_TERMS: dict[str, tuple[int, int]] = {
+    name: (axis, power)
+    for power, group in enumerate((ATTITUDE_BIASES, ATTITUDE_RATES, ATTITUDE_QUADS))
+    for axis, name in enumerate(group)
+}
+# orbit offsets: (axis of the orbital frame X, Y, Z; sign of the offset along it)
+ORBIT_TERMS: dict[str, tuple[int, float]] = {
+    "orbit_along_m": (0, 1.0), "orbit_across_m": (1, 1.0), "orbit_radial_m": (2, -1.0),
+}
+
+
+@dataclass(frozen=True)
+class Corrections:
+    """Corrections to the delivered model, one per adjustable parameter (units: module doc)."""
+
+    roll_bias: float = 0.0
+    pitch_bias: float = 0.0
+    yaw_bias: float = 0.0
+    roll_rate: float = 0.0
+    pitch_rate: float = 0.0
+    yaw_rate: float = 0.0
+    roll_quad: float = 0.0
+    pitch_quad: float = 0.0
+    yaw_quad: float = 0.0
+    orbit_along_m: float = 0.0
+    orbit_across_m: float = 0.0
+    orbit_radial_m: float = 0.0
+    focal_scale: float = 0.0
+    k1: float = 0.0
+    k3: float = 0.0
+    p1: float = 0.0
+    p2: float = 0.0
+    roll_h1: float = 0.0
+    roll_h2: float = 0.0
+    roll_h3: float = 0.0
+    roll_h4: float = 0.0
+    roll_h5: float = 0.0
+    roll_h6: float = 0.0
+    roll_h7: float = 0.0
+    roll_h8: float = 0.0
+    pitch_h1: float = 0.0
+    pitch_h2: float = 0.0
+    pitch_h3: float = 0.0
+    pitch_h4: float = 0.0
+    pitch_h5: float = 0.0
+    pitch_h6: float = 0.0
+    pitch_h7: float = 0.0
+    pitch_h8: float = 0.0
+    yaw_h1: float = 0.0
+    yaw_h2: float = 0.0
+    yaw_h3: float = 0.0
+    yaw_h4: float = 0.0
+    yaw_h5: float = 0.0
+    yaw_h6: float = 0.0
+    yaw_h7: float = 0.0
+    yaw_h8: float = 0.0
+
+    def values(self, names: tuple[str, ...]) -> FloatArray:
+        return np.array([getattr(self, n) for n in names], dtype=np.float64)
+
+    def attitude_delta(self) -> FloatArray:
+        """(3, 3): [roll, pitch, yaw] x [bias, rate, quad]."""
+        delta = np.zeros((3, 3))
+        for name, (axis, power) in ATTITUDE_TERMS.items():
+            delta[axis, power] = getattr(self, name)
+        return delta
+
+
+PARAM_NAMES: tuple[str, ...] = tuple(f.name for f in fields(Corrections))
+PARAM_UNITS: dict[str, str] = {
+    **{n: ("rad", "rad/s", "rad/s^2")[power] for n, (_, power) in ATTITUDE_TERMS.items()},
+    **{n: "m" for n in ORBIT_TERMS}, **{n: "1" for n in LENS},
+    **{n: "rad" for n in ATTITUDE_HARMONICS},
+}
+
+
+def correction_centre_of(d: object) -> tuple[float, float]:
+    v = d.get("correction_centre", [0.0, 0.0])  # type: ignore[union-attr]
+    if (not isinstance(v, list) or len(v) != 2
+            or not all(isinstance(x, (int, float)) and np.isfinite(x) for x in v)):
+        raise InputError(f"key 'correction_centre' must be two numbers (x, y), got {v!r:.80}")
+    return float(v[0]), float(v[1])
+
+
+def harmonic_span_of(d: object) -> tuple[float, float] | None:
+    v = d.get("harmonic_span_s")  # type: ignore[union-attr]
+    if v is None:
+        return None
+    if (not isinstance(v, list) or len(v) != 2
+            or not all(isinstance(x, (int, float)) and np.isfinite(x) for x in v) or v[1] <= 0):
+        raise InputError(f"key 'harmonic_span_s' must be (start s, duration s > 0), got {v!r:.80}")
+    return float(v[0]), float(v[1])
+
+
+def check_adjust(names: tuple[str, ...]) -> tuple[str, ...]:
+    names = tuple(names)
+    bad = [n for n in names if n not in PARAM_NAMES]
+    if bad or len(set(names)) != len(names):
+        raise InputError(
+            f"adjust names {bad or names} are unknown or repeated; choose distinct names "
+            f"among {PARAM_NAMES}"
+        )
+    return names
