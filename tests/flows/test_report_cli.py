@@ -81,7 +81,7 @@ def test_optional_inputs_missing_give_not_available_lines(out, capsys):
         assert f"not available         {what}" in printed, what
         assert f"Not available: {what}" in html and f"Not available: {what}" in md, what
     assert {Path(s).stem for s in images_of(out)[0]} == {
-        "tie_points", "relief", "gcp_residuals", "histograms"}
+        "tie_points", "relief", "gcp_residuals", "row_profile", "histograms"}
 
 
 def test_bad_input_is_one_line_and_writes_nothing(out, tmp_path, capsys):

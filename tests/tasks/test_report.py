@@ -34,7 +34,7 @@ from tests.flows.reports import finished_report
 
 PNG_MAGIC = b"\x89PNG\r\n\x1a\n"
 FIGURES = {"tie_points", "profile", "relief", "correlation_surface", "gcp_residuals",
-           "checkpoint_residuals", "histograms", "le68"}
+           "row_profile", "checkpoint_residuals", "histograms", "le68"}
 REL = 5.001e-4  # the report prints 4 significant digits (one decimal from 1000 up)
 
 
@@ -345,6 +345,10 @@ def test_the_numbers_shown_are_those_of_the_json_products(run, evaluation):
             "Surface matching and relief verdict": doc["surface_matching"],
             "Simulated GCPs": doc["gcps"], "Absolute adjustment": ab,
             "Lens self-calibration": ab["self_calibration"],
+            "Along-track attitude: harmonics chosen by BIC": {
+                k: ab["along_track"][k] for k in ("harmonics", "bic", "rms_row_px_without",
+                                                  "rms_row_px_with", "tie_rms_px_without",
+                                                  "tie_rms_px_with")},
             **{f"Image {n}: residuals at the GCPs used (px)": ab["images"][n]
                for n in ("left", "right")},
             "Other entries": {k: v for k, v in original.items() if k not in SECTIONS},
@@ -452,7 +456,7 @@ def test_products_not_available_are_said_not_raised(run, tmp_path):
     assert len(outcome.not_available) >= 6
     html_imgs, md_imgs = images_of(copy)
     assert html_imgs == md_imgs
-    assert {Path(s).stem for s in html_imgs} == {"gcp_residuals", "histograms"}
+    assert {Path(s).stem for s in html_imgs} == {"gcp_residuals", "row_profile", "histograms"}
     assert_valid_pngs(copy, html_imgs)
     # the check-point statistics come from report.json: still there
     doc = json.loads((copy / "report.json").read_text())
