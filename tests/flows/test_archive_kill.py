@@ -181,9 +181,12 @@ def test_ctrl_c_then_a_rerun_completes_only_what_is_missing(finished_pair, api_f
     cat, root = seeded_archive(tmp_path, scene, finished, 4)
     argv = ["archive", "--catalog", str(cat), "--out", str(root), "--reference",
             str(scene / "reference.tif"), "--dashboard-address", ":0", "--no-progress"]
+    # Ctrl-C as a terminal delivers it: a suite started in the background (``make test &``)
+    # hands its children SIGINT ignored, which Python then keeps ignored
     proc = subprocess.Popen([sys.executable, "-m", "flows.cli", *argv, "--workers", "2"],
                             cwd=Path(__file__).resolve().parents[2], stdout=subprocess.PIPE,
-                            stderr=subprocess.PIPE, text=True)
+                            stderr=subprocess.PIPE, text=True,
+                            preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL))
     try:
         end = time.monotonic() + 900
         while not list(root.glob("*/pair.json")) and proc.poll() is None:
