@@ -426,7 +426,9 @@ def _calibrated(models: list[SensorModel], eqs: Equations, inlier: NDArray[np.bo
     under those components, and the components."""
     use = inlier[:, None] & seen
 
-    present = np.unique(eqs.build(models, inlier, jacobian=False).group)
+    # the groups there are rows of: GCP columns and rows always, tie points and priors if given
+    present = [0, 1] + ([2] if eqs.ties is not None and eqs.ties.n else []) + (
+        [3] if eqs.prior.shape[0] else [])
 
     def solve(split: bool) -> tuple[list[SensorModel], FloatArray, VarianceComponents]:
         moved, factors, n_it = list(models), None, 0

@@ -62,8 +62,7 @@ def _bic(result: AbsoluteOrientation, ties: TieObservations | None, n_added: int
     v = np.concatenate([np.concatenate([r.col_px, r.row_px]) for r in result.residuals])
     groups = [(v.size, float(np.sum(v**2)))]
     if ties is not None and result.tie_rms_px is not None and result.n_ties:
-        n_eq = result.n_ties * (2 * ties.n_images - 3)
-        groups.append((n_eq, n_eq * result.tie_rms_px**2))
+        groups.append((ties.n_equations, ties.n_equations * result.tie_rms_px**2))
     n = sum(g[0] for g in groups)
     return float(sum(k * np.log(max(rss / k, 1e-30)) for k, rss in groups)
                  + n_added * np.log(n))

@@ -95,6 +95,13 @@ class Corrections:
             delta[axis, power] = getattr(self, name)
         return delta
 
+    def harmonics(self) -> FloatArray:
+        """(3, N_HARMONICS): [roll, pitch, yaw] x the along-track harmonics 1..N."""
+        coef = np.zeros((3, N_HARMONICS))
+        for name, (axis, k) in ATTITUDE_HARMONICS.items():
+            coef[axis, k - 1] = getattr(self, name)
+        return coef
+
 
 PARAM_NAMES: tuple[str, ...] = tuple(f.name for f in fields(Corrections))
 PARAM_UNITS: dict[str, str] = {

@@ -271,32 +271,32 @@ class PushbroomModel:
         rot = rotation_rpy(*ang)
         return pos, frame @ rot, rot, ang
 
-    def _harmonic_basis(self, t: FloatArray, derivative: bool = False
-                        ) -> tuple[FloatArray, FloatArray]:
-        """(N_HARMONICS, m) cos(pi k u) at times t (u = 0..1 over ``harmonic_span``), or its
-        time derivative; and the (3, N_HARMONICS) coefficients of the corrections."""
+    def _harmonic_term(self, t: FloatArray, derivative: bool = False) -> FloatArray | None:
+        """(3, m) the along-track harmonics' angles at times t (``sum_k a_k cos(pi k u)``, u =
+        0..1 over ``harmonic_span``), or their time derivative; None when they are all zero
+        (no cosine is evaluated: this runs in every projection)."""
+        coef = self.corrections.harmonics()
+        if not coef.any():
+            return None
         t0, span = self.harmonic_span  # type: ignore[misc]
         u = (np.asarray(t, dtype=np.float64) - t0) / span
         k = np.arange(1, N_HARMONICS + 1)[:, None]
         basis = (-np.pi * k / span * np.sin(np.pi * k * u) if derivative
                  else np.cos(np.pi * k * u))
-        coef = np.zeros((3, N_HARMONICS))
-        for name, (axis, kk) in ATTITUDE_HARMONICS.items():
-            coef[axis, kk - 1] = getattr(self.corrections, name)
-        return basis, coef
+        return coef @ basis
 
     def attitude_angles(self, t: FloatArray) -> FloatArray:
         """(3, m) roll, pitch, yaw (rad) at times t: the delivered attitude with the
         corrections (polynomial and along-track harmonics)."""
         ang = self.attitude.angles(t, self.corrections.attitude_delta())
-        basis, coef = self._harmonic_basis(t)
-        return ang + coef @ basis if np.any(coef) else ang
+        wave = self._harmonic_term(t)
+        return ang if wave is None else ang + wave
 
     def attitude_rates(self, t: FloatArray) -> FloatArray:
         """(3, m) time derivatives of :meth:`attitude_angles`."""
         rates = self.attitude.rates(t, self.corrections.attitude_delta())
-        basis, coef = self._harmonic_basis(t, derivative=True)
-        return rates + coef @ basis if np.any(coef) else rates
+        wave = self._harmonic_term(t, derivative=True)
+        return rates if wave is None else rates + wave
 
     def localize_time(
         self, col: ArrayLike, t_s: ArrayLike, h_m: ArrayLike
