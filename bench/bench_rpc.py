@@ -18,12 +18,9 @@ a bare package stub that skips that ``__init__``.
 from __future__ import annotations
 
 import argparse
-import importlib
-import importlib.util
 import os
 import sys
 import time
-import types
 from collections.abc import Callable
 from pathlib import Path
 
@@ -34,25 +31,9 @@ from rasterio.transform import RPCTransformer
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 from core.sensors.rpc import RPCModel
+from tests.peers import rpcm_model_module
 
 GEOM = Path(__file__).resolve().parents[1] / "tests" / "data" / "pleiades_ventoux" / "left_image.geom"
-
-
-def load_rpcm_model_module() -> types.ModuleType | None:
-    """``rpcm.rpc_model`` without running ``rpcm/__init__.py``; None when rpcm is absent."""
-    spec = importlib.util.find_spec("rpcm")
-    if spec is None or not spec.submodule_search_locations:
-        return None
-    if "rpcm" not in sys.modules:
-        stub = types.ModuleType("rpcm")
-        stub.__path__ = list(spec.submodule_search_locations)
-        stub.__spec__ = spec
-        sys.modules["rpcm"] = stub
-    try:
-        return importlib.import_module("rpcm.rpc_model")
-    except ImportError as exc:
-        print(f"rpcm.rpc_model could not be imported ({exc}); skipping rpcm")
-        return None
 
 
 def best_time(fn: Callable[[], object], repeat: int) -> tuple[float, object]:
@@ -88,8 +69,10 @@ def main() -> None:
     print(f"  max |gcpfree - gcpfree NumPy| = "
           f"{max(np.max(np.abs(c - c_ours)), np.max(np.abs(r - r_ours))):.2e} px")
 
-    rpcm_mod = load_rpcm_model_module()
-    if rpcm_mod is not None:
+    rpcm_mod = rpcm_model_module()
+    if rpcm_mod is None:
+        print("  rpcm not installed (or its rpc_model does not import): skipping rpcm")
+    else:
         rpcm_model = rpcm_mod.RPCModel(model.to_gdal_tags())
         t, (c, r) = best_time(lambda: rpcm_model.projection(lon, lat, h), args.repeat)
         results["rpcm"] = t

@@ -59,6 +59,7 @@ from core.errors import ConvergenceError, InputError
 from core.geodesy import WGS84_A_M, enu_rotation, geodetic_to_ecef
 from core.sensors.orbit import GM_EARTH_M3_S2, Orbit, circular_orbit_ecef, orbital_frame
 from core.sensors.sar import SPEED_OF_LIGHT_M_S, SarModel
+from core.sensors.sentinel1 import GeolocationGrid
 
 FloatArray = NDArray[np.float64]
 ToLonLat = Callable[[FloatArray, FloatArray], tuple[FloatArray, FloatArray]]
@@ -404,17 +405,11 @@ def offset_orbit(orbit: Orbit, offset_m: tuple[float, float, float]) -> Orbit:
 
 
 @dataclass(frozen=True, eq=False)
-class GridPoints:
-    """A geolocation grid as Sentinel-1 annotations give it (times as the model's), with the
-    ellipsoid incidence and the elevation (off-nadir look) angle of each point, degrees."""
+class GridPoints(GeolocationGrid):
+    """A geolocation grid as Sentinel-1 annotations give it (the reader's
+    :class:`~core.sensors.sentinel1.GeolocationGrid`), with the ellipsoid incidence and the
+    elevation (off-nadir look) angle of each point, degrees, which annotations also write."""
 
-    azimuth_time_s: FloatArray
-    slant_range_time_s: FloatArray
-    line: FloatArray
-    pixel: FloatArray
-    lon_deg: FloatArray
-    lat_deg: FloatArray
-    h_m: FloatArray
     incidence_deg: FloatArray
     elevation_deg: FloatArray
 

@@ -5,38 +5,15 @@ inputs, broadcasting and arrays large enough to be split over threads."""
 
 from __future__ import annotations
 
-import importlib
-import importlib.util
-import sys
-import types
-
 import numpy as np
 import pytest
 
 from core.kernels import MIN_SPLIT
 from core.sensors.rpc import RPCModel
 from tests.core.sensors.test_rpc import REAL_ALL, domain_points, load
+from tests.peers import rpcm_model_module
 
 TOL_PX = 1e-9
-
-
-def rpcm_model_module() -> types.ModuleType | None:
-    """``rpcm.rpc_model`` without ``rpcm/__init__.py`` (it imports srtm4 and geojson, which
-    are not installed here); None when rpcm is absent."""
-    if "rpcm.rpc_model" in sys.modules:
-        return sys.modules["rpcm.rpc_model"]
-    spec = importlib.util.find_spec("rpcm")
-    if spec is None or not spec.submodule_search_locations:
-        return None
-    if "rpcm" not in sys.modules:
-        stub = types.ModuleType("rpcm")
-        stub.__path__ = list(spec.submodule_search_locations)
-        stub.__spec__ = spec
-        sys.modules["rpcm"] = stub
-    try:
-        return importlib.import_module("rpcm.rpc_model")
-    except ImportError:
-        return None
 
 
 def biased(m: RPCModel, mode: str) -> RPCModel:
