@@ -74,7 +74,7 @@ def oriented_pair(params: DsmParams) -> OrientedPair:
     if params.orient:
         from flows.relative import relative_models
 
-        outcome = relative_models(pair, out.parent / f"{out.stem}_relative")
+        outcome = relative_models(pair, out.parent / f"{out.stem}_relative", params.workers)
         same = pair.reference is not None and outcome.reference is not None and \
             Path(outcome.reference).resolve() == pair.reference.resolve()
         # a reference prepared from SRTM tiles says its datum in its own tag

@@ -99,7 +99,7 @@ def orient_flow(params: OrientParams) -> OrientOutcome:
                          "--reference")
     checkpoints = read_checkpoints(params.checkpoints) if params.checkpoints else None
     out.mkdir(parents=True, exist_ok=True)
-    rel = relative_models(given, out / "relative")
+    rel = relative_models(given, out / "relative", params.workers)
     # a reference prepared from SRTM tiles says its datum in its own tag
     datum = dem_datum(rel.reference, given.reference_vertical if given.reference else "auto")
     pair = OrientedPair(rel.left, rel.right, rel.reference, datum.datum)
@@ -116,7 +116,8 @@ def orient_flow(params: OrientParams) -> OrientOutcome:
     reference = read_reference(rel.reference, box, datum.datum)
     ties = TieGround.from_tiepoints_json(rel.rel_json.with_suffix(".tiepoints.json"))
     windows = match_surfaces(out / "relative_dem.tif", ties, reference, cfg, params.spacing_m,
-                             out=out / "windows.json", progress=params.progress)
+                             out=out / "windows.json", progress=params.progress,
+                             workers=params.workers)
     verdict = relief_sufficiency(windows.matches, cfg, params.min_windows,
                                  reference.cell_size_m())
     if not verdict.enough:  # the true reason: too flat, or too small, or reference voids

@@ -32,6 +32,7 @@ class RelativeParams:
     search_radius_m: float | None = None  # default: from the GSD (default_search_radius_m)
     reference_sigma_m: float = 5.0
     tie_points: TiePointConfig = field(default_factory=TiePointConfig)
+    workers: int | None = None  # threads matching the tie-point cells (default one per core)
 
 
 @dataclass(frozen=True, eq=False)
@@ -94,7 +95,8 @@ def relative_flow(params: RelativeParams) -> RelativeOutcome:
                                                                                + h_range[1])))
     cfg = replace(params.tie_points, cell_m=params.cell_m, search_radius_m=radius)
     ties = find_tie_points(left.image or left.source, right.image or right.source, left.model,
-                           right.model, dem, cfg, h_range_m=h_range)
+                           right.model, dem, cfg, h_range_m=h_range,
+                           num_workers=params.workers)
     products = orient_relative(left, right, ties, out, dem, h_range,
                                RelativeConfig(corrections=params.corrections),
                                params.reference_sigma_m, used)
@@ -105,9 +107,10 @@ def relative_flow(params: RelativeParams) -> RelativeOutcome:
 
 
 @flow(name="relative-models")
-def relative_models(pair: PairInputs, out_dir: Path) -> RelativeOutcome:
+def relative_models(pair: PairInputs, out_dir: Path,
+                    workers: int | None = None) -> RelativeOutcome:
     """The pair relatively oriented (for the steps that follow, e.g. ``gcpfree dsm``); writes
-    ``out_dir/rel.json`` and its tie points."""
+    ``out_dir/rel.json`` and its tie points. ``workers``: threads for the tie points."""
     out_dir = Path(out_dir)
     out_dir.mkdir(parents=True, exist_ok=True)
-    return relative_flow(RelativeParams(pair=pair, out=out_dir / "rel.json"))
+    return relative_flow(RelativeParams(pair=pair, out=out_dir / "rel.json", workers=workers))

@@ -95,12 +95,12 @@ def match_one(dem_path: str, lon: float, lat: float, reference: GeoDEM,
 
 def _match_all(dem_path: Path, ties: TieGround, idx: np.ndarray, reference: GeoDEM,
                cfg: SurfaceMatchConfig, priors: np.ndarray | None = None,
-               progress: bool = False) -> list[WindowMatch]:
+               progress: bool = False, workers: int | None = None) -> list[WindowMatch]:
     parts = [dask.delayed(match_one)(str(dem_path), float(ties.lon_deg[i]),
                                      float(ties.lat_deg[i]), reference, cfg,
                                      None if priors is None else tuple(map(float, priors[k])))
              for k, i in enumerate(idx)]
-    return compute(parts, progress=progress)
+    return compute(parts, progress=progress, workers=workers)
 
 
 @dataclass(frozen=True, eq=False)
@@ -128,11 +128,13 @@ class SurfaceMatchResult:
 def match_surfaces(dem_path: Path, ties: TieGround, reference: GeoDEM,
                    cfg: SurfaceMatchConfig = SurfaceMatchConfig(), spacing_m: float | None = None,
                    names: tuple[str, str] = ("left", "right"),
-                   out: Path | None = None, progress: bool = False) -> SurfaceMatchResult:
+                   out: Path | None = None, progress: bool = False,
+                   workers: int | None = None) -> SurfaceMatchResult:
     """Match a window around each chosen tie point (``spacing_m`` apart, default the window
     radius) and make a GCP of each good one: the tie point's relative ground coordinates moved
     by the window's 3-D shift, with its image positions and the window's precision.
-    ``progress``: a progress bar over the windows on stderr."""
+    ``progress``: a progress bar over the windows on stderr; ``workers``: the threads that
+    match them (default one per core)."""
     centres = choose_windows(ties.lon_deg, ties.lat_deg, ties.h_m, ties.score,
                              spacing_m or cfg.radius_m)
     if progress:
@@ -141,7 +143,7 @@ def match_surfaces(dem_path: Path, ties: TieGround, reference: GeoDEM,
               "first)", file=sys.stderr, flush=True)
 
     def match(k: np.ndarray, priors: np.ndarray | None) -> list[WindowMatch]:
-        return _match_all(dem_path, ties, centres[k], reference, cfg, priors, progress)
+        return _match_all(dem_path, ties, centres[k], reference, cfg, priors, progress, workers)
 
     matches = tuple(search_windows(ties.lon_deg[centres], ties.lat_deg[centres], match))
     gcps = gcps_from_windows(centres, matches, ties.lon_deg, ties.lat_deg, ties.h_m,

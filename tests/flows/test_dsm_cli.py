@@ -90,7 +90,7 @@ def stub_orientation(monkeypatch, tiny_clean_scene):
     scene_dir, _ = tiny_clean_scene
     calls = []
 
-    def relative_models(pair, out_dir):
+    def relative_models(pair, out_dir, workers=None):
         calls.append({"left": pair.left, "right": pair.right, "reference": pair.reference,
                       "reference_vertical": pair.reference_vertical, "out_dir": out_dir})
         loaded = []
