@@ -1,0 +1,119 @@
+"""The SAR-optical matcher (core/matching/multimodal.py): descriptor, score, search, lattice."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from scipy.ndimage import gaussian_filter
+
+from core.errors import InputError
+from core.matching import multimodal as mm
+
+UP = 4  # the world is drawn 4 times finer than the images, then averaged
+
+
+def _classes(shape=(160, 160), seed=0):
+    """A land-cover-like field of patches (4 classes, smooth boundaries), UP times finer."""
+    rng = np.random.default_rng(seed)
+    field = gaussian_filter(rng.standard_normal((shape[0] * UP, shape[1] * UP)), 4.0 * UP)
+    return np.digitize(field, np.quantile(field, [0.3, 0.6, 0.85]))
+
+
+def _image(values, classes, di=0.0, dj=0.0):
+    """The class values moved by (+di, +dj) image cells (multiples of 1/UP), averaged to
+    image cells: edges land where they should to a small fraction of a cell."""
+    fine = np.roll(values[classes], (round(di * UP), round(dj * UP)), axis=(0, 1))
+    n, m = fine.shape[0] // UP, fine.shape[1] // UP
+    return fine.reshape(n, UP, m, UP).mean(axis=(1, 3))
+
+
+def _optical(classes, rng, di=0.0, dj=0.0):
+    img = _image(np.array([0.2, 0.8, 0.5, 0.35]), classes, di, dj)
+    return img + 0.02 * rng.standard_normal(img.shape)
+
+
+def _sar(classes, rng, di=0.0, dj=0.0, looks=16.0):
+    # another radiometry: the order of the classes' brightness differs (contrast reversed)
+    sigma0 = _image(np.array([0.05, 0.02, 0.3, 0.12]), classes, di, dj)
+    return np.log(sigma0 * rng.standard_gamma(looks, sigma0.shape) / looks)
+
+
+def test_channel_ncc_is_the_correlation_of_the_descriptor_vectors():
+    rng = np.random.default_rng(3)
+    t = rng.random((5, 9, 9)).astype(np.float32)
+    s = rng.random((5, 15, 15)).astype(np.float32)
+    got = mm.channel_ncc(t, s)
+    assert got.shape == (7, 7)
+    for a in range(7):
+        for b in range(7):
+            w = s[:, a:a + 9, b:b + 9]
+            tv = (t - t.mean(axis=(1, 2), keepdims=True)).ravel()
+            wv = (w - w.mean(axis=(1, 2), keepdims=True)).ravel()
+            ref = tv @ wv / np.sqrt((tv @ tv) * (wv @ wv))
+            assert got[a, b] == pytest.approx(ref, abs=2e-5)
+
+
+def test_descriptor_is_blind_to_contrast_reversal_and_gain():
+    img = _optical(_classes(), np.random.default_rng(0))
+    a = mm.orientation_channels(img)
+    b = mm.orientation_channels(-3.0 * img + 7.0)
+    assert np.allclose(a, b, atol=1e-4)
+    norm = np.linalg.norm(a, axis=0)
+    assert np.median(norm) == pytest.approx(1.0, abs=1e-5) and norm.max() <= 1.0 + 1e-5
+
+
+@pytest.mark.parametrize("di, dj", [(2.25, -1.5), (-4.75, 3.25)])
+def test_a_known_shift_is_found_across_modalities(di, dj):
+    rng = np.random.default_rng(1)
+    classes = _classes()
+    opt = _optical(classes, rng)
+    sar = _sar(classes, rng, di, dj)
+    # the optical image's grey levels do not correlate with the SAR's
+    assert abs(np.corrcoef(opt.ravel(), _sar(classes, rng).ravel())[0, 1]) < 0.5
+    da, db = mm.orientation_channels(opt), mm.orientation_channels(sar)
+    valid = np.ones(opt.shape, bool)
+    ci, cj = mm.template_centres(valid, 16, 20)
+    ci, cj = ci[(ci > 30) & (ci < 130) & (cj > 30) & (cj < 130)], \
+        cj[(ci > 30) & (ci < 130) & (cj > 30) & (cj < 130)]
+    m = mm.match_points(da, db, valid, valid, mm.gradient_energy(opt), (ci, cj), (0.0, 0.0),
+                        mm.MultimodalConfig(radius_cells=7))
+    assert m.ok.sum() >= 0.8 * ci.size
+    assert np.median(m.di[m.ok]) == pytest.approx(di, abs=0.1)
+    assert np.median(m.dj[m.ok]) == pytest.approx(dj, abs=0.1)
+
+
+def test_flat_and_off_image_templates_are_refused():
+    rng = np.random.default_rng(2)
+    opt = _optical(_classes(), rng)
+    opt[:60, :60] = 0.5 + 0.001 * rng.standard_normal((60, 60))  # a featureless lake
+    valid = np.ones(opt.shape, bool)
+    valid_b = valid.copy()
+    valid_b[:, 120:] = False  # the second image stops there
+    d = mm.orientation_channels(opt)
+    m = mm.match_points(d, d, valid, valid_b, mm.gradient_energy(opt),
+                        ([30, 80, 80], [30, 80, 130]), (0, 0), mm.MultimodalConfig())
+    assert list(m.status) == [mm.MatchStatus.FLAT, mm.MatchStatus.OK, mm.MatchStatus.NO_DATA]
+    assert m.di[1] == pytest.approx(0, abs=0.05) and np.isnan(m.di[0])
+
+
+def test_image_positions_interpolate_the_exact_projection():
+    # a smooth, non-linear model with a height term
+    def project(lon, lat, h):
+        return (1e4 * (lon - 5.0) + 30 * np.sin(3 * lat) + 0.02 * h,
+                -1.2e4 * (lat - 44.0) + 5 * (lon - 5.0) ** 2 - 0.001 * h * (lon - 5))
+
+    g = mm.GroundGrid.covering([5.0, 5.1], [44.0, 44.08], 50.0)
+    lon, lat = g.nodes()
+    h = 800 + 600 * np.sin(lon * 40) * np.cos(lat * 30)
+    col, row = mm.image_positions(project, g, h)
+    c_ref, r_ref = project(lon, lat, h)
+    assert np.abs(col - c_ref).max() < 1e-3 and np.abs(row - r_ref).max() < 1e-3
+    i, j = g.indices(lon[3, 7], lat[3, 7])
+    assert (i, j) == pytest.approx((3, 7))
+
+
+def test_bad_settings_are_refused():
+    with pytest.raises(InputError):
+        mm.MultimodalConfig(min_score=1.5)
+    with pytest.raises(InputError):
+        mm.GroundGrid.covering([5.0, np.nan], [44.0, 44.1], 20.0)
