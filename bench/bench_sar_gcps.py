@@ -57,6 +57,10 @@ def main() -> None:
     ap.add_argument("--image", default="left")
     ap.add_argument("--cell", type=float, default=None,
                     help="ground grid cell (m); default the SAR's ground spacing")
+    ap.add_argument("--ignore-steps", choices=("none", "truth"), default="none",
+                    help="leave out of the scores the cells near height steps of a DSM "
+                         "(truth: the truth DSM, to see what a perfect mask gives)")
+    ap.add_argument("--step-m", type=float, default=3.0)
     a = ap.parse_args()
     d = a.scene
     rec = json.loads((d / "truth" / "sar.json").read_text())
@@ -97,8 +101,24 @@ def main() -> None:
     if not mc.ok.any():
         raise SystemExit(f"no coarse match: {mc.counts()}")
     oi, oj = float(np.median(mc.di[mc.ok])), float(np.median(mc.dj[mc.ok]))
+    ignore = None
+    if a.ignore_steps == "truth":
+        from scipy.ndimage import maximum_filter, minimum_filter
+        with rasterio.open(d / "truth" / "dsm.tif") as f:
+            z, tz, cz = f.read(1).astype(np.float64), f.transform, f.crs
+        x, y = Transformer.from_crs(4326, cz, always_xy=True).transform(LON, LAT)
+        D = sample_bilinear(z, (y - tz.f) / tz.e - 0.5, (x - tz.c) / tz.a - 0.5)
+        D = np.where(np.isfinite(D), D, np.nanmedian(D))
+        inc = np.radians(rec["figures"]["incidence_centre_deg"])
+        step = maximum_filter(D, 3) - minimum_filter(D, 3)
+        tall = step[step > a.step_m]
+        reach = int(np.ceil(float(np.percentile(tall, 90)) / np.tan(inc) / cell)) + 1 \
+            if tall.size else 1
+        ignore = maximum_filter(step > a.step_m, 2 * reach + 1)
+        print(f"ignored: {100 * ignore.mean():.0f} % of the cells ({reach} cells around "
+              f"steps over {a.step_m:g} m)")
     ci, cj = mm.template_centres(va, mm.MultimodalConfig().half_cells, 8)
-    m = mm.match_points(da, db, va, vb, st, (ci, cj), (oi, oj))
+    m = mm.match_points(da, db, va, vb, st, (ci, cj), (oi, oj), ignore_a=ignore)
     t_match = time.perf_counter() - t0
     print(f"grid {g.shape} of {cell:g} m; scene offset ({oi:+.2f}, {oj:+.2f}) cells from "
           f"{int(mc.ok.sum())} large templates; {ci.size} templates: {m.counts()}; "

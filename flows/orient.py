@@ -37,7 +37,10 @@ class OrientParams:
     along-track profile of pushbroom images (harmonics in time, as many as the data choose,
     none included). ``spacing_m``: distance between surface
     matching windows (default their radius). ``min_windows``: windows whose relief must
-    qualify, else InsufficientReliefError.
+    qualify, else InsufficientReliefError, unless a SAR scene is given: ``sar`` (its image;
+    its model beside it or ``sar_model``) adds SAR-optical GCPs
+    (:mod:`core.orientation.sar_gcps`) to the SRTM ones, or replaces them where the relief
+    verdict refuses SRTM matching.
     """
 
     pair: PairInputs
@@ -52,6 +55,8 @@ class OrientParams:
     progress: bool = True
     surface: SurfaceMatchConfig = field(default_factory=SurfaceMatchConfig)
     absolute: AbsoluteConfig = field(default_factory=AbsoluteConfig)
+    sar: Path | None = None
+    sar_model: Path | None = None
 
 
 @dataclass(frozen=True, eq=False)
@@ -120,10 +125,32 @@ def orient_flow(params: OrientParams) -> OrientOutcome:
                              workers=params.workers)
     verdict = relief_sufficiency(windows.matches, cfg, params.min_windows,
                                  reference.cell_size_m())
-    if not verdict.enough:  # the true reason: too flat, or too small, or reference voids
+    sar = None
+    if params.sar is not None:
+        from tasks.absolute.sar_control import sar_ground_control
+
+        first = max((p.id for p in windows.gcps), default=0) + 1
+        sar = sar_ground_control(params.sar, params.sar_model,
+                                 {"left": rel.left, "right": rel.right}, reference,
+                                 out / "sar_points.json", workers=params.workers,
+                                 first_id=first)
+        for line in sar.lines():
+            print(line)
+    if not verdict.enough and sar is None:  # the true reason: too flat, too small, voids
         raise (InsufficientReliefError if verdict.reason == "too_flat"
                else InsufficientDataError)(verdict.message())
-    gcps = windows.gcps
+    srtm_used = verdict.enough and bool(windows.gcps)
+    if sar is not None and not srtm_used:
+        why = verdict.message() if not verdict.enough else \
+            f"no window gave a GCP: {windows.counts()}"
+        print(f"SRTM surface matching refused ({why}); the orientation proceeds on the SAR "
+              "GCPs alone")
+    gcps = (windows.gcps if verdict.enough else ()) + (sar.gcps if sar is not None else ())
+    if len(gcps) < params.absolute.min_gcps and sar is not None:
+        raise InsufficientDataError(
+            f"only {len(gcps)} GCPs from SRTM and SAR together ({params.absolute.min_gcps} "
+            f"needed): surface matching {windows.counts()}; SAR "
+            f"{[r.counts() for r in sar.results]}")
     if len(gcps) < params.absolute.min_gcps:
         raise InsufficientDataError(
             f"only {len(gcps)} surface-matching windows gave a GCP "
@@ -148,7 +175,9 @@ def orient_flow(params: OrientParams) -> OrientOutcome:
                                             verdict),
         gcps=GcpSummary.of(absolute, gcps), absolute=Absolute.of(absolute, params.corrections),
         reference=ReferenceUsed.of(rel.reference, datum, given),
-        dsm=FinalDsm("dsm.tif", "dsm_egm96.tif", final["ellipsoidal"]))
+        dsm=FinalDsm("dsm.tif", "dsm_egm96.tif", final["ellipsoidal"]),
+        sar=None if sar is None else sar.summary(
+            srtm_used, {"left": absolute.models[0], "right": absolute.models[1]}))
     if checkpoints is not None:
         report = replace(
             report, check_points=check_points_of(check_point_report(

@@ -124,6 +124,34 @@ def image_positions(project: Project, grid: GroundGrid, h_m: FloatArray,
     return col, row
 
 
+def forward_mean(shape: tuple[int, int], col: FloatArray, row: FloatArray,
+                 values: FloatArray, mean: bool = True) -> FloatArray:
+    """The image of ``shape`` (rows, cols) that points of ``values`` at fractional (col, row)
+    make when each is spread over its four nearest pixels (bilinear weights): per pixel the
+    weighted mean of the values that reach it (``mean=False``: their weighted sum, as a radar
+    adds the power of the cells it sees at one range), NaN where none does. How a ground
+    image is laid out in another sensor's geometry: where several ground cells reach one
+    pixel (SAR layover) they are mixed there, where none does (SAR shadow) there is
+    nothing."""
+    ok = np.isfinite(col) & np.isfinite(row) & np.isfinite(values)
+    col, row, values = col[ok], row[ok], values[ok]
+    c0, r0 = np.floor(col).astype(np.int64), np.floor(row).astype(np.int64)
+    fc, fr = col - c0, row - r0
+    nr, nc = shape
+    total = np.zeros(nr * nc)
+    weight = np.zeros(nr * nc)
+    for dr, dc, w in ((0, 0, (1 - fr) * (1 - fc)), (0, 1, (1 - fr) * fc),
+                      (1, 0, fr * (1 - fc)), (1, 1, fr * fc)):
+        r, c = r0 + dr, c0 + dc
+        inside = (r >= 0) & (r < nr) & (c >= 0) & (c < nc)
+        idx = r[inside] * nc + c[inside]
+        total += np.bincount(idx, weights=(w * values)[inside], minlength=nr * nc)
+        weight += np.bincount(idx, weights=w[inside], minlength=nr * nc)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        out = np.where(weight > 1e-3, total / weight if mean else total, np.nan)
+    return out.reshape(nr, nc)
+
+
 def orientation_channels(image: FloatArray, n_orientations: int = 9,
                          sigma_cells: float = 1.0) -> NDArray[np.float32]:
     """The CFOG descriptor ``(n, rows, cols)`` of ``image`` (NaN: no data, described as 0):
@@ -147,20 +175,28 @@ def orientation_channels(image: FloatArray, n_orientations: int = 9,
     return ch.astype(np.float32)
 
 
-def channel_ncc(template: NDArray[np.float32], search: NDArray[np.float32]) -> FloatArray:
+def channel_ncc(template: NDArray[np.float32], search: NDArray[np.float32],
+                mask: NDArray[np.bool_] | None = None) -> FloatArray:
     """Correlation coefficient of the descriptor vectors (all channels together) of
     ``template`` ``(n, t, t)`` and of every ``(t, t)`` window of ``search`` ``(n, s, s)``:
-    ``(s - t + 1, s - t + 1)``, indexed by the window's top-left corner."""
+    ``(s - t + 1, s - t + 1)``, indexed by the window's top-left corner. With ``mask``
+    ``(t, t)``, only the template's cells where it is True take part, in the template and in
+    every window (the masked correlation: the search image is not altered, so a mask cannot
+    correlate with itself)."""
     n, th, tw = template.shape
-    t = template - template.mean(axis=(1, 2), keepdims=True)
+    w = np.ones((th, tw), np.float32) if mask is None else mask.astype(np.float32)
+    n_cells = float(w.sum())
+    if n_cells < 2:
+        return np.full((search.shape[1] - th + 1, search.shape[2] - tw + 1), -1.0)
+    mean = (template * w).sum(axis=(1, 2), keepdims=True) / n_cells
+    t = (template - mean) * w
     t_energy = float((t * t).sum())
-    ones = np.ones((th, tw), np.float32)
     num = den = None
     for k in range(n):
         cc = cv2.matchTemplate(search[k], t[k], cv2.TM_CCORR)
-        s1 = cv2.matchTemplate(search[k], ones, cv2.TM_CCORR)
-        s2 = cv2.matchTemplate(search[k] * search[k], ones, cv2.TM_CCORR)
-        var = s2 - s1 * s1 / (th * tw)
+        s1 = cv2.matchTemplate(search[k], w, cv2.TM_CCORR)
+        s2 = cv2.matchTemplate(search[k] * search[k], w, cv2.TM_CCORR)
+        var = s2 - s1 * s1 / n_cells
         num = cc if num is None else num + cc
         den = var if den is None else den + var
     with np.errstate(invalid="ignore", divide="ignore"):
@@ -186,7 +222,8 @@ class MultimodalConfig:
     ``radius_cells`` around the predicted offset; the refusals: ``min_score`` (correlation of
     the descriptors), ``max_ratio`` (second peak over first, the second at least
     ``exclusion_cells`` away), ``min_structure`` (the template's mean gradient energy over
-    the image's median, below which it is flat)."""
+    the image's median, below which it is flat); ``min_used``: the share of a template's cells
+    that must remain when some are ignored."""
 
     orientations: int = 9
     sigma_cells: float = 1.0
@@ -196,6 +233,7 @@ class MultimodalConfig:
     max_ratio: float = 0.9
     exclusion_cells: int = 3
     min_structure: float = 0.5
+    min_used: float = 0.2
 
     def __post_init__(self) -> None:
         if self.orientations < 3 or self.half_cells < 4 or self.radius_cells < 2:
@@ -243,13 +281,15 @@ def gradient_energy(image: FloatArray, sigma_cells: float = 1.0) -> FloatArray:
 def match_points(desc_a: NDArray[np.float32], desc_b: NDArray[np.float32],
                  valid_a: NDArray[np.bool_], valid_b: NDArray[np.bool_],
                  structure_a: FloatArray, centres: tuple[ArrayLike, ArrayLike],
-                 prior: tuple[ArrayLike, ArrayLike], cfg: MultimodalConfig = MultimodalConfig()
-                 ) -> MultimodalMatches:
+                 prior: tuple[ArrayLike, ArrayLike], cfg: MultimodalConfig = MultimodalConfig(),
+                 ignore_a: NDArray[np.bool_] | None = None) -> MultimodalMatches:
     """Each template of ``desc_a`` centred at ``centres`` (integer grid indices) searched in
     ``desc_b`` within ``cfg.radius_cells`` of the offset ``prior`` (cells, per centre or one
     for all); ``valid_a``, ``valid_b``: where each image has data (a masked cell, described
     as 0, is still valid); ``structure_a`` (:func:`gradient_energy`, 0 where masked) refuses
-    flat templates."""
+    flat templates; ``ignore_a``: cells of image A left out of every score (where the two
+    sensors see a feature at different places, e.g. next to a height step), a template with
+    fewer than ``cfg.min_used`` of its cells left is NO_DATA."""
     ci = np.atleast_1d(np.asarray(centres[0])).astype(int)
     cj = np.atleast_1d(np.asarray(centres[1])).astype(int)
     pi = np.broadcast_to(np.asarray(prior[0], float), ci.shape)
@@ -270,10 +310,15 @@ def match_points(desc_a: NDArray[np.float32], desc_b: NDArray[np.float32],
                 or valid_b[b0i:b1i, b0j:b1j].mean() < 0.95):
             status[k] = MatchStatus.NO_DATA
             continue
-        if structure_a[a0i:a1i, a0j:a1j].mean() < cfg.min_structure:
+        use = None if ignore_a is None else ~ignore_a[a0i:a1i, a0j:a1j]
+        if use is not None and use.mean() < cfg.min_used:
+            status[k] = MatchStatus.NO_DATA
+            continue
+        structure = structure_a[a0i:a1i, a0j:a1j]
+        if (structure.mean() if use is None else structure[use].mean()) < cfg.min_structure:
             status[k] = MatchStatus.FLAT
             continue
-        score = channel_ncc(desc_a[:, a0i:a1i, a0j:a1j], desc_b[:, b0i:b1i, b0j:b1j])
+        score = channel_ncc(desc_a[:, a0i:a1i, a0j:a1j], desc_b[:, b0i:b1i, b0j:b1j], use)
         pk = np.unravel_index(int(np.argmax(score)), score.shape)
         best = float(score[pk])
         far = score.copy()

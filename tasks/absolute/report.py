@@ -28,6 +28,11 @@ Its keys (format ``gcpfree.orient``, version 1), as the README lists them:
   significant), ``noise_px`` (0), ``n`` points;
 - ``models``: the oriented model files; ``reference``: the DEM used and its vertical datum;
   ``dsm``: the final DSM's files and summary;
+- optional: ``sar`` (with ``--sar``; :meth:`tasks.absolute.sar_control.SarControl.summary`):
+  the SAR scene, its mission and assumed geolocation error, the SAR GCPs' ``role`` (with
+  SRTM, or alone where the relief verdict refused SRTM), per image the templates, counts by
+  status, GCPs, matching noise and the SAR GCPs' residuals after the adjustment (RMS and mean,
+  px); the points themselves are in ``sar_points.json``;
 - optional: ``check_points`` and ``check_points_before`` (per image, the paper's Table 2;
   ``check_points.<image>`` also gives ``predicted_rms_col_px`` and ``predicted_rms_row_px``,
   the RMS the adjustment predicts at those check points, beside the measured ``rms_col_px``
@@ -113,6 +118,7 @@ class OrientReport:
     check_points: Mapping[str, CheckPointStats] | None = None
     check_points_before: Mapping[str, CheckPointStats] | None = None
     report: Mapping[str, Any] | None = None
+    sar: Mapping[str, Any] | None = None
     version: int = VERSION
 
     # keys given their own section in the run report (the others are listed as they are)
@@ -134,6 +140,8 @@ class OrientReport:
                 d[key] = {n: s.to_dict() for n, s in stats.items()}
         if self.report is not None:
             d[self.RUN_REPORT_KEY] = dict(self.report)
+        if self.sar is not None:
+            d["sar"] = dict(self.sar)
         return _json(d)  # JSON values: what the file holds, NaN as null
 
     @classmethod
@@ -163,13 +171,20 @@ class OrientReport:
             check_points=_check_points(d.get("check_points"), "check_points"),
             check_points_before=_check_points(d.get("check_points_before"),
                                               "check_points_before"),
-            report=dict(report) if report is not None else None, version=version)
+            report=dict(report) if report is not None else None,
+            sar=dict(_get(d, "sar", "", Mapping)) if "sar" in d else None, version=version)
 
     def lines(self) -> list[str]:
         """The orientation's figures as ``gcpfree orient`` and ``gcpfree pair`` print them."""
         g, sm = self.gcps, self.surface_matching
-        out = [f"GCPs from SRTM        {g.used} used, {g.rejected} rejected ({sm.windows} "
-               f"windows, {sm.qualified} with enough relief)"]
+        out = [(f"GCPs                  {g.used} used, {g.rejected} rejected ({sm.windows} "
+                f"SRTM windows, {sm.qualified} with enough relief)")]
+        if self.sar is not None:
+            for name, s in self.sar.get("images", {}).items():
+                res = (f", residuals P {s['residual_rms_col_px']:.3f} L "
+                       f"{s['residual_rms_row_px']:.3f} px RMS"
+                       if "residual_rms_col_px" in s else "")
+                out.append(f"GCPs from SAR {name:<6}  {s['gcps']} ({self.sar['role']}){res}")
         for name, a in self.absolute.images.items():
             out.append(f"GCP residuals {name:<6}  P {a.rms_col_px:.3f} px  "
                        f"L {a.rms_row_px:.3f} px RMS")

@@ -1,0 +1,181 @@
+"""Task of SAR-optical ground control (issue 20; the maths is
+:mod:`core.orientation.sar_gcps`): the SAR scene and its model read, each optical image read
+and matched against it on Dask threads, the GCPs made and ``sar_points.json`` written."""
+
+from __future__ import annotations
+
+import warnings
+from collections.abc import Mapping
+from dataclasses import dataclass, replace
+from pathlib import Path
+from typing import Any
+
+import dask
+import numpy as np
+import rasterio
+from prefect import task
+from prefect.cache_policies import NO_CACHE
+from rasterio.errors import NotGeoreferencedWarning
+
+from core.dem import GeoDEM
+from core.errors import InputError
+from core.orientation.sar_gcps import (
+    SarGcpConfig,
+    SarImageResult,
+    geolocation_sigma_m,
+    sar_gcps_of_image,
+)
+from core.points import ControlPoint
+from tasks.io.rasters import atomic_write_json
+from tasks.io.sensors import LoadedModel, load_model
+from tasks.scheduling import compute
+
+FILE = "sar_points.json"
+
+
+def load_sar(image: Path, model: Path | None = None) -> LoadedModel:
+    """The SAR scene's model (its annotation or gcpfree ``.json`` beside it, or ``model``);
+    InputError when what was given is not a SAR scene."""
+    loaded = load_model(image, model=model)
+    if loaded.family != "sar":
+        raise InputError(f"{image} has a {loaded.family} model ({loaded.source}), not a SAR "
+                         "one: give a SAR image with its Sentinel-1 annotation beside it or "
+                         "named with --sar-model")
+    if loaded.image is None:
+        raise InputError(f"{image} is a SAR model without its image: give the measurement "
+                         "TIFF as --sar and the annotation as --sar-model")
+    return loaded
+
+
+def _read(path: Path) -> np.ndarray:
+    with warnings.catch_warnings():  # radar geometry: no georeferencing
+        warnings.simplefilter("ignore", NotGeoreferencedWarning)
+        with rasterio.open(path) as f:
+            return f.read(1)
+
+
+def _corners(model: LoadedModel, h_m: float) -> tuple[np.ndarray, np.ndarray]:
+    n_cols, n_rows = model.size
+    c = np.array([0.0, n_cols - 1, 0.0, n_cols - 1])
+    r = np.array([0.0, 0.0, n_rows - 1, n_rows - 1])
+    return model.model.localize(c, r, np.full(4, h_m))
+
+
+def _overlap(a: tuple[np.ndarray, np.ndarray], b: tuple[np.ndarray, np.ndarray]) -> float:
+    """Share of box ``a`` (lon/lat) that box ``b`` covers."""
+    w = min(a[0].max(), b[0].max()) - max(a[0].min(), b[0].min())
+    h = min(a[1].max(), b[1].max()) - max(a[1].min(), b[1].min())
+    area = (a[0].max() - a[0].min()) * (a[1].max() - a[1].min())
+    return max(w, 0.0) * max(h, 0.0) / area if area > 0 else 0.0
+
+
+@dataclass(frozen=True, eq=False)
+class SarControl:
+    """The SAR GCPs of both images and the record written (``to_dict``)."""
+
+    sar: LoadedModel
+    results: tuple[SarImageResult, ...]
+    config: SarGcpConfig
+
+    @property
+    def gcps(self) -> tuple[ControlPoint, ...]:
+        return tuple(p for r in self.results for p in r.gcps)
+
+    def to_dict(self) -> dict[str, Any]:
+        images = {}
+        for r in self.results:
+            m, h = r.matches, r.heights
+            ok = np.flatnonzero(m.matches.ok)
+            images[r.name] = {
+                "templates": int(m.matches.status.size), "counts": r.counts(),
+                "gcps": len(r.gcps), "scene_offset_m": [m.offset_cells[1] * m.cell_m,
+                                                        -m.offset_cells[0] * m.cell_m],
+                "sigma_match_m": h.sigma_match_m, "control_points": int(h.control.sum()),
+                "parallax_m_per_m": float(np.median(h.m_per_m)),
+                "heights_from_parallax_only": int((~h.from_reference & h.inlier).sum()),
+                "points": [{"optical_col": float(m.optical_col[i]),
+                            "optical_row": float(m.optical_row[i]),
+                            "sar_col": float(m.sar_col[i]), "sar_row": float(m.sar_row[i]),
+                            "score": float(m.matches.score[i]),
+                            "h_reference_m": float(m.h_ref_m[i]),
+                            "h_parallax_m": float(h.h_parallax_m[k]), "h_m": float(h.h_m[k]),
+                            "inlier": bool(h.inlier[k]), "control": bool(h.control[k])}
+                           for k, i in enumerate(ok)]}
+        return {"format": "gcpfree.sar_points", "version": 1,
+                "sar_image": str(self.sar.image), "sar_model": str(self.sar.source),
+                "mission": str(getattr(self.sar.model, "mission", "")),
+                "method": "oriented-gradient (CFOG) matching on a common ground grid; heights "
+                          "from the SAR-optical parallax calibrated on the reference "
+                          "(Goncalves 2002); planimetry from the SAR model",
+                "cell_m": self.results[0].matches.cell_m if self.results else None,
+                "geolocation_sigma_m": self.config.geolocation_sigma_m,
+                "images": images}
+
+    def summary(self, srtm_used: bool, models: Mapping[str, Any] | None = None
+                ) -> dict[str, Any]:
+        """report.json's ``sar`` section: the scene, the GCPs' role (``with SRTM``, or
+        ``alone`` where the relief verdict refused SRTM matching) and per image the counts,
+        the matching's noise and, given the oriented ``models`` (name -> sensor model), the
+        SAR GCPs' residuals (measured - projected, px)."""
+        images = {}
+        for r in self.results:
+            d: dict[str, Any] = {"templates": int(r.matches.matches.status.size),
+                                 "counts": r.counts(), "gcps": len(r.gcps),
+                                 "sigma_match_m": r.heights.sigma_match_m}
+            if models is not None and r.gcps:
+                lon, lat, h = (np.array([getattr(p, k) for p in r.gcps])
+                               for k in ("lon_deg", "lat_deg", "h_m"))
+                col, row = models[r.name].project(lon, lat, h)
+                dc = np.array([p.image_points[r.name].col for p in r.gcps]) - col
+                dr = np.array([p.image_points[r.name].row for p in r.gcps]) - row
+                d.update(residual_rms_col_px=float(np.sqrt(np.mean(dc**2))),
+                         residual_rms_row_px=float(np.sqrt(np.mean(dr**2))),
+                         residual_mean_col_px=float(np.mean(dc)),
+                         residual_mean_row_px=float(np.mean(dr)))
+            images[r.name] = d
+        return {"file": FILE, "sar_image": str(self.sar.image),
+                "mission": str(getattr(self.sar.model, "mission", "")),
+                "geolocation_sigma_m": self.config.geolocation_sigma_m,
+                "role": "with SRTM" if srtm_used else
+                        "alone: SRTM surface matching refused (relief verdict or no window)",
+                "images": images}
+
+    def lines(self) -> list[str]:
+        return [f"GCPs from SAR {r.name:<6} {len(r.gcps)} of {int(r.matches.matches.status.size)} "
+                f"templates ({r.counts()}), matching {r.heights.sigma_match_m:.1f} m"
+                for r in self.results]
+
+
+@task(name="sar-ground-control", cache_policy=NO_CACHE)
+def sar_ground_control(sar_image: Path, sar_model: Path | None,
+                       images: Mapping[str, LoadedModel], reference: GeoDEM,
+                       out: Path | None = None, config: SarGcpConfig | None = None,
+                       workers: int | None = None, first_id: int = 1) -> SarControl:
+    """GCPs of every optical image in ``images`` (name -> model, their images read) from the
+    SAR scene ``sar_image``, numbered from ``first_id``; ``out``: ``sar_points.json``
+    written there."""
+    sar = load_sar(Path(sar_image), sar_model)
+    mission = str(getattr(sar.model, "mission", ""))
+    cfg = config or SarGcpConfig(geolocation_sigma_m=geolocation_sigma_m(mission))
+    h_mid = float(np.nanmedian(reference.h_m))
+    sar_box = _corners(sar, h_mid)
+    for name, m in images.items():
+        share = _overlap(_corners(m, h_mid), sar_box)
+        if share < 0.2:
+            raise InputError(f"the SAR scene {sar_image} covers {100 * share:.0f} % of the "
+                             f"{name} image (20 % needed): it does not overlap the pair")
+    sar_pixels = _read(sar.image)
+    parts = [dask.delayed(sar_gcps_of_image)(name, m.model, _read(m.image or m.source),
+                                             sar.model, sar_pixels, reference,
+                                             _corners(m, h_mid), cfg)
+             for name, m in images.items()]
+    results, next_id = [], first_id
+    for r in compute(parts, workers=workers):  # ids unique across images
+        results.append(replace(r, gcps=tuple(replace(p, id=next_id + k)
+                                             for k, p in enumerate(r.gcps))))
+        next_id += len(r.gcps)
+    results = tuple(results)
+    result = SarControl(sar, results, cfg)
+    if out is not None:
+        atomic_write_json(out, result.to_dict())
+    return result
