@@ -103,6 +103,12 @@ def orient_flow(params: OrientParams) -> OrientOutcome:
         raise InputError("GCP-free orientation needs a reference DEM: give --srtm-dir or "
                          "--reference")
     checkpoints = read_checkpoints(params.checkpoints) if params.checkpoints else None
+    if params.sar is not None:  # bad SAR input refused before any work
+        from tasks.absolute.sar_control import check_overlap, load_sar
+
+        left, right = given.load()
+        check_overlap(load_sar(params.sar, params.sar_model), {"left": left, "right": right},
+                      0.0)
     out.mkdir(parents=True, exist_ok=True)
     rel = relative_models(given, out / "relative", params.workers)
     # a reference prepared from SRTM tiles says its datum in its own tag
@@ -146,11 +152,27 @@ def orient_flow(params: OrientParams) -> OrientOutcome:
         print(f"SRTM surface matching refused ({why}); the orientation proceeds on the SAR "
               "GCPs alone")
     gcps = (windows.gcps if verdict.enough else ()) + (sar.gcps if sar is not None else ())
+    shift = None
+    if sar is not None and srtm_used and len(sar.gcps) >= 3:
+        # the SAR GCPs' common offset (the SAR's geolocation, the matching's bias at height
+        # steps) measured against the models oriented on the SRTM GCPs, and removed
+        import tempfile
+
+        from core.orientation.sar_gcps import common_shift, shifted
+
+        with tempfile.TemporaryDirectory(dir=out, prefix=".srtm_only") as tmp:
+            first = orient_absolute(rel.left, rel.right, windows.gcps, Path(tmp),
+                                    params.corrections, False, params.absolute, ties, False)
+        shift = common_shift({"left": first.models[0], "right": first.models[1]}, sar.gcps)
+        print(f"SAR GCPs' common shift against the SRTM orientation: east "
+              f"{shift.east_m:+.1f} +- {shift.sigma_east_m:.1f} m, north "
+              f"{shift.north_m:+.1f} +- {shift.sigma_north_m:.1f} m (removed)")
+        gcps = windows.gcps + shifted(sar.gcps, shift)
     if len(gcps) < params.absolute.min_gcps and sar is not None:
         raise InsufficientDataError(
             f"only {len(gcps)} GCPs from SRTM and SAR together ({params.absolute.min_gcps} "
             f"needed): surface matching {windows.counts()}; SAR "
-            f"{[r.counts() for r in sar.results]}")
+            f"{'; '.join(r.refused or str(r.counts()) for r in sar.results)}")
     if len(gcps) < params.absolute.min_gcps:
         raise InsufficientDataError(
             f"only {len(gcps)} surface-matching windows gave a GCP "
@@ -177,7 +199,8 @@ def orient_flow(params: OrientParams) -> OrientOutcome:
         reference=ReferenceUsed.of(rel.reference, datum, given),
         dsm=FinalDsm("dsm.tif", "dsm_egm96.tif", final["ellipsoidal"]),
         sar=None if sar is None else sar.summary(
-            srtm_used, {"left": absolute.models[0], "right": absolute.models[1]}))
+            srtm_used, {"left": absolute.models[0], "right": absolute.models[1]}, shift,
+            tuple(p for p in gcps if p.source == "sar")))
     if checkpoints is not None:
         report = replace(
             report, check_points=check_points_of(check_point_report(

@@ -43,7 +43,7 @@ the calibration cannot tell it from the optical model's error. Measured on the s
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from typing import Any
 
 import cv2
@@ -246,9 +246,10 @@ def parallax_heights(optical: SensorModel, sar: SensorModel, optical_px: tuple[F
     control = reliable & np.isfinite(h_ref_m) & np.isfinite(d0).all(axis=1)
     inlier = np.isfinite(d0).all(axis=1)
     for _ in range(3):  # blunders out of the calibration, then refit
-        if control.sum() < 6:
+        if control.sum() < MIN_POINTS:
             raise InputError(f"only {int(control.sum())} SAR-optical points on reliable "
-                             "reference heights (6 needed) to calibrate the parallax")
+                             f"reference heights ({MIN_POINTS} needed) to calibrate the "
+                             "parallax")
         coef = [robust_fit(d0[control, k], basis[control])[0] for k in range(2)]
         field_ = np.stack([basis @ c for c in coef], axis=1)
         cross = np.einsum("ij,ij->i", d0 - field_, w)
@@ -314,17 +315,23 @@ def sar_control_points(name: str, sar: SensorModel, m: SarOpticalMatches, hts: P
 @dataclass(frozen=True, eq=False)
 class SarImageResult:
     """One optical image against the SAR scene: its conjugate points, their heights and the
-    GCPs made of them."""
+    GCPs made of them; ``refused``: why there are none (too few conjugate points or too
+    little altimetric control; ``heights`` is then None)."""
 
     name: str
     matches: SarOpticalMatches
-    heights: ParallaxHeights
+    heights: ParallaxHeights | None
     gcps: tuple[ControlPoint, ...]
+    refused: str = ""
 
     def counts(self) -> dict[str, int]:
         c = self.matches.matches.counts()
-        c["BLUNDER"] = int((~self.heights.inlier).sum())
+        if self.heights is not None:
+            c["BLUNDER"] = int((~self.heights.inlier).sum())
         return c
+
+
+MIN_POINTS = 6  # conjugate points, and of them on altimetric control, to calibrate
 
 
 def sar_gcps_of_image(name: str, optical: SensorModel, optical_image: NDArray,
@@ -332,16 +339,21 @@ def sar_gcps_of_image(name: str, optical: SensorModel, optical_image: NDArray,
                       corners: tuple[FloatArray, FloatArray], cfg: SarGcpConfig,
                       first_id: int = 1) -> SarImageResult:
     """The whole method for one optical image (see the module docstring); ``corners``: the
-    lon/lat of the image's footprint."""
+    lon/lat of the image's footprint. No GCP (``refused`` says why) where the images match
+    at fewer than :data:`MIN_POINTS` places or too few of them lie on reliable reference
+    heights (steep terrain, where the radar's and the sun's shading differ most)."""
     g = ground_images(optical, optical_image, sar, sar_image, reference, corners,
                       cfg.cell_m or ground_spacing_m(sar, np.shape(sar_image), reference))
     m = match_sar_optical(g, cfg)
     ok = m.matches.ok
-    if ok.sum() < 6:
-        raise InputError(f"{name}: only {int(ok.sum())} SAR-optical conjugate points "
-                         f"({m.matches.counts()}); the SAR scene barely overlaps the image "
-                         "or shows nothing the optical image shows")
+    if ok.sum() < MIN_POINTS:
+        return SarImageResult(name, m, None, (), f"{int(ok.sum())} conjugate points "
+                              f"({MIN_POINTS} needed): {m.matches.counts()}")
     reliable = reliable_reference(reference, m.lon_deg[ok], m.lat_deg[ok], cfg.max_slope)
+    if reliable.sum() < MIN_POINTS:
+        return SarImageResult(name, m, None, (), f"{int(reliable.sum())} of {int(ok.sum())} "
+                              f"conjugate points on reliable reference heights (slope under "
+                              f"{cfg.max_slope:g}, no void; {MIN_POINTS} needed)")
     hts = parallax_heights(optical, sar, (m.optical_col[ok], m.optical_row[ok]),
                            (m.sar_col[ok], m.sar_row[ok]), m.h_ref_m[ok], reliable, cfg)
     return SarImageResult(name, m, hts, sar_control_points(name, sar, m, hts, cfg, first_id))
@@ -360,3 +372,56 @@ def geolocation_sigma_m(mission: str) -> float:
         if mission.upper().startswith(prefix):
             return sigma
     return GEOLOCATION_SIGMA_M["ERS"]
+
+
+@dataclass(frozen=True)
+class CommonShift:
+    """The SAR GCPs' common horizontal offset (east, north, m) from where models oriented on
+    other control put their image points, its standard error and the points used."""
+
+    east_m: float
+    north_m: float
+    sigma_east_m: float
+    sigma_north_m: float
+    n: int
+
+    def to_dict(self) -> dict[str, float | int]:
+        return {"east_m": self.east_m, "north_m": self.north_m,
+                "sigma_east_m": self.sigma_east_m, "sigma_north_m": self.sigma_north_m,
+                "n": self.n}
+
+
+def common_shift(models: dict[str, SensorModel], gcps: tuple[ControlPoint, ...]) -> CommonShift:
+    """How far the SAR GCPs sit, in common, from the ground their image points reach through
+    ``models`` (name -> model oriented without them, e.g. on SRTM GCPs): the robust mean of
+    (model's ground - GCP's ground), east and north. The SAR scene's own geolocation error
+    and the matching's bias at height steps (see the module docstring) are such a common
+    offset; with other control it is estimated and removed (:func:`shifted`), alone it
+    passes into the orientation."""
+    de, dn = [], []
+    for p in gcps:
+        for name, ip in p.image_points.items():
+            lon, lat = models[name].localize(np.array([ip.col]), np.array([ip.row]),
+                                             np.array([p.h_m]))
+            mx, my = metres_per_degree(p.lat_deg)
+            de.append((float(lon[0]) - p.lon_deg) * float(mx))
+            dn.append((float(lat[0]) - p.lat_deg) * float(my))
+    if len(de) < 3:
+        raise InputError(f"only {len(de)} SAR GCPs to measure their common shift (3 needed)")
+    e, n = np.asarray(de), np.asarray(dn)
+    one = np.ones((e.size, 1))
+    (ce,), se = robust_fit(e, one)
+    (cn,), sn = robust_fit(n, one)
+    return CommonShift(float(ce), float(cn), float(se / np.sqrt(e.size)),
+                       float(sn / np.sqrt(n.size)), int(e.size))
+
+
+def shifted(gcps: tuple[ControlPoint, ...], shift: CommonShift) -> tuple[ControlPoint, ...]:
+    """The GCPs moved by ``shift`` (their image points kept), its provenance recorded."""
+    out = []
+    for p in gcps:
+        mx, my = metres_per_degree(p.lat_deg)
+        prov = {**p.provenance, "common_shift_m": [shift.east_m, shift.north_m]}
+        out.append(replace(p, lon_deg=p.lon_deg + shift.east_m / float(mx),
+                           lat_deg=p.lat_deg + shift.north_m / float(my), provenance=prov))
+    return tuple(out)

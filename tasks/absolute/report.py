@@ -184,7 +184,9 @@ class OrientReport:
                 res = (f", residuals P {s['residual_rms_col_px']:.3f} L "
                        f"{s['residual_rms_row_px']:.3f} px RMS"
                        if "residual_rms_col_px" in s else "")
-                out.append(f"GCPs from SAR {name:<6}  {s['gcps']} ({self.sar['role']}){res}")
+                why = f": none, {s['refused']}" if s.get("refused") else ""
+                out.append(f"GCPs from SAR {name:<6}  {s['gcps']} ({self.sar['role']}){why}"
+                           f"{res}")
         for name, a in self.absolute.images.items():
             out.append(f"GCP residuals {name:<6}  P {a.rms_col_px:.3f} px  "
                        f"L {a.rms_row_px:.3f} px RMS")

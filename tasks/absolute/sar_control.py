@@ -18,8 +18,9 @@ from prefect.cache_policies import NO_CACHE
 from rasterio.errors import NotGeoreferencedWarning
 
 from core.dem import GeoDEM
-from core.errors import InputError
+from core.errors import GeometryError, InputError
 from core.orientation.sar_gcps import (
+    CommonShift,
     SarGcpConfig,
     SarImageResult,
     geolocation_sigma_m,
@@ -69,6 +70,21 @@ def _overlap(a: tuple[np.ndarray, np.ndarray], b: tuple[np.ndarray, np.ndarray])
     return max(w, 0.0) * max(h, 0.0) / area if area > 0 else 0.0
 
 
+def check_overlap(sar: LoadedModel, images: Mapping[str, LoadedModel], h_m: float) -> None:
+    """InputError unless the SAR scene covers at least 20 % of each image at height ``h_m``
+    (a coarse check: bounding boxes)."""
+    try:
+        sar_box = _corners(sar, h_m)
+    except GeometryError as exc:
+        raise InputError(f"the SAR scene {sar.image} does not overlap the pair: its corners "
+                         f"do not reach the ground at {h_m:.0f} m ({exc})") from exc
+    for name, m in images.items():
+        share = _overlap(_corners(m, h_m), sar_box)
+        if share < 0.2:
+            raise InputError(f"the SAR scene {sar.image} covers {100 * share:.0f} % of the "
+                             f"{name} image (20 % needed): it does not overlap the pair")
+
+
 @dataclass(frozen=True, eq=False)
 class SarControl:
     """The SAR GCPs of both images and the record written (``to_dict``)."""
@@ -86,10 +102,14 @@ class SarControl:
         for r in self.results:
             m, h = r.matches, r.heights
             ok = np.flatnonzero(m.matches.ok)
+            head = {"templates": int(m.matches.status.size), "counts": r.counts(),
+                    "gcps": len(r.gcps), "scene_offset_m": [m.offset_cells[1] * m.cell_m,
+                                                            -m.offset_cells[0] * m.cell_m]}
+            if h is None:
+                images[r.name] = {**head, "refused": r.refused}
+                continue
             images[r.name] = {
-                "templates": int(m.matches.status.size), "counts": r.counts(),
-                "gcps": len(r.gcps), "scene_offset_m": [m.offset_cells[1] * m.cell_m,
-                                                        -m.offset_cells[0] * m.cell_m],
+                **head,
                 "sigma_match_m": h.sigma_match_m, "control_points": int(h.control.sum()),
                 "parallax_m_per_m": float(np.median(h.m_per_m)),
                 "heights_from_parallax_only": int((~h.from_reference & h.inlier).sum()),
@@ -111,23 +131,31 @@ class SarControl:
                 "geolocation_sigma_m": self.config.geolocation_sigma_m,
                 "images": images}
 
-    def summary(self, srtm_used: bool, models: Mapping[str, Any] | None = None
-                ) -> dict[str, Any]:
+    def summary(self, srtm_used: bool, models: Mapping[str, Any] | None = None,
+                shift: CommonShift | None = None,
+                used: tuple[ControlPoint, ...] | None = None) -> dict[str, Any]:
         """report.json's ``sar`` section: the scene, the GCPs' role (``with SRTM``, or
-        ``alone`` where the relief verdict refused SRTM matching) and per image the counts,
-        the matching's noise and, given the oriented ``models`` (name -> sensor model), the
-        SAR GCPs' residuals (measured - projected, px)."""
+        ``alone`` where SRTM surface matching was refused), their ``common_shift_m`` measured
+        against the SRTM orientation and removed (with SRTM), and per image the counts, the
+        matching's noise and, given the oriented ``models`` (name -> sensor model) and the SAR
+        GCPs ``used`` (default as made), their residuals (measured - projected, px)."""
+        by_image = {r.name: [p for p in (used if used is not None else r.gcps)
+                             if r.name in p.image_points] for r in self.results}
         images = {}
         for r in self.results:
             d: dict[str, Any] = {"templates": int(r.matches.matches.status.size),
-                                 "counts": r.counts(), "gcps": len(r.gcps),
-                                 "sigma_match_m": r.heights.sigma_match_m}
-            if models is not None and r.gcps:
-                lon, lat, h = (np.array([getattr(p, k) for p in r.gcps])
+                                 "counts": r.counts(), "gcps": len(r.gcps)}
+            if r.heights is None:
+                d["refused"] = r.refused
+            else:
+                d["sigma_match_m"] = r.heights.sigma_match_m
+            pts = by_image[r.name]
+            if models is not None and pts:
+                lon, lat, h = (np.array([getattr(p, k) for p in pts])
                                for k in ("lon_deg", "lat_deg", "h_m"))
                 col, row = models[r.name].project(lon, lat, h)
-                dc = np.array([p.image_points[r.name].col for p in r.gcps]) - col
-                dr = np.array([p.image_points[r.name].row for p in r.gcps]) - row
+                dc = np.array([p.image_points[r.name].col for p in pts]) - col
+                dr = np.array([p.image_points[r.name].row for p in pts]) - row
                 d.update(residual_rms_col_px=float(np.sqrt(np.mean(dc**2))),
                          residual_rms_row_px=float(np.sqrt(np.mean(dr**2))),
                          residual_mean_col_px=float(np.mean(dc)),
@@ -138,12 +166,14 @@ class SarControl:
                 "geolocation_sigma_m": self.config.geolocation_sigma_m,
                 "role": "with SRTM" if srtm_used else
                         "alone: SRTM surface matching refused (relief verdict or no window)",
+                "common_shift_m": None if shift is None else shift.to_dict(),
                 "images": images}
 
     def lines(self) -> list[str]:
         return [f"GCPs from SAR {r.name:<6} {len(r.gcps)} of {int(r.matches.matches.status.size)} "
-                f"templates ({r.counts()}), matching {r.heights.sigma_match_m:.1f} m"
-                for r in self.results]
+                f"templates ({r.counts()}), " + (
+                    f"matching {r.heights.sigma_match_m:.1f} m" if r.heights is not None
+                    else f"none: {r.refused}") for r in self.results]
 
 
 @task(name="sar-ground-control", cache_policy=NO_CACHE)
@@ -158,12 +188,7 @@ def sar_ground_control(sar_image: Path, sar_model: Path | None,
     mission = str(getattr(sar.model, "mission", ""))
     cfg = config or SarGcpConfig(geolocation_sigma_m=geolocation_sigma_m(mission))
     h_mid = float(np.nanmedian(reference.h_m))
-    sar_box = _corners(sar, h_mid)
-    for name, m in images.items():
-        share = _overlap(_corners(m, h_mid), sar_box)
-        if share < 0.2:
-            raise InputError(f"the SAR scene {sar_image} covers {100 * share:.0f} % of the "
-                             f"{name} image (20 % needed): it does not overlap the pair")
+    check_overlap(sar, images, h_mid)
     sar_pixels = _read(sar.image)
     parts = [dask.delayed(sar_gcps_of_image)(name, m.model, _read(m.image or m.source),
                                              sar.model, sar_pixels, reference,
