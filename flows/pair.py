@@ -48,6 +48,7 @@ class PairParams:
     workers: int | None = None
     progress: bool = False
     pair_id: str | None = None
+    reference_sigma_m: tuple[float, float, float] = (5.0, 5.0, 5.0)
 
     def to_dict(self) -> dict[str, Any]:
         """The manifest's ``params``: the pair's inputs and every option, as JSON values."""
@@ -130,6 +131,7 @@ def pair_flow(params: PairParams) -> PairOutcome:
     from prefect.artifacts import create_progress_artifact, update_progress_artifact
 
     from core.errors import InputError
+    from core.orientation.absolute import AbsoluteConfig
     from flows.orient import OrientParams, orient_flow
     from tasks.archive.pair import (
         ORIENT_PRODUCTS,
@@ -165,7 +167,8 @@ def pair_flow(params: PairParams) -> PairOutcome:
             self_calibrate=params.self_calibrate, along_track=params.along_track,
             corrections=params.corrections,
             workers=params.workers, progress=params.progress, spacing_m=params.spacing_m,
-            min_windows=params.min_windows, surface=params.surface or SurfaceMatchConfig()))
+            min_windows=params.min_windows, surface=params.surface or SurfaceMatchConfig(),
+            absolute=AbsoluteConfig(reference_sigma_m=params.reference_sigma_m)))
     done("orient")
 
     products = dict(ORIENT_PRODUCTS)

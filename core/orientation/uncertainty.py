@@ -21,8 +21,14 @@ the ground's east, north and up at the point, ``s`` the shift), a variance ``G S
 lens, an attitude the corrections cannot follow) is as large at a check point as at the GCPs;
 it is smooth across the image where GCP noise is not, so its variance is the covariance of
 the residuals of neighbouring GCPs (the signal of least-squares collocation, Moritz), which
-the prediction adds. The RMS predicted over a set of points is the square root of the mean of
-those variances per axis.
+the prediction adds. But the GCPs' own ground errors (the reference's noise, the canopy share
+it sees, overlapping surface-matching windows) are smooth over kilometres too: in a pair, only
+the residuals' parallax, which no ground error makes, tells a model error
+(:func:`parallax_covariance`); the rest is a correlated ground error
+(:func:`correlated_ground_error`), which a check point does not show itself but which does not
+average out over the GCPs either, so it enters the parameters' covariance
+(:func:`correlated_covariance`). The RMS predicted over a set of points is the square root of
+the mean of those variances per axis.
 """
 
 from __future__ import annotations
@@ -259,6 +265,206 @@ def neighbour_covariance(col: ArrayLike, row: ArrayLike, v: ArrayLike,
     prod = v[pairs[:, 0]] * v[pairs[:, 1]]  # each pair once (mutual neighbours are one pair)
     m, se = float(np.mean(prod)), float(np.std(prod) / np.sqrt(prod.size))
     return m if m > t_min * se else 0.0
+
+
+def parallax_covariance(ground_jac: ArrayLike, v: ArrayLike, col: ArrayLike, row: ArrayLike,
+                        t_min: float = 2.0) -> float:
+    """The model's own error per pixel axis (px^2) that the residuals ``v`` (n, m, 2) of
+    points seen in ``m >= 2`` images show and an error of the points' ground cannot:
+    :func:`neighbour_covariance` of each point's residuals projected out of the span of its
+    ground Jacobian ``ground_jac`` (n, m, 2, 3, :func:`ground_jacobian`), i.e. of the
+    parallax, the ``2 m - 3`` directions no east/north/up move of the point makes.
+
+    A GCP taken from a reference DEM carries the reference's error there (its noise, the
+    canopy share it sees, a tilt), correlated over kilometres, so over the GCPs' spacing: in
+    their residuals it is as smooth as a model error, and :func:`neighbour_covariance` of
+    the raw residuals counts it as one, though a check point (exact ground) never shows it.
+    Its image signature is ``G e``, which the projection removes whole; what is left of a
+    smooth model error ``d`` is ``Q d`` (``Q = I - G G^+``), whose expectation at neighbours
+    ``i``, ``j`` is ``tr(Q_i Q_j)`` times the per-axis variance when the model error is alike
+    in every image axis (the only statement the GCPs allow about the directions they cannot
+    see). Returned: ``mean((Q_i v_i)'(Q_j v_j)) / mean(tr(Q_i Q_j))`` over the nearest-
+    neighbour pairs (in (``col``, ``row``) of one image), 0 unless above ``t_min`` standard
+    errors (independent noise averages out of it), and with fewer than 3 points."""
+    from scipy.spatial import cKDTree
+
+    g = np.asarray(ground_jac, dtype=np.float64)
+    v = np.asarray(v, dtype=np.float64)
+    n = v.shape[0]
+    if g.ndim != 4 or g.shape[1:] != (v.shape[1], 2, 3) or v.shape[2:] != (2,) \
+            or v.shape[1] < 2:
+        raise InputError(f"ground Jacobian {g.shape} and residuals {v.shape} must be "
+                         "(n, m, 2, 3) and (n, m, 2) with m >= 2 images")
+    if n < 3:
+        return 0.0
+    gf = g.reshape(n, -1, 3)
+    q = np.eye(gf.shape[1]) - gf @ np.linalg.pinv(gf)  # (n, 2m, 2m) onto the parallax
+    w = np.einsum("nij,nj->ni", q, v.reshape(n, -1))
+    pts = np.column_stack([np.asarray(col, dtype=np.float64), np.asarray(row, dtype=np.float64)])
+    _, j = cKDTree(pts).query(pts, k=2)
+    pairs = np.unique(np.sort(np.column_stack([np.arange(n), j[:, 1]]), axis=1), axis=0)
+    a, b = pairs[:, 0], pairs[:, 1]
+    prod = np.einsum("ni,ni->n", w[a], w[b])
+    tr = np.einsum("nij,nji->n", q[a], q[b])
+    m = float(np.sum(prod) / np.sum(tr))
+    se = float(np.std(prod) / np.sqrt(prod.size) / np.mean(tr))
+    return m if m > t_min * se else 0.0
+
+
+@dataclass(frozen=True)
+class CorrelatedGroundError:
+    """The part of the GCPs' ground error correlated between GCPs (the reference's noise over
+    kilometres, the canopy share of its stands, a tilt): variances ``variance_m2`` (east,
+    north, up; m^2) falling off as ``exp(-d / length_m)`` with the distance ``d`` between
+    GCPs, fitted to the empirical covariances of the ground displacements the GCPs'
+    residuals make (:func:`correlated_ground_error`) in ``n_bins`` distance classes."""
+
+    variance_m2: tuple[float, float, float]
+    length_m: float
+    n_bins: int
+
+    def correlation(self, d_m: ArrayLike) -> FloatArray:
+        return np.exp(-np.asarray(d_m, dtype=np.float64) / self.length_m)
+
+    def to_dict(self) -> dict[str, Any]:
+        return {"sigma_m": [float(np.sqrt(v)) for v in self.variance_m2],
+                "length_m": self.length_m, "n_bins": self.n_bins}
+
+
+NO_CORRELATION = CorrelatedGroundError((0.0, 0.0, 0.0), 1.0, 0)
+
+
+def _distances(east_m: ArrayLike, north_m: ArrayLike) -> FloatArray:
+    xy = np.column_stack([np.asarray(east_m, dtype=np.float64),
+                          np.asarray(north_m, dtype=np.float64)])
+    return np.sqrt(np.sum((xy[:, None, :] - xy[None, :, :]) ** 2, axis=2))
+
+
+def correlated_ground_error(ground_jac: ArrayLike, v: ArrayLike, east_m: ArrayLike,
+                            north_m: ArrayLike, n_bins: int = 8,
+                            absorbed: tuple[ArrayLike, ArrayLike, ArrayLike] | None = None
+                            ) -> CorrelatedGroundError:
+    """The GCPs' ground error correlated between GCPs, from their residuals ``v`` (n, m, 2;
+    px) in the ``m >= 2`` images they are measured in, with the ground Jacobians
+    ``ground_jac`` (n, m, 2, 3; :func:`ground_jacobian`) at the GCPs' local ``east_m``,
+    ``north_m``: each GCP's ground displacement ``e_i = G_i^+ v_i`` (m), the mean products
+    ``e_i e_j`` per component over the pairs in ``n_bins`` distance classes (quantiles of the
+    pair distances up to half the largest; the pair with itself left out, so independent
+    noise adds nothing), fitted by the variances ``c_k >= 0`` of a field correlated as
+    ``exp(-d / L)`` (one length for the three components, chosen on a logarithmic grid).
+
+    The residuals of an adjustment have lost the part of the error its parameters follow (a
+    shift, a rate: the long wavelengths), and a check point shows that part whole. With
+    ``absorbed`` = (``param_jac`` (n, m, 2, u), ``sigma_px`` (n, m, 2), ``covariance`` (u, u))
+    of that adjustment, the fit compares the products with what the field leaves in the
+    residuals, ``P R G K G' R' P'`` (``R = I - A C A' W`` the residuals' projector, ``P`` the
+    ``G_i^+``), so the field found is the one before the adjustment; without it, the raw
+    ``c_k exp(-d / L)`` with ``c_k`` at most ``mean(e_k^2)`` (a lower bound)."""
+    from scipy.optimize import nnls
+
+    g = np.asarray(ground_jac, dtype=np.float64)
+    v = np.asarray(v, dtype=np.float64)
+    n = v.shape[0]
+    if g.ndim != 4 or g.shape[1:] != (v.shape[1], 2, 3) or v.shape[1] < 2:
+        raise InputError(f"ground Jacobian {g.shape} and residuals {v.shape} must be "
+                         "(n, m, 2, 3) and (n, m, 2) with m >= 2 images")
+    if n < 4 * n_bins:
+        return NO_CORRELATION
+    gf = g.reshape(n, -1, 3)  # (n, o, 3), o = 2 m observations per GCP
+    pinv = np.linalg.pinv(gf)  # (n, 3, o)
+    e = np.einsum("nij,nj->ni", pinv, v.reshape(n, -1))
+    d = _distances(east_m, north_m)
+    iu = np.triu_indices(n, k=1)
+    dd = d[iu]
+    edges = np.quantile(dd[dd <= 0.5 * dd.max()], np.linspace(0.0, 1.0, n_bins + 1))
+    b = np.clip(np.searchsorted(edges, dd, side="right") - 1, 0, n_bins - 1)
+    inside = dd <= edges[-1]
+    b, pi, pj = b[inside], iu[0][inside], iu[1][inside]
+    cnt = np.bincount(b, minlength=n_bins).astype(np.float64)
+    ok = cnt > 0
+
+    def binned(x: FloatArray) -> FloatArray:  # mean over the pairs of each distance class
+        return np.bincount(b, weights=x, minlength=n_bins)[ok] / cnt[ok]
+
+    emp = np.stack([binned(e[pi, c] * e[pj, c]) for c in range(3)], axis=1)  # (bins, 3)
+    w = np.sqrt(cnt[ok])[:, None]
+    z = None
+    if absorbed is not None:  # z[l, k]: (n, n) map of the field's component k into e's l
+        a_, s_, c_ = (np.asarray(x, dtype=np.float64) for x in absorbed)
+        wa = a_ / s_[..., None] ** 2  # W A: (n, m, 2, u)
+        pa = np.einsum("nlo,nou->nlu", pinv, a_.reshape(n, gf.shape[1], -1))  # P A
+        # P R B_k: identity part e_i <- e_i (P_i G_i = I), less P A C A' W B_k
+        awg = np.einsum("pou,pok->puk", wa.reshape(n, gf.shape[1], -1), gf)  # A' W B_k
+        z = np.empty((3, 3, n, n))
+        for k in range(3):
+            z[:, k] = -np.einsum("nlu,uv,pv->lnp", pa, c_, awg[:, :, k])
+            z[k, k] += np.eye(n)
+    best = (np.inf, NO_CORRELATION)
+    total = np.mean(e**2, axis=0)
+    for length in np.geomspace(0.25 * max(edges[1], 1.0), 4.0 * dd.max(), 30):
+        corr = np.exp(-d / length)
+        if z is None:
+            f = binned(np.exp(-dd[inside] / length))
+            c = np.clip((w[:, 0] ** 2 * f) @ emp / np.sum(w[:, 0] ** 2 * f * f), 0.0, total)
+            model = f[:, None] * c
+        else:
+            basis = np.stack([np.stack([binned((z[ll, k] @ corr @ z[ll, k].T)[pi, pj])
+                                        for ll in range(3)], axis=1)
+                              for k in range(3)], axis=2)  # (bins, l, k)
+            c, _ = nnls((w[:, :, None] * basis).reshape(-1, 3), (w * emp).reshape(-1))
+            model = np.einsum("blk,k->bl", basis, c)
+        cost = float(np.sum((w * (emp - model)) ** 2))
+        if cost < best[0]:
+            best = (cost, CorrelatedGroundError((float(c[0]), float(c[1]), float(c[2])),
+                                                float(length), int(ok.sum())))
+    return best[1]
+
+
+def correlated_covariance(covariance: ArrayLike, param_jac: ArrayLike, sigma_px: ArrayLike,
+                          ground_jac: ArrayLike, east_m: ArrayLike, north_m: ArrayLike,
+                          error: CorrelatedGroundError) -> FloatArray:
+    """The parameters' covariance when the GCPs' ground errors are correlated as ``error``
+    says, where ``covariance`` (u, u) treated them as independent with the variances
+    ``sigma_px`` (n, m, 2; px) their weights were (those variances hold each observation's
+    own share of the correlated error, as variance components estimated on the residuals
+    do): the sandwich ``C + C F C`` with ``F = sum_{i, j} A_i' W_i G_i K_ij G_j' W_j A_j``
+    over the GCPs less its diagonal in the observations (``A_i`` = ``param_jac`` (n, m, 2,
+    u), ``W_i`` the weights, ``G_i`` = ``ground_jac`` (n, m, 2, 3), ``K_ij`` the correlated
+    ground covariance between GCPs ``i`` and ``j``; ``i = j``: one GCP's error seen in both
+    images). Correlated errors do not average out over the GCPs as independent ones do:
+    ``N^-1`` alone is too optimistic."""
+    c = np.asarray(covariance, dtype=np.float64)
+    a = np.asarray(param_jac, dtype=np.float64)
+    n = a.shape[0]
+    if n == 0 or not any(error.variance_m2):
+        return c
+    wa = a / np.asarray(sigma_px, dtype=np.float64)[..., None] ** 2  # W A: (n, m, 2, u)
+    fk = np.einsum("nmau,nmak->nku", wa, np.asarray(ground_jac, dtype=np.float64))  # (n, 3, u)
+    r = error.correlation(_distances(east_m, north_m))
+    var = np.asarray(error.variance_m2, dtype=np.float64)
+    f = sum(vk * fk[:, k, :].T @ r @ fk[:, k, :] for k, vk in enumerate(var))
+    # less what the weights already hold: each observation's own variance of the error
+    own = np.einsum("nmak,k->nma", np.asarray(ground_jac, dtype=np.float64) ** 2, var)
+    f = f - np.einsum("nmau,nma,nmav->uv", wa, own, wa)
+    return c + c @ f @ c
+
+
+def stereo_model_error_px(models: Sequence[Any], lon_deg: ArrayLike, lat_deg: ArrayLike,
+                          h_m: ArrayLike, col: ArrayLike, row: ArrayLike) -> float:
+    """The model's own error (px RMS per axis, every image) the residuals of GCPs measured in
+    all of ``models`` show beyond their ground's error (:func:`parallax_covariance`): ``col``,
+    ``row`` (n, m) their measurements, ``lon_deg``, ``lat_deg``, ``h_m`` (n,) their ground."""
+    lon, lat, h = (np.asarray(x, dtype=np.float64) for x in (lon_deg, lat_deg, h_m))
+    col, row = np.asarray(col, dtype=np.float64), np.asarray(row, dtype=np.float64)
+    if col.shape != row.shape or col.shape != (lon.size, len(models)):
+        raise InputError(f"measurements {col.shape}/{row.shape} for {lon.size} points in "
+                         f"{len(models)} images")
+    v = np.empty(col.shape + (2,))
+    for k, model in enumerate(models):
+        pc, pr = model.project(lon, lat, h)
+        v[:, k, 0], v[:, k, 1] = col[:, k] - pc, row[:, k] - pr
+    g = np.stack([ground_jacobian(m, lon, lat, h) for m in models], axis=1)
+    return float(np.sqrt(parallax_covariance(g, v, col[:, 0], row[:, 0])))
 
 
 def image_grid(n_cols: int, n_rows: int, n_side: int = 9) -> tuple[FloatArray, FloatArray]:

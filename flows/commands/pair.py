@@ -14,6 +14,7 @@ from flows.commands._pair import (
     check_orientation_arguments,
     check_pair,
 )
+from flows.commands.orient import add_reference_sigma_argument, reference_sigma_m
 
 
 def add_parser(sub: argparse._SubParsersAction) -> None:
@@ -32,6 +33,7 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     add_reference_arguments(p, use="the ground the pair is oriented to (required, or "
                                    "--srtm-dir)")
     add_orientation_arguments(p)
+    add_reference_sigma_argument(p)
     p.add_argument("--lidar", type=Path, default=None, metavar="LAS",
                    help="lidar LAS/LAZ to evaluate the final DSM against (any CRS)")
     p.add_argument("--landcover", type=Path, default=None, metavar="TIF",
@@ -46,6 +48,7 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
 def run(args: argparse.Namespace) -> int:
     from flows._env import prefect_api
 
+    sigma = reference_sigma_m(args)  # refused in a line, before the server boots
     with prefect_api() as api:  # a temporary Prefect server boots meanwhile
         from core.errors import InputError
 
@@ -76,6 +79,6 @@ def run(args: argparse.Namespace) -> int:
             corrections=args.corrections,
             workers=args.workers, progress=not args.no_progress,
             pair_id=args.pair_id, surface=surface, spacing_m=args.window_spacing,
-            min_windows=args.min_windows))
+            min_windows=args.min_windows, reference_sigma_m=sigma))
         print("\n".join(outcome.lines()))
     return 0
