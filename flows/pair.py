@@ -30,7 +30,8 @@ class PairParams:
 
     ``lidar`` (LAS/LAZ) and ``landcover`` (a class raster) drive the evaluation; without lidar
     the pair ends with the ortho check. ``checkpoints``: independent points for the check-point
-    table. ``pair_id`` names the STAC items (default: OUT's folder name).
+    table. ``pair_id`` names the STAC items (default: OUT's folder name). ``sar`` (and
+    ``sar_model``): a SAR scene for SAR-optical GCPs (``gcpfree orient --sar``).
     """
 
     pair: PairInputs
@@ -49,6 +50,8 @@ class PairParams:
     progress: bool = False
     pair_id: str | None = None
     reference_sigma_m: tuple[float, float, float] = (5.0, 5.0, 5.0)
+    sar: Path | None = None
+    sar_model: Path | None = None
 
     def to_dict(self) -> dict[str, Any]:
         """The manifest's ``params``: the pair's inputs and every option, as JSON values."""
@@ -168,7 +171,8 @@ def pair_flow(params: PairParams) -> PairOutcome:
             corrections=params.corrections,
             workers=params.workers, progress=params.progress, spacing_m=params.spacing_m,
             min_windows=params.min_windows, surface=params.surface or SurfaceMatchConfig(),
-            absolute=AbsoluteConfig(reference_sigma_m=params.reference_sigma_m)))
+            absolute=AbsoluteConfig(reference_sigma_m=params.reference_sigma_m),
+            sar=params.sar, sar_model=params.sar_model))
     done("orient")
 
     products = dict(ORIENT_PRODUCTS)

@@ -93,7 +93,8 @@ def run_pair(entry: PairEntry, root: Path, srtm_dir: Path | None, reference: Pat
         pair_flow(PairParams(
             pair=entry.pair_inputs(reference, srtm_dir, reference_vertical),
             out=out, lidar=entry.lidar, landcover=entry.landcover,
-            checkpoints=entry.checkpoints, self_calibrate=self_calibrate, workers=1,
+            checkpoints=entry.checkpoints, sar=entry.sar, sar_model=entry.sar_model,
+            self_calibrate=self_calibrate, workers=1,
             progress=False, pair_id=entry.id))
 
 

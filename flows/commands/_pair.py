@@ -83,6 +83,15 @@ def add_orientation_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--min-windows", type=int, default=8,
                    help="windows with enough relief needed, else the terrain is refused as too "
                         "flat (default 8)")
+    p.add_argument("--sar", type=Path, default=None, metavar="IMAGE",
+                   help="a SAR scene of the same ground (e.g. a Sentinel-1 measurement TIFF, "
+                        "or gcpfree simulate's sar.tif; its annotation found beside it): "
+                        "SAR-optical GCPs (Goncalves 2002) join the SRTM ones, or orient the pair "
+                        "alone where SRTM surface matching is refused (flat terrain); "
+                        "OUT/sar_points.json")
+    p.add_argument("--sar-model", type=Path, default=None, metavar="FILE",
+                   help="the SAR scene's model when not beside it (Sentinel-1 annotation XML or "
+                        "gcpfree SAR .json)")
 
 
 def add_run_arguments(p: argparse.ArgumentParser) -> None:
@@ -91,6 +100,18 @@ def add_run_arguments(p: argparse.ArgumentParser) -> None:
                    help="parallel tiles of the dense matching (default: one per core)")
     p.add_argument("--no-progress", action="store_true", help="no progress bar")
     p.add_argument("--out", type=Path, required=True, help="output folder")
+
+
+def check_sar_arguments(args: argparse.Namespace) -> None:
+    """``--sar``/``--sar-model`` name files that exist (InputError else)."""
+    from core.errors import InputError
+
+    if args.sar_model is not None and args.sar is None:
+        raise InputError("--sar-model names the model of the --sar image: give --sar too")
+    for flag, path in (("--sar", args.sar), ("--sar-model", args.sar_model)):
+        if path is not None and not Path(path).is_file():
+            raise InputError(f"{flag} {path} does not exist; give the SAR image (and its "
+                             "annotation)")
 
 
 def check_orientation_arguments(args: argparse.Namespace, command: str,

@@ -11,6 +11,7 @@ from flows.commands._pair import (
     add_run_arguments,
     check_orientation_arguments,
     check_pair,
+    check_sar_arguments,
 )
 
 
@@ -27,7 +28,8 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
             "fix the position. The final DSM is the relative DEM's matches intersected again "
             "with the oriented models. Writes OUT/report.json, the oriented models OUT/left.json "
             "and OUT/right.json, OUT/gcps.json, OUT/windows.json, OUT/dsm.tif (ellipsoidal) "
-            "and OUT/dsm_egm96.tif, OUT/relative_dem.tif and OUT/relative/."),
+            "and OUT/dsm_egm96.tif, OUT/relative_dem.tif and OUT/relative/. With --sar, "
+            "SAR-optical GCPs too (OUT/sar_points.json), which also orient flat terrain."),
     )
     add_pair_arguments(p)
     add_reference_arguments(p, use="the ground the pair is oriented to (required, or "
@@ -66,6 +68,7 @@ def run(args: argparse.Namespace) -> int:
     with prefect_api() as api:  # a temporary Prefect server boots meanwhile
         checked = check_pair(args)
         surface = check_orientation_arguments(args, "orient", checked)
+        check_sar_arguments(args)
         pair = checked[0]
         from core.orientation.absolute import AbsoluteConfig
         from flows.orient import OrientParams, orient_flow
@@ -76,6 +79,7 @@ def run(args: argparse.Namespace) -> int:
             along_track=args.along_track,
             corrections=args.corrections, spacing_m=args.window_spacing,
             min_windows=args.min_windows, workers=args.workers, progress=not args.no_progress,
-            surface=surface, absolute=AbsoluteConfig(reference_sigma_m=sigma)))
+            surface=surface, absolute=AbsoluteConfig(reference_sigma_m=sigma), sar=args.sar,
+            sar_model=args.sar_model))
         print("\n".join(outcome.lines()))
     return 0

@@ -13,6 +13,7 @@ from flows.commands._pair import (
     add_run_arguments,
     check_orientation_arguments,
     check_pair,
+    check_sar_arguments,
 )
 from flows.commands.orient import add_reference_sigma_argument, reference_sigma_m
 
@@ -69,6 +70,7 @@ def run(args: argparse.Namespace) -> int:
             with open_raster(args.landcover, "land cover"):
                 pass
         surface = check_orientation_arguments(args, "pair", checked)
+        check_sar_arguments(args)
         from flows.pair import PairParams, pair_flow
 
         api.ready()
@@ -79,6 +81,7 @@ def run(args: argparse.Namespace) -> int:
             corrections=args.corrections,
             workers=args.workers, progress=not args.no_progress,
             pair_id=args.pair_id, surface=surface, spacing_m=args.window_spacing,
-            min_windows=args.min_windows, reference_sigma_m=sigma))
+            min_windows=args.min_windows, reference_sigma_m=sigma, sar=args.sar,
+            sar_model=args.sar_model))
         print("\n".join(outcome.lines()))
     return 0

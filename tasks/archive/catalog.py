@@ -8,9 +8,10 @@ A catalog is one of:
   ``right/`` folders each with one image (``IMAGERY.TIF`` beside ``METADATA.DIM`` for SPOT).
   Optional: ``lidar.laz`` (or ``.las``), ``landcover.tif`` (used with lidar only, it classifies
   the lidar evaluation), ``checkpoints.json`` (or ``.csv``), looked for in the pair folder, then
-  in its ``truth/`` folder (the simulator's);
+  in its ``truth/`` folder (the simulator's); ``sar.tif`` (a SAR scene of the same ground, its
+  model ``sar.xml``/``sar.json`` beside it: SAR-optical GCPs, ``gcpfree orient --sar``);
 - a CSV file with a header ``id,left,right[,left_model,right_model,lidar,landcover,
-  checkpoints]``, or a JSON list of objects with the same keys (or ``{"pairs": [...]}``). Relative
+  checkpoints,sar,sar_model]``, or a JSON list of objects with the same keys (or ``{"pairs": [...]}``). Relative
   paths are relative to the catalog file.
 
 Reading a catalog checks its form only: a pair whose images are missing is that pair's failure
@@ -38,7 +39,8 @@ from tasks.io.pair import PairInputs
 from tasks.io.rasters import atomic_write_json, atomic_write_text
 
 REQUIRED = ("id", "left", "right")
-OPTIONAL = ("left_model", "right_model", "lidar", "landcover", "checkpoints")
+OPTIONAL = ("left_model", "right_model", "lidar", "landcover", "checkpoints", "sar",
+            "sar_model")
 COLUMNS = REQUIRED + OPTIONAL
 IMAGE_SUFFIXES = (".tif", ".tiff", ".jp2")
 PAIR_ID = re.compile(r"[A-Za-z0-9_][A-Za-z0-9._-]*")
@@ -60,6 +62,8 @@ class PairEntry:
     lidar: Path | None = None
     landcover: Path | None = None
     checkpoints: Path | None = None
+    sar: Path | None = None
+    sar_model: Path | None = None
 
     def pair_inputs(self, reference: Path | None = None, srtm_dir: Path | None = None,
                     reference_vertical: str = "auto") -> PairInputs:
@@ -270,7 +274,8 @@ def _pair_of_folder(folder: Path) -> PairEntry:
         id=_checked_id(folder.name, f"catalog folder {folder}"),
         left=_image(folder, "left"), right=_image(folder, "right"), lidar=lidar,
         landcover=_first(folder, ("landcover.tif",)) if lidar else None,  # classifies lidar
-        checkpoints=_first(folder, ("checkpoints.json", "checkpoints.csv")))
+        checkpoints=_first(folder, ("checkpoints.json", "checkpoints.csv")),
+        sar=_first(folder, ("sar.tif", "sar.tiff")))
 
 
 def check_pair_inputs(entry: PairEntry) -> None:

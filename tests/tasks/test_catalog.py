@@ -39,6 +39,7 @@ def test_directory_of_pair_folders(tmp_path: Path):
     touch(a / "left.tif"), touch(a / "right.tif"), touch(a / "left.json")
     touch(a / "truth" / "lidar.laz"), touch(a / "truth" / "checkpoints.json")
     touch(a / "truth" / "landcover.tif")
+    touch(a / "sar.tif"), touch(a / "sar.xml")  # a SAR scene of the same ground
     # SPOT products in left/ and right/ folders; files in the pair folder win over truth/
     b, c = cat / "b", cat / "c"
     touch(b / "left" / "IMAGERY.TIF"), touch(b / "left" / "METADATA.DIM")
@@ -58,7 +59,7 @@ def test_directory_of_pair_folders(tmp_path: Path):
     assert got == Catalog(cat, (
         PairEntry("a_2020", a / "left.tif", a / "right.tif", lidar=a / "truth" / "lidar.laz",
                   landcover=a / "truth" / "landcover.tif",
-                  checkpoints=a / "truth" / "checkpoints.json"),
+                  checkpoints=a / "truth" / "checkpoints.json", sar=a / "sar.tif"),
         PairEntry("b", b / "left" / "IMAGERY.TIF", b / "right" / "IMAGERY.TIF",
                   lidar=b / "lidar.las", landcover=b / "landcover.tif",
                   checkpoints=b / "checkpoints.csv"),
@@ -85,22 +86,24 @@ def test_pair_folder_without_images_fails_alone_with_its_reason(tmp_path: Path):
     check_pair_inputs(got["good"])
 
 
-CSV_TEXT = """id,left,right,left_model,lidar
-p1,imgs/l1.tif,imgs/r1.tif,,
-p2 , {abs}/l2.tif , imgs/r2.tif , models/l2.DIM , p2.laz
+CSV_TEXT = """id,left,right,left_model,lidar,sar,sar_model
+p1,imgs/l1.tif,imgs/r1.tif,,,s1/m.tiff,s1/a.xml
+p2 , {abs}/l2.tif , imgs/r2.tif , models/l2.DIM , p2.laz,,
 
 """
 
 
 def test_csv_and_json_lists(tmp_path: Path):
     (tmp_path / "cat.csv").write_text(CSV_TEXT.format(abs="/data"))
-    rows = [{"id": "p1", "left": "imgs/l1.tif", "right": "imgs/r1.tif"},
+    rows = [{"id": "p1", "left": "imgs/l1.tif", "right": "imgs/r1.tif", "sar": "s1/m.tiff",
+             "sar_model": "s1/a.xml"},
             {"id": "p2", "left": "/data/l2.tif", "right": "imgs/r2.tif",
              "left_model": "models/l2.DIM", "lidar": "p2.laz", "checkpoints": None}]
     (tmp_path / "cat.json").write_text(json.dumps(rows))
     (tmp_path / "wrapped.json").write_text(json.dumps({"pairs": rows}))
     expected = (
-        PairEntry("p1", tmp_path / "imgs/l1.tif", tmp_path / "imgs/r1.tif"),
+        PairEntry("p1", tmp_path / "imgs/l1.tif", tmp_path / "imgs/r1.tif",
+                  sar=tmp_path / "s1/m.tiff", sar_model=tmp_path / "s1/a.xml"),
         PairEntry("p2", Path("/data/l2.tif"), tmp_path / "imgs/r2.tif",
                   left_model=tmp_path / "models/l2.DIM", lidar=tmp_path / "p2.laz"),
     )
