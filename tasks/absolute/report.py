@@ -20,7 +20,10 @@ Its keys (format ``gcpfree.orient``, version 1), as the README lists them:
   ``redundancy``; ``split``: the F test's verdict), and ``predicted``, the check-point RMS
   predicted for users without check points: ``grid_points_per_side`` (9), ``heights_m`` (the
   5th, 50th, 95th percentiles of the GCPs kept), ``reference_sigma_m`` (the reference's
-  registration error assumed, east, north, up) and per image (``images.<image>``)
+  registration error assumed, east, north, up; ``--reference-sigma``),
+  ``correlated_ground_error`` (the GCPs' ground error correlated over kilometres, fitted on
+  their residuals and propagated into the parameters' covariance: sigma per axis and length;
+  :class:`core.orientation.uncertainty.CorrelatedGroundError`) and per image (``images.<image>``)
   ``predicted_rms_col_px``/``predicted_rms_row_px`` over that grid of pixels spanning the
   image at those heights, with their terms ``adjustment_rms_*`` (the parameters' covariance),
   ``reference_rms_*`` (the reference's registration), ``unmodelled_rms_*`` (the model's own
