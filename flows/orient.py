@@ -180,8 +180,19 @@ def orient_flow(params: OrientParams) -> OrientOutcome:
             f"not correlate with the reference: terrain too flat for its noise (median relief "
             f"{verdict.relief_found_m:.1f} m per window), clouds, voids or a wrong reference")
     write_gcps(out / "gcps.json", gcps)
+    absolute_cfg = params.absolute
+    if sar is not None and not srtm_used:
+        # the ground control is the SAR scene: what the orientation cannot see is its
+        # geolocation error and the matching's bias at height steps (0.7-1.0 radar pixel on
+        # the simulator, the module docstring of core.orientation.sar_gcps), one radar pixel
+        from core.orientation.sar_gcps import registration_sigma_m
+
+        first_ok = next(r for r in sar.results if r.heights is not None)
+        absolute_cfg = replace(absolute_cfg, reference_sigma_m=registration_sigma_m(
+            sar.config.geolocation_sigma_m, first_ok.matches.cell_m,
+            first_ok.heights.range_direction_en, params.absolute.reference_sigma_m[2]))
     absolute = orient_absolute(rel.left, rel.right, gcps, out, params.corrections,
-                               params.self_calibrate, params.absolute, ties,
+                               params.self_calibrate, absolute_cfg, ties,
                                params.along_track)
     final = {}
     for vert, name in (("ellipsoidal", "dsm.tif"), ("egm96", "dsm_egm96.tif")):
@@ -205,7 +216,7 @@ def orient_flow(params: OrientParams) -> OrientOutcome:
         report = replace(
             report, check_points=check_points_of(check_point_report(
                 absolute.models, checkpoints, absolute.adjustment,
-                params.absolute.reference_sigma_m)),
+                absolute_cfg.reference_sigma_m)),
             check_points_before=check_points_of(check_point_report(
                 (rel.left.model, rel.right.model), checkpoints)))
     path = report.write(out / "report.json")

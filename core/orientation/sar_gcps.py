@@ -202,7 +202,8 @@ class ParallaxHeights:
     ``sigma_parallax_m``), the height kept (``h_m``, ``sigma_h_m``; ``from_reference``: the
     reference's height took part), ``inlier`` (not a blunder), ``control`` (used to
     calibrate), ``cross_m`` (the cross-parallax residual), the parallax's sensitivity
-    ``m_per_m``, the SAR point's own (``sar_m_per_m``, 1 / tan(incidence)) and the matching's noise ``sigma_match_m`` (robust, from the cross
+    ``m_per_m``, the SAR point's own (``sar_m_per_m``, 1 / tan(incidence)), the ground
+    direction towards the radar (``range_direction_en``, east, north) and the matching's noise ``sigma_match_m`` (robust, from the cross
     residuals)."""
 
     h_parallax_m: FloatArray
@@ -215,6 +216,7 @@ class ParallaxHeights:
     cross_m: FloatArray
     m_per_m: FloatArray
     sar_m_per_m: FloatArray
+    range_direction_en: tuple[float, float]
     sigma_match_m: float
 
 
@@ -237,6 +239,8 @@ def parallax_heights(optical: SensorModel, sar: SensorModel, optical_px: tuple[F
     d1, _, _, sar1 = parallax(h0 + 10.0)
     v = (d1 - d0) / 10.0
     sar_move = np.linalg.norm(sar1 - sar0, axis=1) / 10.0  # 1 / tan(incidence)
+    towards = np.median(sar1 - sar0, axis=0)  # a raised point moves towards the radar
+    range_dir = towards / max(float(np.linalg.norm(towards)), 1e-12)
     s = np.linalg.norm(v, axis=1)
     u = v / s[:, None]
     w = np.stack([-u[:, 1], u[:, 0]], axis=1)
@@ -267,7 +271,8 @@ def parallax_heights(optical: SensorModel, sar: SensorModel, optical_px: tuple[F
     h = np.where(agree, (wp * h_par + wr * h0) / (wp + wr), h_par)
     sigma_h = np.where(agree, 1.0 / np.sqrt(wp + wr), sig_par)
     return ParallaxHeights(h_par, sig_par, h, sigma_h, agree, inlier, control, cross, s,
-                           sar_move, float(sigma_match))
+                           sar_move, (float(range_dir[0]), float(range_dir[1])),
+                           float(sigma_match))
 
 
 def reliable_reference(reference: GeoDEM, lon_deg: FloatArray, lat_deg: FloatArray,
@@ -425,3 +430,16 @@ def shifted(gcps: tuple[ControlPoint, ...], shift: CommonShift) -> tuple[Control
         out.append(replace(p, lon_deg=p.lon_deg + shift.east_m / float(mx),
                            lat_deg=p.lat_deg + shift.north_m / float(my), provenance=prov))
     return tuple(out)
+
+
+def registration_sigma_m(geolocation_sigma_m: float, radar_pixel_m: float,
+                         range_direction_en: tuple[float, float], up_m: float
+                         ) -> tuple[float, float, float]:
+    """What an orientation on SAR GCPs alone cannot see, as the reference registration
+    sigma (east, north, up; m) its predicted uncertainty adds: the SAR product's geolocation
+    error, and the matching's bias at height steps, one radar ground pixel along the ground
+    direction of the range (measured 0.7-1.0 pixel on the simulator's forest edges; the
+    module docstring), split over east and north; ``up_m`` as given."""
+    e, n = (abs(float(v)) for v in range_direction_en)
+    return (float(np.hypot(geolocation_sigma_m, radar_pixel_m * e)),
+            float(np.hypot(geolocation_sigma_m, radar_pixel_m * n)), float(up_m))
