@@ -165,14 +165,19 @@ def orientation_channels(image: FloatArray, n_orientations: int = 9,
     gx = cv2.Sobel(z, cv2.CV_32F, 1, 0, ksize=3)
     gy = cv2.Sobel(z, cv2.CV_32F, 0, 1, ksize=3)
     angles = np.arange(n_orientations) * np.pi / n_orientations
-    ch = np.stack([cv2.GaussianBlur(np.abs(np.cos(a) * gx + np.sin(a) * gy), (0, 0),
-                                    sigma_cells) for a in angles])
-    ch = 0.25 * (np.roll(ch, 1, axis=0) + 2.0 * ch + np.roll(ch, -1, axis=0))
-    norm = np.sqrt((ch * ch).sum(axis=0))
-    ch /= np.maximum(norm, 1e-6 * max(float(norm.max()), 1e-30))
+    raw = np.empty((n_orientations, *image.shape), np.float32)
+    for k, a in enumerate(angles):
+        raw[k] = cv2.GaussianBlur(np.abs(np.float32(np.cos(a)) * gx + np.float32(np.sin(a)) * gy),
+                                  (0, 0), sigma_cells)
+    ch = np.empty_like(raw)  # [1, 2, 1] across orientations (circular), one copy
+    for k in range(n_orientations):
+        ch[k] = 0.25 * (raw[k - 1] + 2.0 * raw[k] + raw[(k + 1) % n_orientations])
+    del raw
+    norm = np.sqrt(np.einsum("kij,kij->ij", ch, ch))
+    ch /= np.maximum(norm, np.float32(1e-6 * max(float(norm.max()), 1e-30)))
     bad = cv2.dilate((~valid).astype(np.uint8), np.ones((5, 5), np.uint8)).astype(bool)
     ch[:, bad] = 0.0
-    return ch.astype(np.float32)
+    return ch
 
 
 def channel_ncc(template: NDArray[np.float32], search: NDArray[np.float32],
