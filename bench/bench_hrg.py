@@ -20,9 +20,11 @@ shows. Prints figures, asserts nothing.
 from __future__ import annotations
 
 import argparse
+import itertools
 import json
 import os
 import re
+import resource
 import sqlite3
 import subprocess
 import sys
@@ -52,30 +54,90 @@ def load() -> str:
         return "?"
 
 
+_TICK = os.sysconf("SC_CLK_TCK")
+
+
+def tree_cpu_s(root: int) -> float:
+    """CPU seconds (user + system, with the children each process has reaped) of a process
+    and its descendants, Prefect's temporary API server (uvicorn) left out, as
+    :func:`bench_dsm.tree_rss_mb` counts memory."""
+    total, todo, seen = 0, [root], set()
+    while todo:
+        pid = todo.pop()
+        if pid in seen:
+            continue
+        seen.add(pid)
+        try:
+            cmd = Path(f"/proc/{pid}/cmdline").read_bytes()
+            stat = Path(f"/proc/{pid}/stat").read_text()
+        except OSError:
+            continue
+        if b"uvicorn" not in cmd:
+            fields = stat.rsplit(")", 1)[1].split()
+            total += sum(int(f) for f in fields[11:15])  # utime stime cutime cstime
+        for f in Path(f"/proc/{pid}/task").glob("*/children"):
+            try:
+                todo += [int(x) for x in f.read_text().split()]
+            except OSError:
+                pass
+    return total / _TICK
+
+
 def watch(cmd: list[str], env: dict[str, str], label: str
-          ) -> tuple[float, float, str, list[tuple[float, float]]]:
-    """(seconds, peak tree RSS in MB, stdout, samples (epoch seconds, MB)) of one child;
-    exits on failure."""
+          ) -> tuple[float, float, str, list[tuple[float, float, float]]]:
+    """(seconds, peak tree RSS in MB, stdout, samples (epoch seconds, MB, tree CPU seconds))
+    of one child; exits on failure. The whole run's CPU seconds (every descendant reaped,
+    the API server included) are printed."""
     t0 = time.perf_counter()
-    samples: list[tuple[float, float]] = []
+    cpu0 = resource.getrusage(resource.RUSAGE_CHILDREN)
+    samples: list[tuple[float, float, float]] = []
     with tempfile.TemporaryFile("w+") as out, tempfile.TemporaryFile("w+") as err:
         proc = subprocess.Popen(cmd, stdout=out, stderr=err, text=True, env=env, cwd=REPO)
         while proc.poll() is None:
-            samples.append((time.time(), tree_rss_mb(proc.pid)))
+            samples.append((time.time(), tree_rss_mb(proc.pid), tree_cpu_s(proc.pid)))
             time.sleep(0.25)
+        cpu1 = resource.getrusage(resource.RUSAGE_CHILDREN)
         dt = time.perf_counter() - t0
         out.seek(0)
         err.seek(0)
         stdout, stderr = out.read(), err.read()
+    cpu = (cpu1.ru_utime - cpu0.ru_utime) + (cpu1.ru_stime - cpu0.ru_stime)
+    print(f"{label}: wall {dt:.1f} s, CPU {cpu:.1f} s (user+system of the whole process "
+          f"tree), CPU/wall {cpu / max(dt, 1e-9):.2f}", flush=True)
     if proc.returncode != 0:
         print(stdout[-3000:], stderr[-3000:])
         raise SystemExit(f"{label} failed")
-    return dt, max((m for _, m in samples), default=0.0), stdout, samples
+    return dt, max((s[1] for s in samples), default=0.0), stdout, samples
 
 
-def step_memory(db: Path, samples: list[tuple[float, float]]) -> dict[str, tuple[float, float]]:
-    """Per Prefect task name: (seconds, peak tree RSS in MB while one of its runs ran), from
-    the run's Prefect database and the RSS samples."""
+def _union(spans: list[tuple[float, float]]) -> list[tuple[float, float]]:
+    out: list[tuple[float, float]] = []
+    for a, b in sorted(spans):
+        if out and a <= out[-1][1]:
+            out[-1] = (out[-1][0], max(out[-1][1], b))
+        else:
+            out.append((a, b))
+    return out
+
+
+def step_cpu(spans: list[tuple[float, float]], samples: list[tuple[float, float, float]]
+             ) -> float:
+    """CPU seconds the process tree spent while any of ``spans`` ran (each sampling interval
+    whose middle falls inside one; a step that overlaps another shares that CPU with it)."""
+    u = _union(spans)
+    cpu = 0.0
+    for (ta, _, ca), (tb, _, cb) in itertools.pairwise(samples):
+        mid = 0.5 * (ta + tb)
+        if any(a <= mid <= b for a, b in u):
+            cpu += max(cb - ca, 0.0)
+    return cpu
+
+
+def step_memory(db: Path, samples: list[tuple[float, float, float]]
+                ) -> dict[str, tuple[float, float, float]]:
+    """Per Prefect task name: (seconds, peak tree RSS in MB while one of its runs ran, CPU
+    seconds of the process tree while one ran), from the run's Prefect database and the
+    samples."""
     con = sqlite3.connect(f"file:{db}?mode=ro", uri=True)
     try:
         rows = con.execute(
@@ -85,20 +147,22 @@ def step_memory(db: Path, samples: list[tuple[float, float]]) -> dict[str, tuple
             "flow_run WHERE parent_task_run_id IS NOT NULL) ORDER BY start_time").fetchall()
     finally:
         con.close()
-    out: dict[str, tuple[float, float]] = {}
+    out: dict[str, tuple[float, float, float]] = {}
+    spans: dict[str, list[tuple[float, float]]] = {}
     for name, t0, t1 in rows:
         base = re.sub(r"-[0-9a-f]{3}$", "", name)
-        inside = [m for t, m in samples if t0 <= t <= t1]
+        inside = [s[1] for s in samples if t0 <= s[0] <= t1]
         if not inside and samples:  # shorter than the sampling step: the nearest sample
             inside = [min(samples, key=lambda s: abs(s[0] - 0.5 * (t0 + t1)))[1]]
         peak = max(inside, default=0.0)
-        sec, mb = out.get(base, (0.0, 0.0))
-        out[base] = (sec + t1 - t0, max(mb, peak))
-    return out
+        sec, mb, _ = out.get(base, (0.0, 0.0, 0.0))
+        out[base] = (sec + t1 - t0, max(mb, peak), 0.0)
+        spans.setdefault(base, []).append((t0, t1))
+    return {n: (sec, mb, step_cpu(spans[n], samples)) for n, (sec, mb, _) in out.items()}
 
 
 def pair(scene: Path, out: Path, workers: int, env: dict[str, str]
-         ) -> tuple[float, float, dict[str, tuple[float, float]]]:
+         ) -> tuple[float, float, dict[str, tuple[float, float, float]]]:
     """Run `gcpfree pair` on a scene (its own PREFECT_HOME); (seconds, peak MB, per step)."""
     truth = scene / "truth"
     home = out.with_name(out.name + "_prefect")
@@ -121,14 +185,17 @@ def pair(scene: Path, out: Path, workers: int, env: dict[str, str]
     return dt, peak, step_memory(home / "prefect.db", samples)
 
 
-def step_lines(runs: dict[str, dict[str, tuple[float, float]]]) -> list[str]:
-    """Seconds and peak MB of each step, one column pair per scene."""
+def step_lines(runs: dict[str, dict[str, tuple[float, float, float]]]) -> list[str]:
+    """Seconds, CPU seconds and peak MB of each step, one column triple per scene."""
     names = list(dict.fromkeys(n for r in runs.values() for n in r))
-    head = f"{'step':26s}" + "".join(f" {k + ' s':>10s} {k + ' MB':>10s}" for k in runs)
+    head = f"{'step':26s}" + "".join(f" {k + ' s':>10s} {k + ' CPU s':>10s} {k + ' MB':>10s}"
+                                     for k in runs)
     lines = [head]
+    zero = (0.0, 0.0, 0.0)
     for n in names:
-        lines.append(f"{n:26s}" + "".join(f" {r.get(n, (0.0, 0.0))[0]:10.1f} "
-                                          f"{r.get(n, (0.0, 0.0))[1]:10.0f}"
+        lines.append(f"{n:26s}" + "".join(f" {r.get(n, zero)[0]:10.1f} "
+                                          f"{r.get(n, zero)[2]:10.1f} "
+                                          f"{r.get(n, zero)[1]:10.0f}"
                                           for r in runs.values()))
     return lines
 
@@ -155,7 +222,7 @@ def main() -> None:
                   f"load {load()}", flush=True)
         if a.skip_pair:
             return
-        runs: dict[str, dict[str, tuple[float, float]]] = {}
+        runs: dict[str, dict[str, tuple[float, float, float]]] = {}
         t_spot = None
         if a.spot is not None:
             t_spot, _, runs["spot"] = pair(a.spot, tmp / "pair_spot", a.workers, env)

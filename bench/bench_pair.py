@@ -49,21 +49,27 @@ def run(cmd: list[str], env: dict[str, str], tmp: Path) -> tuple[float, float]:
     return dt, rss
 
 
-def step_table(steps: dict[int, dict[str, tuple[float, float]]], total: dict[int, float]
-               ) -> list[str]:
-    """Per-step wall time, 1 worker beside 2, the ratio, and each step's peak memory."""
+def step_table(steps: dict[int, dict[str, tuple[float, float, float]]],
+               total: dict[int, float], cpu_total: dict[int, float]) -> list[str]:
+    """Per-step wall time and CPU time, 1 worker beside 2, the wall ratio, the CPU use (CPU
+    seconds per wall second: 2 is both cores busy) and each step's peak memory."""
     names = list(dict.fromkeys(n for w in sorted(steps) for n in steps[w]))
-    head = (f"{'step':26s} {'1 worker s':>10s} {'2 workers s':>11s} {'ratio':>6s} "
-            f"{'1w MB':>7s} {'2w MB':>7s}")
+    head = (f"{'step':26s} {'1w s':>7s} {'2w s':>7s} {'ratio':>6s} {'1w CPU':>7s} "
+            f"{'2w CPU':>7s} {'1w use':>6s} {'2w use':>6s} {'1w MB':>6s} {'2w MB':>6s}")
     lines = [head]
-    zero = (0.0, 0.0)
+    zero = (0.0, 0.0, 0.0)
     rows = [(n, steps[1].get(n, zero), steps[2].get(n, zero)) for n in names]
-    rest = [total[w] - sum(v[0] for v in steps[w].values()) for w in (1, 2)]
-    rows.append(("rest (flows, start-up)", (rest[0], math.nan), (rest[1], math.nan)))
-    rows.append(("whole run", (total[1], math.nan), (total[2], math.nan)))
-    for n, (a, ma), (b, mb) in rows:
+    rest = [(total[w] - sum(v[0] for v in steps[w].values()), math.nan,
+             cpu_total[w] - sum(v[2] for v in steps[w].values())) for w in (1, 2)]
+    rows.append(("rest (flows, start-up)", rest[0], rest[1]))
+    rows.append(("whole run", (total[1], math.nan, cpu_total[1]),
+                 (total[2], math.nan, cpu_total[2])))
+    for n, (a, ma, ca), (b, mb, cb) in rows:
         ratio = f"{a / b:6.2f}" if b > 0.05 else "     -"
-        lines.append(f"{n:26s} {a:10.1f} {b:11.1f} {ratio} {ma:7.0f} {mb:7.0f}")
+        ua = f"{ca / a:6.2f}" if a > 0.05 else "     -"
+        ub = f"{cb / b:6.2f}" if b > 0.05 else "     -"
+        lines.append(f"{n:26s} {a:7.1f} {b:7.1f} {ratio} {ca:7.1f} {cb:7.1f} {ua} {ub} "
+                     f"{ma:6.0f} {mb:6.0f}")
     return lines
 
 
@@ -81,7 +87,8 @@ def main() -> None:
         repeats = int(os.environ.get("GCPFREE_BENCH_REPEAT", "1"))
         for rep in range(repeats):
             times: dict[int, float] = {}
-            steps: dict[int, dict[str, tuple[float, float]]] = {}
+            steps: dict[int, dict[str, tuple[float, float, float]]] = {}
+            cpus: dict[int, float] = {}
             for workers in (1, 2):
                 out = tmp / f"pair_{workers}_{rep}"
                 home = tmp / f"prefect_{workers}_{rep}"
@@ -97,6 +104,7 @@ def main() -> None:
                 dt, rss, _, samples = watch(args, dict(env, PREFECT_HOME=str(home)),
                                             f"pair with {workers} worker(s)")
                 times[workers] = dt
+                cpus[workers] = samples[-1][2] if samples else math.nan
                 steps[workers] = step_memory(home / "prefect.db", samples)
                 report = json.loads((out / "report.json").read_text())
                 cp = report.get("check_points", {})
@@ -111,7 +119,7 @@ def main() -> None:
                       f"process tree); load before "
                       f"{before}, after {load()}", flush=True)
                 shutil.rmtree(out, ignore_errors=True)
-            print("\n".join(step_table(steps, times)))
+            print("\n".join(step_table(steps, times, cpus)))
             print(f"speed-up of 2 workers over 1: {times[1] / times[2]:.2f}x (target >= 1.7)",
                   flush=True)
 

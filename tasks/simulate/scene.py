@@ -19,7 +19,6 @@ import laspy
 import numpy as np
 import pyproj
 import rasterio
-import rioxarray
 from prefect import task
 from rasterio.rpc import RPC
 
@@ -60,7 +59,9 @@ from tasks.io.rasters import (
     CogOptions,
     atomic_write_json,
     atomic_write_text,
+    open_raster,
     read_surface_window,
+    read_window,
     write_arrays_cog,
 )
 from tasks.simulate.io import ScenePaths, check_dem, load_surface_spec, read_dem_window
@@ -198,16 +199,17 @@ def build_truth_surface(scene: SceneDef, out: Path) -> SceneDef:
                             chunks=((3,),) + base.chunks, dtype=np.float32)
     tags = {"vertical_datum": "WGS84 ellipsoid", "units": "m", "seed": str(scene.seed)}
     dsm = stack[1]
-    lo, hi = write_arrays_cog(
-        [
-            CogItem(stack[0], paths.dtm, _georef(scene, nodata=np.nan, tags=tags)),
-            CogItem(dsm, paths.dsm, _georef(scene, nodata=np.nan, tags=tags)),
-            CogItem(stack[2].astype(np.uint8), paths.landcover,
-                    _georef(scene, nodata=0, resampling="nearest",
-                            tags={c.name: str(int(c)) for c in LandCover})),
-        ],
-        extra=[darr.nanmin(dsm), darr.nanmax(dsm)],
-    )
+    with rasterio.Env(GDAL_CACHEMAX=SIM_CACHE_MB):
+        lo, hi = write_arrays_cog(
+            [
+                CogItem(stack[0], paths.dtm, _georef(scene, nodata=np.nan, tags=tags)),
+                CogItem(dsm, paths.dsm, _georef(scene, nodata=np.nan, tags=tags)),
+                CogItem(stack[2].astype(np.uint8), paths.landcover,
+                        _georef(scene, nodata=0, resampling="nearest",
+                                tags={c.name: str(int(c)) for c in LandCover})),
+            ],
+            extra=[darr.nanmin(dsm), darr.nanmax(dsm)],
+        )
     scene = replace(scene, dsm_range_m=(float(lo), float(hi)))
     atomic_write_text(paths.scene_json, scene.to_json())
     return scene
@@ -216,15 +218,58 @@ def build_truth_surface(scene: SceneDef, out: Path) -> SceneDef:
 # ---------------------------------------------------------------------------- C. radiance
 
 
-def radiance_block(dsm: np.ndarray, classes: np.ndarray, scene: SceneDef, image_index: int,
-                   block_info: dict | None = None) -> np.ndarray:
-    """Ground radiance of one block; the block arrives with a 1-cell halo (map_overlap)."""
-    (r0, r1), (c0, c1) = block_info[0]["array-location"][-2:]
-    xx, yy = scene.grid.cell_centres(r0 - 1, r1 - 1, c0 - 1, c1 - 1)
+RADIANCE_HALO = 1  # cells around each block: the slopes of its edge cells
+# GDAL's block cache while the simulator reads and writes its rasters (MB). GDAL's default is
+# 5 % of the machine's memory (1.2 GB on 24 GB) and the radiance, rendering and truth stages
+# read and write whole-scene rasters through it, so it filled with the scene (2.9 GB peak on
+# hrg): bounded, memory stays that of the blocks in flight.
+SIM_CACHE_MB = 128
+
+
+def halo_cells(r0: int, r1: int, n: int, halo: int = RADIANCE_HALO) -> np.ndarray:
+    """The grid indices of cells ``r0 - halo .. r1 + halo - 1`` along an axis of ``n`` cells,
+    those beyond the grid repeating its edge cell (``map_overlap``'s ``boundary="nearest"``)."""
+    return np.clip(np.arange(r0 - halo, r1 + halo), 0, n - 1)
+
+
+def _read_halo(path: str, r0: int, r1: int, c0: int, c1: int, nan_masked: bool,
+               halo: int = RADIANCE_HALO) -> np.ndarray:
+    """Cells ``[r0, r1) x [c0, c1)`` of a raster with ``halo`` cells around them, the edge
+    repeated beyond the raster; float64 with NaN for nodata when ``nan_masked``, else raw."""
+    with open_raster(path, "truth raster") as src:
+        rows, cols = halo_cells(r0, r1, src.height, halo), halo_cells(c0, c1, src.width, halo)
+        box = (int(cols[0]), int(rows[0]), int(cols[-1]) + 1, int(rows[-1]) + 1)
+        part = read_window(src, box, nan_masked=nan_masked, what="truth raster")
+    return part[np.ix_(rows - rows[0], cols - cols[0])]
+
+
+def radiance_block(block: np.ndarray, scene: SceneDef, image_index: int, dsm_path: str,
+                   landcover_path: str, block_info: dict | None = None) -> np.ndarray:
+    """Ground radiance of one block of the truth grid: its DSM and land cover read from the
+    truth rasters with a one-cell halo (the slopes at its edge), at the grid's own cells."""
+    (r0, r1), (c0, c1) = block_info[None]["array-location"]
+    h = RADIANCE_HALO
+    dsm = _read_halo(dsm_path, r0, r1, c0, c1, nan_masked=True)
+    classes = _read_halo(landcover_path, r0, r1, c0, c1, nan_masked=False)
+    xx, yy = scene.grid.cell_centres(r0 - h, r1 + h, c0 - h, c1 + h)
     sun = scene.preset_spec.images[image_index]
     change = scene.date_change if image_index == 1 else 0.0  # the second date changed
-    return ground_radiance(xx, yy, classes, dsm, scene.grid.res_m, sun.sun_azimuth_deg,
-                           sun.sun_elevation_deg, scene.seed, change).astype(np.float32)
+    rad = ground_radiance(xx, yy, classes, dsm, scene.grid.res_m, sun.sun_azimuth_deg,
+                          sun.sun_elevation_deg, scene.seed, change)
+    return rad[h:-h, h:-h].astype(np.float32)
+
+
+def radiance(scene: SceneDef, image_index: int, dsm_path: Path, landcover_path: Path,
+             chunks: int | tuple[int, int] | None = None) -> darr.Array:
+    """The ground radiance of one date over the truth grid (the DSM raster's shape), a Dask
+    array of ``chunks`` (default :data:`CHUNK`) whose blocks each read their own cells (no
+    block waits for another: memory holds the blocks in flight, whatever the scene's size)."""
+    with open_raster(dsm_path, "truth DSM") as src:
+        shape = (src.height, src.width)
+    base = darr.zeros(shape, chunks=chunks or CHUNK, dtype=np.float32)
+    return darr.map_blocks(radiance_block, base, scene=scene, image_index=image_index,
+                           dsm_path=str(dsm_path), landcover_path=str(landcover_path),
+                           dtype=np.float32)
 
 
 @task(name="radiance")
@@ -234,13 +279,9 @@ def build_radiance(scene: SceneDef, out: Path, image_index: int) -> Path:
     name = scene.image_names[image_index]
     if _exist(paths.radiance(name)):
         return paths.radiance(name)
-    dsm = rioxarray.open_rasterio(paths.dsm, chunks=CHUNK, masked=True).squeeze("band", drop=True)
-    cls = rioxarray.open_rasterio(paths.landcover, chunks=CHUNK).squeeze("band", drop=True)
-    rad = darr.map_overlap(
-        radiance_block, dsm.data.astype(np.float64), cls.data, depth=1, boundary="nearest",
-        dtype=np.float32, scene=scene, image_index=image_index, trim=True,
-    )
-    write_arrays_cog([CogItem(rad, paths.radiance(name), _georef(scene, nodata=np.nan))])
+    rad = radiance(scene, image_index, paths.dsm, paths.landcover)
+    with rasterio.Env(GDAL_CACHEMAX=SIM_CACHE_MB):
+        write_arrays_cog([CogItem(rad, paths.radiance(name), _georef(scene, nodata=np.nan))])
     return paths.radiance(name)
 
 
@@ -279,8 +320,9 @@ def render_image(scene: SceneDef, out: Path, image_index: int) -> Path:
     rpc, report = fit_rpc(delivered, truth.n_cols, truth.n_rows, (lo - 100.0, hi + 100.0))
     tags = {"rpc_fit_max_px": f"{report.max_px:.2e}", "rpc_fit_rms_px": f"{report.rms_px:.2e}",
             "metadata": paths.delivered(name).name, "seed": str(scene.seed)}
-    write_arrays_cog([CogItem(img, paths.image(name), CogOptions(
-        rpcs=RPC.from_gdal(rpc.to_gdal_tags()), nodata=0, tags=tags))])
+    with rasterio.Env(GDAL_CACHEMAX=SIM_CACHE_MB):
+        write_arrays_cog([CogItem(img, paths.image(name), CogOptions(
+            rpcs=RPC.from_gdal(rpc.to_gdal_tags()), nodata=0, tags=tags))])
     return paths.image(name)
 
 
@@ -429,8 +471,8 @@ class SimulationSummary:
     def lines(self) -> list[str]:
         errs = ", ".join(f"{k} {v:.1f} m" for k, v in self.centre_error_m.items())
         return [
-            f"simulated scene  {self.out} (preset {self.preset}, seed {self.seed}, "
-            f"{self.errors} errors)",
+            (f"simulated scene  {self.out} (preset {self.preset}, seed {self.seed}, "
+             f"{self.errors} errors)"),
             f"images           {', '.join(self.images)} (RPC tags inside, metadata .json beside)",
             f"metadata error   at the scene centre: {errs}",
             (f"truth            DSM/DTM {self.dsm_range_m[0]:.0f}..{self.dsm_range_m[1]:.0f} m "
