@@ -25,6 +25,7 @@ import subprocess
 import sys
 import tempfile
 import time
+from collections.abc import Iterator
 from pathlib import Path
 
 import numpy as np
@@ -62,10 +63,10 @@ def _status_kb(pid: int, key: str = "VmRSS") -> float:
     return 0.0
 
 
-def tree_rss_mb(root: int) -> float:
-    """Resident memory of a process and its descendants, Prefect's temporary API server
-    (uvicorn) left out: what the DEM itself holds, its worker processes included."""
-    total, todo, seen = 0.0, [root], set()
+def tree_pids(root: int) -> Iterator[int]:
+    """A process and its descendants, Prefect's temporary API server (uvicorn) left out (its
+    children still walked); a process gone meanwhile is skipped with its children."""
+    todo, seen = [root], set()
     while todo:
         pid = todo.pop()
         if pid in seen:
@@ -76,13 +77,18 @@ def tree_rss_mb(root: int) -> float:
         except OSError:
             continue
         if b"uvicorn" not in cmd:
-            total += _status_kb(pid)
+            yield pid
         for f in Path(f"/proc/{pid}/task").glob("*/children"):
             try:
                 todo += [int(x) for x in f.read_text().split()]
             except OSError:
                 pass
-    return total / 1024.0
+
+
+def tree_rss_mb(root: int) -> float:
+    """Resident memory of a process and its descendants, Prefect's temporary API server
+    (uvicorn) left out: what the DEM itself holds, its worker processes included."""
+    return sum(_status_kb(pid) for pid in tree_pids(root)) / 1024.0
 
 
 def run_child(scene: Path, out: Path, roi: list[int] | None, home: Path) -> dict:

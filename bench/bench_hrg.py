@@ -33,7 +33,7 @@ import time
 from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from bench_dsm import tree_rss_mb
+from bench_dsm import tree_pids, tree_rss_mb
 
 REPO = Path(__file__).resolve().parents[1]
 
@@ -61,25 +61,14 @@ def tree_cpu_s(root: int) -> float:
     """CPU seconds (user + system, with the children each process has reaped) of a process
     and its descendants, Prefect's temporary API server (uvicorn) left out, as
     :func:`bench_dsm.tree_rss_mb` counts memory."""
-    total, todo, seen = 0, [root], set()
-    while todo:
-        pid = todo.pop()
-        if pid in seen:
-            continue
-        seen.add(pid)
+    total = 0
+    for pid in tree_pids(root):
         try:
-            cmd = Path(f"/proc/{pid}/cmdline").read_bytes()
             stat = Path(f"/proc/{pid}/stat").read_text()
         except OSError:
             continue
-        if b"uvicorn" not in cmd:
-            fields = stat.rsplit(")", 1)[1].split()
-            total += sum(int(f) for f in fields[11:15])  # utime stime cutime cstime
-        for f in Path(f"/proc/{pid}/task").glob("*/children"):
-            try:
-                todo += [int(x) for x in f.read_text().split()]
-            except OSError:
-                pass
+        fields = stat.rsplit(")", 1)[1].split()
+        total += sum(int(f) for f in fields[11:15])  # utime stime cutime cstime
     return total / _TICK
 
 
