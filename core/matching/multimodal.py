@@ -124,32 +124,14 @@ def image_positions(project: Project, grid: GroundGrid, h_m: FloatArray,
     return col, row
 
 
-def forward_mean(shape: tuple[int, int], col: FloatArray, row: FloatArray,
-                 values: FloatArray, mean: bool = True) -> FloatArray:
-    """The image of ``shape`` (rows, cols) that points of ``values`` at fractional (col, row)
-    make when each is spread over its four nearest pixels (bilinear weights): per pixel the
-    weighted mean of the values that reach it (``mean=False``: their weighted sum, as a radar
-    adds the power of the cells it sees at one range), NaN where none does. How a ground
-    image is laid out in another sensor's geometry: where several ground cells reach one
-    pixel (SAR layover) they are mixed there, where none does (SAR shadow) there is
-    nothing."""
-    ok = np.isfinite(col) & np.isfinite(row) & np.isfinite(values)
-    col, row, values = col[ok], row[ok], values[ok]
-    c0, r0 = np.floor(col).astype(np.int64), np.floor(row).astype(np.int64)
-    fc, fr = col - c0, row - r0
-    nr, nc = shape
-    total = np.zeros(nr * nc)
-    weight = np.zeros(nr * nc)
-    for dr, dc, w in ((0, 0, (1 - fr) * (1 - fc)), (0, 1, (1 - fr) * fc),
-                      (1, 0, fr * (1 - fc)), (1, 1, fr * fc)):
-        r, c = r0 + dr, c0 + dc
-        inside = (r >= 0) & (r < nr) & (c >= 0) & (c < nc)
-        idx = r[inside] * nc + c[inside]
-        total += np.bincount(idx, weights=(w * values)[inside], minlength=nr * nc)
-        weight += np.bincount(idx, weights=w[inside], minlength=nr * nc)
-    with np.errstate(invalid="ignore", divide="ignore"):
-        out = np.where(weight > 1e-3, total / weight if mean else total, np.nan)
-    return out.reshape(nr, nc)
+def _gradients(image: FloatArray) -> tuple[NDArray[np.bool_], NDArray[np.float32],
+                                          NDArray[np.float32]]:
+    """Where ``image`` has data, and its Sobel gradients (x, y) with no-data cells filled
+    by the mean (0 when there is none)."""
+    valid = np.isfinite(image)
+    z = np.where(valid, image, np.nanmean(image) if valid.any() else 0.0).astype(np.float32)
+    return (valid, cv2.Sobel(z, cv2.CV_32F, 1, 0, ksize=3),
+            cv2.Sobel(z, cv2.CV_32F, 0, 1, ksize=3))
 
 
 def orientation_channels(image: FloatArray, n_orientations: int = 9,
@@ -158,12 +140,9 @@ def orientation_channels(image: FloatArray, n_orientations: int = 9,
     per cell, the unsigned gradient along ``n`` directions over half a turn, smoothed in space
     (Gaussian ``sigma_cells``) and across orientations (``[1, 2, 1]``), normalised to unit
     length; zero where a no-data cell is within two cells."""
-    valid = np.isfinite(image)
+    valid, gx, gy = _gradients(image)
     if not valid.any():
         return np.zeros((n_orientations, *image.shape), np.float32)
-    z = np.where(valid, image, np.nanmean(image)).astype(np.float32)
-    gx = cv2.Sobel(z, cv2.CV_32F, 1, 0, ksize=3)
-    gy = cv2.Sobel(z, cv2.CV_32F, 0, 1, ksize=3)
     angles = np.arange(n_orientations) * np.pi / n_orientations
     raw = np.empty((n_orientations, *image.shape), np.float32)
     for k, a in enumerate(angles):
@@ -274,10 +253,7 @@ class MultimodalMatches:
 def gradient_energy(image: FloatArray, sigma_cells: float = 1.0) -> FloatArray:
     """Smoothed squared gradient magnitude (NaN cells: 0), the structure measure of a
     template, relative to the image's median over valid cells."""
-    valid = np.isfinite(image)
-    z = np.where(valid, image, np.nanmean(image) if valid.any() else 0.0).astype(np.float32)
-    gx = cv2.Sobel(z, cv2.CV_32F, 1, 0, ksize=3)
-    gy = cv2.Sobel(z, cv2.CV_32F, 0, 1, ksize=3)
+    valid, gx, gy = _gradients(image)
     e = cv2.GaussianBlur(gx * gx + gy * gy, (0, 0), sigma_cells).astype(np.float64)
     med = np.median(e[valid]) if valid.any() else 1.0
     return np.where(valid, e / max(med, 1e-30), 0.0)
