@@ -449,24 +449,6 @@ def correlated_covariance(covariance: ArrayLike, param_jac: ArrayLike, sigma_px:
     return c + c @ f @ c
 
 
-def stereo_model_error_px(models: Sequence[Any], lon_deg: ArrayLike, lat_deg: ArrayLike,
-                          h_m: ArrayLike, col: ArrayLike, row: ArrayLike) -> float:
-    """The model's own error (px RMS per axis, every image) the residuals of GCPs measured in
-    all of ``models`` show beyond their ground's error (:func:`parallax_covariance`): ``col``,
-    ``row`` (n, m) their measurements, ``lon_deg``, ``lat_deg``, ``h_m`` (n,) their ground."""
-    lon, lat, h = (np.asarray(x, dtype=np.float64) for x in (lon_deg, lat_deg, h_m))
-    col, row = np.asarray(col, dtype=np.float64), np.asarray(row, dtype=np.float64)
-    if col.shape != row.shape or col.shape != (lon.size, len(models)):
-        raise InputError(f"measurements {col.shape}/{row.shape} for {lon.size} points in "
-                         f"{len(models)} images")
-    v = np.empty(col.shape + (2,))
-    for k, model in enumerate(models):
-        pc, pr = model.project(lon, lat, h)
-        v[:, k, 0], v[:, k, 1] = col[:, k] - pc, row[:, k] - pr
-    g = np.stack([ground_jacobian(m, lon, lat, h) for m in models], axis=1)
-    return float(np.sqrt(parallax_covariance(g, v, col[:, 0], row[:, 0])))
-
-
 def image_grid(n_cols: int, n_rows: int, n_side: int = 9) -> tuple[FloatArray, FloatArray]:
     """A regular ``n_side`` x ``n_side`` grid of pixel centres spanning the image (first to
     last pixel), as flat (col, row) arrays."""

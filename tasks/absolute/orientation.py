@@ -37,7 +37,7 @@ from core.orientation.uncertainty import (
     correlated_covariance,
     correlated_ground_error,
     ground_jacobian,
-    stereo_model_error_px,
+    parallax_covariance,
 )
 from core.points import (
     CheckPoint,
@@ -222,7 +222,7 @@ def with_gcp_errors_as_they_are(adj: AbsoluteOrientation, obs: Observations,
                                 ) -> tuple[AbsoluteOrientation, CorrelatedGroundError]:
     """``adj`` with the uncertainties the GCPs measured in both images support: the model's own
     error only where their residuals show one their ground cannot have made
-    (:func:`~core.orientation.uncertainty.stereo_model_error_px`; the smooth part of the raw
+    (:func:`~core.orientation.uncertainty.parallax_covariance`; the smooth part of the raw
     residuals is mostly the reference's error, correlated over kilometres), and that correlated
     ground error propagated into the parameters' covariance
     (:func:`~core.orientation.uncertainty.correlated_covariance`) instead. Unchanged with fewer
@@ -259,7 +259,7 @@ def with_gcp_errors_as_they_are(adj: AbsoluteOrientation, obs: Observations,
     error = correlated_ground_error(ground, v, east, north,
                                     absorbed=(jac, sigma, adj.covariance))
     cov = correlated_covariance(adj.covariance, jac, sigma, ground, east, north, error)
-    mu = stereo_model_error_px(models, lon, lat, h, col, row)
+    mu = float(np.sqrt(parallax_covariance(ground, v, col[:, 0], row[:, 0])))
     residuals = tuple(replace(r, unmodelled_col_px=mu, unmodelled_row_px=mu)
                       for r in adj.residuals)
     return replace(adj, covariance=cov, residuals=residuals), error
