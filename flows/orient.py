@@ -103,12 +103,13 @@ def orient_flow(params: OrientParams) -> OrientOutcome:
         raise InputError("GCP-free orientation needs a reference DEM: give --srtm-dir or "
                          "--reference")
     checkpoints = read_checkpoints(params.checkpoints) if params.checkpoints else None
+    sar_scene = None
     if params.sar is not None:  # bad SAR input refused before any work
         from tasks.absolute.sar_control import check_overlap, load_sar
 
         left, right = given.load()
-        check_overlap(load_sar(params.sar, params.sar_model), {"left": left, "right": right},
-                      0.0)
+        sar_scene = load_sar(params.sar, params.sar_model)
+        check_overlap(sar_scene, {"left": left, "right": right}, 0.0)
     out.mkdir(parents=True, exist_ok=True)
     rel = relative_models(given, out / "relative", params.workers)
     # a reference prepared from SRTM tiles says its datum in its own tag
@@ -132,12 +133,11 @@ def orient_flow(params: OrientParams) -> OrientOutcome:
     verdict = relief_sufficiency(windows.matches, cfg, params.min_windows,
                                  reference.cell_size_m())
     sar = None
-    if params.sar is not None:
+    if sar_scene is not None:
         from tasks.absolute.sar_control import sar_ground_control
 
         first = max((p.id for p in windows.gcps), default=0) + 1
-        sar = sar_ground_control(params.sar, params.sar_model,
-                                 {"left": rel.left, "right": rel.right}, reference,
+        sar = sar_ground_control(sar_scene, {"left": rel.left, "right": rel.right}, reference,
                                  out / "sar_points.json", workers=params.workers,
                                  first_id=first)
         for line in sar.lines():

@@ -85,6 +85,21 @@ def check_overlap(sar: LoadedModel, images: Mapping[str, LoadedModel], h_m: floa
                              f"{name} image (20 % needed): it does not overlap the pair")
 
 
+def mission_of(sar: LoadedModel) -> str:
+    """The SAR model's mission id (``S1A``, ``ERS2``; empty when it does not say)."""
+    return str(getattr(sar.model, "mission", ""))
+
+
+def _image_head(r: SarImageResult) -> dict[str, Any]:
+    """What both records say of one image: templates, counts by status, GCPs, and why there
+    are none when refused."""
+    head: dict[str, Any] = {"templates": int(r.matches.matches.status.size),
+                            "counts": r.counts(), "gcps": len(r.gcps)}
+    if r.heights is None:
+        head["refused"] = r.refused
+    return head
+
+
 @dataclass(frozen=True, eq=False)
 class SarControl:
     """The SAR GCPs of both images and the record written (``to_dict``)."""
@@ -97,16 +112,19 @@ class SarControl:
     def gcps(self) -> tuple[ControlPoint, ...]:
         return tuple(p for r in self.results for p in r.gcps)
 
+    @property
+    def mission(self) -> str:
+        return mission_of(self.sar)
+
     def to_dict(self) -> dict[str, Any]:
         images = {}
         for r in self.results:
             m, h = r.matches, r.heights
             ok = np.flatnonzero(m.matches.ok)
-            head = {"templates": int(m.matches.status.size), "counts": r.counts(),
-                    "gcps": len(r.gcps), "scene_offset_m": [m.offset_cells[1] * m.cell_m,
-                                                            -m.offset_cells[0] * m.cell_m]}
+            head = {**_image_head(r), "scene_offset_m": [m.offset_cells[1] * m.cell_m,
+                                                         -m.offset_cells[0] * m.cell_m]}
             if h is None:
-                images[r.name] = {**head, "refused": r.refused}
+                images[r.name] = head
                 continue
             images[r.name] = {
                 **head,
@@ -123,7 +141,7 @@ class SarControl:
                            for k, i in enumerate(ok)]}
         return {"format": "gcpfree.sar_points", "version": 1,
                 "sar_image": str(self.sar.image), "sar_model": str(self.sar.source),
-                "mission": str(getattr(self.sar.model, "mission", "")),
+                "mission": self.mission,
                 "method": "oriented-gradient (CFOG) matching on a common ground grid; heights "
                           "from the SAR-optical parallax calibrated on the reference "
                           "(Goncalves 2002); planimetry from the SAR model",
@@ -143,11 +161,8 @@ class SarControl:
                              if r.name in p.image_points] for r in self.results}
         images = {}
         for r in self.results:
-            d: dict[str, Any] = {"templates": int(r.matches.matches.status.size),
-                                 "counts": r.counts(), "gcps": len(r.gcps)}
-            if r.heights is None:
-                d["refused"] = r.refused
-            else:
+            d = _image_head(r)
+            if r.heights is not None:
                 d["sigma_match_m"] = r.heights.sigma_match_m
             pts = by_image[r.name]
             if models is not None and pts:
@@ -162,7 +177,7 @@ class SarControl:
                          residual_mean_row_px=float(np.mean(dr)))
             images[r.name] = d
         return {"file": FILE, "sar_image": str(self.sar.image),
-                "mission": str(getattr(self.sar.model, "mission", "")),
+                "mission": self.mission,
                 "geolocation_sigma_m": self.config.geolocation_sigma_m,
                 "role": "with SRTM" if srtm_used else
                         "alone: SRTM surface matching refused (relief verdict or no window)",
@@ -177,16 +192,13 @@ class SarControl:
 
 
 @task(name="sar-ground-control", cache_policy=NO_CACHE)
-def sar_ground_control(sar_image: Path, sar_model: Path | None,
-                       images: Mapping[str, LoadedModel], reference: GeoDEM,
+def sar_ground_control(sar: LoadedModel, images: Mapping[str, LoadedModel], reference: GeoDEM,
                        out: Path | None = None, config: SarGcpConfig | None = None,
                        workers: int | None = None, first_id: int = 1) -> SarControl:
     """GCPs of every optical image in ``images`` (name -> model, their images read) from the
-    SAR scene ``sar_image``, numbered from ``first_id``; ``out``: ``sar_points.json``
-    written there."""
-    sar = load_sar(Path(sar_image), sar_model)
-    mission = str(getattr(sar.model, "mission", ""))
-    cfg = config or SarGcpConfig(geolocation_sigma_m=geolocation_sigma_m(mission))
+    SAR scene ``sar`` (:func:`load_sar`), numbered from ``first_id``; ``out``:
+    ``sar_points.json`` written there."""
+    cfg = config or SarGcpConfig(geolocation_sigma_m=geolocation_sigma_m(mission_of(sar)))
     h_mid = float(np.nanmedian(reference.h_m))
     check_overlap(sar, images, h_mid)
     sar_pixels = _read(sar.image)
