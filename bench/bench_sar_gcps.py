@@ -7,10 +7,10 @@ reference, its planimetry from the SAR model at that height) is worth.
         --out /tmp/s20/flat
     .venv/bin/python bench/bench_sar_gcps.py /tmp/s20/flat [--image left] [--cell 80]
 
-Both images are resampled onto one ground grid (the reference DEM's heights, the delivered
-models), described by oriented gradients (core/matching/multimodal.py) and matched: a few
-large templates first (the scene's offset), then a template every 8 cells. Truth: the
-optical pixel's 3-D point on the truth DSM (true optical model), projected by the true SAR
+The matches and heights are the product's own (core/orientation/sar_gcps.py: both images
+on one ground grid at the reference's heights through the delivered models, oriented
+gradients, the scene's offset then a template every 8 or more cells; the parallax heights
+calibrated on the reliable reference). Truth: the optical pixel's 3-D point on the truth DSM (true optical model), projected by the true SAR
 model, against the matched SAR pixel (in SAR pixels; the optical side is the better
 conditioned one: a SAR pixel at a height step has several 3-D points). Printed: counts,
 the offsets' error (median = bias, NMAD), the share beyond one SAR pixel, and each GCP's
@@ -31,14 +31,13 @@ import numpy as np
 import rasterio
 from pyproj import Transformer
 from rasterio.errors import NotGeoreferencedWarning
-from scipy.ndimage import gaussian_filter
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 from core.dem import sample_bilinear
-from core.geodesy import BBox, metres_per_degree
-from core.matching import multimodal as mm
-from core.robust import nmad, robust_fit
+from core.geodesy import BBox
+from core.orientation import sar_gcps as sg
+from core.robust import nmad
 from core.sensors.sar import SarModel
 from tasks.io.dem import dem_datum, read_reference
 from tasks.io.sensors import load_model, read_model_file
@@ -75,38 +74,15 @@ def main() -> None:
                          BBox(lon.min(), lat.min(), lon.max(), lat.max()).expanded(0.05), datum)
     h_mid = float(np.nanmedian(ref.h_m))
     lon, lat = opt.model.localize(c, r, np.full(4, h_mid))
-    g = mm.GroundGrid.covering(lon, lat, cell)
-    LON, LAT = g.nodes()
-    H = ref.height_m(LON, LAT)
-
-    def ortho(model, image: np.ndarray, log: bool):
-        cc, rr = mm.image_positions(model.project, g, H)
-        gsd = cell / max(float(np.nanmedian(np.hypot(np.diff(cc, axis=1),
-                                                     np.diff(rr, axis=1)))), 1e-9)
-        if log:
-            image = np.log(np.maximum(image, 1.0) ** 2)
-        if 0.5 * cell / gsd > 0.5:
-            image = gaussian_filter(image, 0.5 * cell / gsd)
-        return sample_bilinear(image, rr, cc), cc, rr
-
-    ol, occ, orr = ortho(opt.model, _read(d / f"{a.image}.tif"), False)
-    os_, scc, srr = ortho(sar.model, _read(d / "sar.tif"), True)
-    da, db = mm.orientation_channels(ol), mm.orientation_channels(os_)
-    va, vb, st = np.isfinite(ol), np.isfinite(os_), mm.gradient_energy(ol)
-    coarse = mm.MultimodalConfig(half_cells=max(min(g.shape) // 6, 8),
-                                 radius_cells=int(np.ceil(1500.0 / cell)), min_score=0.1,
-                                 min_structure=0.0)
-    ci, cj = mm.template_centres(va, coarse.half_cells, coarse.half_cells)
-    mc = mm.match_points(da, db, va, vb, st, (ci, cj), (0.0, 0.0), coarse)
-    if not mc.ok.any():
-        raise SystemExit(f"no coarse match: {mc.counts()}")
-    oi, oj = float(np.median(mc.di[mc.ok])), float(np.median(mc.dj[mc.ok]))
+    cfg = sg.SarGcpConfig(cell_m=cell)
+    g = sg.ground_images(opt.model, _read(d / f"{a.image}.tif"), sar.model,
+                         _read(d / "sar.tif"), ref, (lon, lat), cell)
     ignore = None
     if a.ignore_steps == "truth":
         from scipy.ndimage import maximum_filter, minimum_filter
         with rasterio.open(d / "truth" / "dsm.tif") as f:
             z, tz, cz = f.read(1).astype(np.float64), f.transform, f.crs
-        x, y = Transformer.from_crs(4326, cz, always_xy=True).transform(LON, LAT)
+        x, y = Transformer.from_crs(4326, cz, always_xy=True).transform(*g.grid.nodes())
         D = sample_bilinear(z, (y - tz.f) / tz.e - 0.5, (x - tz.c) / tz.a - 0.5)
         D = np.where(np.isfinite(D), D, np.nanmedian(D))
         inc = np.radians(rec["figures"]["incidence_centre_deg"])
@@ -117,20 +93,19 @@ def main() -> None:
         ignore = maximum_filter(step > a.step_m, 2 * reach + 1)
         print(f"ignored: {100 * ignore.mean():.0f} % of the cells ({reach} cells around "
               f"steps over {a.step_m:g} m)")
-    ci, cj = mm.template_centres(va, mm.MultimodalConfig().half_cells, 8)
-    m = mm.match_points(da, db, va, vb, st, (ci, cj), (oi, oj), ignore_a=ignore)
+    sm = sg.match_sar_optical(g, cfg, ignore)
+    m = sm.matches
     t_match = time.perf_counter() - t0
-    print(f"grid {g.shape} of {cell:g} m; scene offset ({oi:+.2f}, {oj:+.2f}) cells from "
-          f"{int(mc.ok.sum())} large templates; {ci.size} templates: {m.counts()}; "
-          f"{t_match:.1f} s")
+    oi, oj = sm.offset_cells
+    print(f"grid {g.grid.shape} of {cell:g} m; scene offset ({oi:+.2f}, {oj:+.2f}) cells; "
+          f"{m.status.size} templates: {m.counts()}; {t_match:.1f} s")
 
     ok = m.ok
-    i0, j0 = m.i[ok], m.j[ok]
-    po = sample_bilinear(occ, i0, j0), sample_bilinear(orr, i0, j0)
-    ps = (sample_bilinear(scc, i0 + m.di[ok], j0 + m.dj[ok]),
-          sample_bilinear(srr, i0 + m.di[ok], j0 + m.dj[ok]))
-    lon0, lat0 = g.lonlat(i0, j0)
-    href = ref.height_m(lon0, lat0)
+    if ok.sum() < sg.MIN_POINTS:
+        raise SystemExit(f"{int(ok.sum())} matches ({sg.MIN_POINTS} needed): nothing to measure")
+    po = sm.optical_col[ok], sm.optical_row[ok]
+    ps = sm.sar_col[ok], sm.sar_row[ok]
+    href = sm.h_ref_m[ok]
 
     # truth: the optical pixel's 3-D point on the truth DSM, seen by the true SAR model
     opt_t = read_model_file(d / "truth" / f"{a.image}_truth.json").model
@@ -143,7 +118,7 @@ def main() -> None:
         x, y = to_xy.transform(lo, la)
         return sample_bilinear(dsm, (y - tr.f) / tr.e - 0.5, (x - tr.c) / tr.a - 0.5)
 
-    ht = np.full(i0.size, h_mid)
+    ht = np.full(po[0].size, h_mid)
     for _ in range(10):
         ht = dsm_at(*opt_t.localize(*po, ht))
     sc, sr = sar_t.project(*opt_t.localize(*po, ht), ht)
@@ -154,25 +129,15 @@ def main() -> None:
           f"{nmad(er[np.isfinite(er)]):.2f}; beyond 1 SAR pixel of the median: "
           f"{100 * np.mean(far):.1f} %")
 
-    # Goncalves: parallax along its height direction, calibrated on the reference heights
-    def parallax(h):
-        ls, as_ = sar.model.localize(*ps, h)
-        lo, ao = opt.model.localize(*po, h)
-        mx, my = metres_per_degree(ao)
-        return np.stack([(ls - lo) * mx, (as_ - ao) * my], 1)
-
-    d0 = parallax(href)
-    v = (parallax(href + 10.0) - d0) / 10.0
-    mx, my = metres_per_degree(float(lat0.mean()))
-    basis = np.stack([np.ones_like(lon0), (lon0 - lon0.mean()) * mx / 1e4,
-                      (lat0 - lat0.mean()) * my / 1e4], 1)
-    field = np.stack([basis @ robust_fit(d0[:, k], basis)[0] for k in range(2)], 1)
-    h_par = href + np.einsum("ij,ij->i", field - d0, v) / np.einsum("ij,ij->i", v, v)
+    # Goncalves: the product's heights (parallax calibrated on the reliable reference)
+    reliable = sg.reliable_reference(ref, sm.lon_deg[ok], sm.lat_deg[ok], cfg.max_slope)
+    hts = sg.parallax_heights(opt.model, sar.model, po, ps, href, reliable, cfg)
+    h_par = hts.h_parallax_m
     e = h_par - ht
     print(f"heights: parallax - truth median {np.nanmedian(e):+.2f} m NMAD "
           f"{nmad(e[np.isfinite(e)]):.2f}; reference - truth median "
           f"{np.nanmedian(href - ht):+.2f} NMAD {nmad((href - ht)[np.isfinite(ht)]):.2f}; "
-          f"{np.median(np.linalg.norm(v, axis=1)):.2f} m of parallax per m")
+          f"{np.median(hts.m_per_m):.2f} m of parallax per m")
     for label, model, h in (("parallax heights", sar.model, h_par),
                             ("reference heights", sar.model, href),
                             ("true SAR model, true heights", sar_t, ht)):

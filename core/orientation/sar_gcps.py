@@ -171,8 +171,11 @@ class SarOpticalMatches:
     cell_m: float
 
 
-def match_sar_optical(g: GroundImages, cfg: SarGcpConfig) -> SarOpticalMatches:
-    """Conjugate points of the optical and the SAR image on their common ground grid."""
+def match_sar_optical(g: GroundImages, cfg: SarGcpConfig,
+                      ignore: NDArray[np.bool_] | None = None) -> SarOpticalMatches:
+    """Conjugate points of the optical and the SAR image on their common ground grid;
+    ``ignore``: grid cells left out of the templates' scores (``bench/bench_sar_gcps.py``
+    tries the cells near height steps)."""
     da, db = mm.orientation_channels(g.optical), mm.orientation_channels(g.sar)
     va, vb = np.isfinite(g.optical), np.isfinite(g.sar)
     structure = mm.gradient_energy(g.optical)
@@ -194,7 +197,8 @@ def match_sar_optical(g: GroundImages, cfg: SarGcpConfig) -> SarOpticalMatches:
     n_valid = int(va.sum())
     spacing = max(cfg.min_spacing_cells, int(np.ceil(np.sqrt(n_valid / cfg.max_points))))
     ci, cj = mm.template_centres(va, hw, spacing)
-    m = mm.match_points(da, db, va, vb, structure, (ci, cj), offset, cfg.matching)
+    m = mm.match_points(da, db, va, vb, structure, (ci, cj), offset, cfg.matching,
+                        ignore_a=ignore)
     oc, orow = g.optical_pos
     sc, srow = g.sar_pos
     bi, bj = m.i + np.nan_to_num(m.di), m.j + np.nan_to_num(m.dj)
