@@ -44,7 +44,7 @@ from tasks.io.rasters import (
     read_window,
     write_arrays_cog,
 )
-from tasks.scheduling import threads
+from tasks.scheduling import schedule
 
 DEFAULT_CONFIG = CompareConfig()
 BLOCK_WINDOWS = 8  # windows per side of a Dask block
@@ -205,8 +205,10 @@ def compare_orthos(plan: ComparePlan, out: Path, map_path: Path | None = None,
     base = darr.zeros(shape, chunks=BLOCK_WINDOWS, dtype=np.float64)
     stack = darr.map_blocks(compare_block, base, plan=plan, new_axis=0,
                             chunks=((4,),) + base.chunks, dtype=np.float64)
-    with threads(num_workers):
-        values = stack.compute()
+    # the windows' correlation is Python loops over small arrays: threads share one core,
+    # so from 8 blocks on (and more than one worker) the blocks run in processes
+    values = stack.compute(**schedule(base.npartitions, num_workers,
+                                      processes=None).compute_kwargs())
     shifts = WindowShifts(values[0], values[1], values[2], values[3].astype(np.uint8))
     stats = discrepancy_stats(shifts, plan.grid.res_m)
     counts = {s.name.lower(): int((shifts.status == s).sum()) for s in ShiftStatus}

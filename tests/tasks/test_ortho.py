@@ -191,6 +191,50 @@ def test_tiles_join_without_seams_and_the_outputs_are_cogs(orthos, monkeypatch):
     assert doc["format"] == "gcpfree.ortho" and doc["width"] == va.shape[1]
 
 
+def test_tiles_in_worker_processes_write_what_threads_write(orthos, monkeypatch):
+    """Two workers and 9 tiles run the tiles in processes (each saves its tile, the writer
+    streams them back): the same bytes and the same counts as one worker's threads."""
+    scene_dir, out, _ = orthos
+    monkeypatch.setattr(T, "CHUNK", 200)
+    used = []
+    original = T._tiles_in_processes
+    monkeypatch.setattr(T, "_tiles_in_processes",
+                        lambda *a, **k: used.append(1) or original(*a, **k))
+    cfg = OrthoConfig(occlusion=True)
+    plan = T.plan_ortho.fn(truth(scene_dir, "right"), describe_dem(scene_dir / "truth" /
+                                                                   "dsm.tif"), RES,
+                           occlusion=True)
+    one = T.orthorectify.fn(plan, out / "threads.tif", cfg, num_workers=1)
+    assert not used
+    two = T.orthorectify.fn(plan, out / "processes.tif", cfg, num_workers=2)
+    assert used
+    for a, b in ((one.path, two.path), (one.occlusion_path, two.occlusion_path)):
+        with rasterio.open(a) as fa, rasterio.open(b) as fb:
+            assert fa.profile == fb.profile
+            assert np.array_equal(fa.read(1), fb.read(1))
+    keys = ("valid_pct", "occluded_pct", "max_error_px", "min_step_px")
+    assert [getattr(one, k) for k in keys] == [getattr(two, k) for k in keys]
+    assert not list(out.glob(".processes.tif.tmp*"))  # the tiles' folder is gone
+
+
+def test_window_blocks_in_worker_processes_find_what_threads_find(orthos, monkeypatch):
+    """Blocks of 2 x 2 windows (at least 8 blocks) with two workers run in processes: every
+    window's shift, correlation and status as one worker's."""
+    import tasks.ortho.compare as C
+
+    _, out, s = orthos
+    monkeypatch.setattr(C, "BLOCK_WINDOWS", 2)
+    plan = plan_compare.fn(Path(s["left"].path), Path(s["right"].path),
+                           CompareConfig(step_px=64))
+    docs = []
+    for workers in (1, 2):
+        compare_orthos.fn(plan, out / f"w{workers}.json", num_workers=workers)
+        docs.append(json.loads((out / f"w{workers}.json").read_text()))
+    assert C.schedule(16, 2, processes=None).scheduler == "processes"
+    assert len(docs[0]["windows"]["status"]) >= 8 * 4
+    assert docs[0]["windows"] == docs[1]["windows"]
+
+
 # ---------------------------------------------------------------------------- GDAL
 
 
