@@ -22,16 +22,22 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from core.errors import ConvergenceError, GeometryError, InputError, InsufficientDataError
-from core.geodesy import geodetic_to_ecef
+from core.geodesy import geodetic_to_ecef, metres_per_degree
 from core.orientation.equations import GROUPS, Equations, prior_rows
-from core.orientation.ties import TieObservations
+from core.orientation.ties import TieObservations, tie_residuals
 from core.orientation.uncertainty import (
+    NO_CORRELATION,
+    CorrelatedGroundError,
     PredictedAccuracy,
     VarianceComponents,
+    along_track_covariance,
     components_differ,
+    correlated_covariance,
+    correlated_ground_error,
     ground_jacobian,
     image_grid,
     neighbour_covariance,
+    parallax_covariance,
     solve_with_components,
 )
 from core.points import ControlPoint
@@ -486,6 +492,63 @@ def _sigma0(models: Sequence[SensorModel], obs: Observations, col: FloatArray, r
     if zz.size <= n_params:
         return 1.0
     return nmad(zz, centre=0.0) * float(np.sqrt(zz.size / (zz.size - n_params)))
+
+
+# ------------------------------------------------- the GCPs' errors as the residuals show them
+
+
+def with_gcp_errors_as_they_are(adj: AbsoluteOrientation, obs: Observations,
+                                kept: np.ndarray, config: AbsoluteConfig,
+                                ties: TieObservations | None = None
+                                ) -> tuple[AbsoluteOrientation, CorrelatedGroundError]:
+    """``adj`` with the uncertainties the GCPs measured in both images support: the model's own
+    error only where their residuals show one their ground cannot have made (``uncertainty.
+    parallax_covariance``; the smooth part of the raw residuals is mostly the reference's
+    error, correlated over kilometres), that correlated ground error propagated into the
+    parameters' covariance (``correlated_covariance``) instead; with the tie points ``ties``,
+    the model's error that follows the time of imaging (jitter faster than the GCPs' spacing)
+    from their parallax at points nearest in time (``along_track_covariance``). Unchanged
+    with fewer than 3 such GCPs. Returned with the correlated ground error found."""
+    use = np.asarray(kept, dtype=bool) & np.isfinite(obs.col).all(axis=1) \
+        & np.isfinite(obs.row).all(axis=1)
+    if use.sum() < 3:
+        return adj, NO_CORRELATION
+    lon, lat, h = obs.lon_deg[use], obs.lat_deg[use], obs.h_m[use]
+    col, row = np.asarray(obs.col)[use], np.asarray(obs.row)[use]
+    sub = Observations(lon, lat, h, col, row, obs.sigma_xy_m[use], obs.sigma_h_m[use])
+    models = adj.models
+    ground = np.stack([ground_jacobian(m, lon, lat, h) for m in models], axis=1)
+    v = np.empty(col.shape + (2,))
+    jac = np.zeros(col.shape + (2, adj.covariance.shape[0]))
+    start = 0
+    for k, model in enumerate(models):
+        pc, pr = model.project(lon, lat, h)
+        v[:, k, 0], v[:, k, 1] = col[:, k] - pc, row[:, k] - pr
+        stop = start + len(adj.param_names[k])
+        jac[:, k, :, start:stop] = model.jacobian(lon, lat, h)
+        start = stop
+    m_lon, m_lat = metres_per_degree(float(np.mean(lat)))
+    east, north = (lon - lon.mean()) * m_lon, (lat - lat.mean()) * m_lat
+    sigma = np.repeat(observation_sigmas_px(models, sub, config.matching_sigma_px)[..., None],
+                      2, axis=2)
+    comps = adj.components
+    if comps is None:
+        sigma = sigma * max(adj.sigma0, 1e-12)
+    elif "gcp" in comps.names:
+        sigma = sigma * np.sqrt(comps.factor_of("gcp"))
+    else:
+        sigma = sigma * np.sqrt([comps.factor_of("gcp_col"), comps.factor_of("gcp_row")])
+    error = correlated_ground_error(ground, v, east, north,
+                                    absorbed=(jac, sigma, adj.covariance))
+    cov = correlated_covariance(adj.covariance, jac, sigma, ground, east, north, error)
+    mu2 = parallax_covariance(ground, v, col[:, 0], row[:, 0])
+    if ties is not None and ties.n >= 3 and ties.n_images == len(models):
+        tie_ground, tie_v = tie_residuals(models, ties)
+        mu2 += along_track_covariance(tie_ground, tie_v, ties.row[:, 0])
+    mu = float(np.sqrt(mu2))
+    residuals = tuple(replace(r, unmodelled_col_px=mu, unmodelled_row_px=mu)
+                      for r in adj.residuals)
+    return replace(adj, covariance=cov, residuals=residuals), error
 
 
 # ------------------------------------------------------------------------- check points

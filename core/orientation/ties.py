@@ -163,3 +163,15 @@ def tie_rows(models: Sequence[SensorModel], ties: TieObservations, ground: Array
         a[:, 2 * m:2 * m + 2, offsets[m]:offsets[m + 1]] = jac / ties.sigma_px
     ar = np.einsum("nck,ncp->nkp", u, a).reshape(-1, int(offsets[-1]))
     return TieRows(ar, rr, point, g, b_px)
+
+
+def tie_residuals(models: Sequence[SensorModel], ties: TieObservations
+                  ) -> tuple[FloatArray, FloatArray]:
+    """The tie points' residuals (measured - projected, px; (n, m, 2)) at their ground
+    positions refined under ``models``, and the ground design there ((n, m, 2, 3), px per
+    metre east, north, up): what :func:`core.orientation.uncertainty.parallax_covariance`
+    takes."""
+    g, b = refine_ground(models, ties, ties.ground())
+    v = _measured(ties) - _project_all(models, g)
+    m = len(models)
+    return b.reshape(ties.n, m, 2, 3), v.reshape(ties.n, m, 2)

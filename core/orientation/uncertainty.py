@@ -311,6 +311,19 @@ def parallax_covariance(ground_jac: ArrayLike, v: ArrayLike, col: ArrayLike, row
     return m if m > t_min * se else 0.0
 
 
+def along_track_covariance(ground_jac: ArrayLike, v: ArrayLike, row: ArrayLike,
+                           t_min: float = 2.0) -> float:
+    """The model's own error per pixel axis (px^2) that follows the time of imaging: the
+    covariance of the parallax (as :func:`parallax_covariance`) at points nearest in ``row``
+    whatever their columns. An attitude error is the same for every detector of a line, so
+    points a few lines apart share it wherever they are across the image, while their matching
+    noise is independent: jitter faster than the GCPs' spacing, which the 2-D neighbours of
+    :func:`parallax_covariance` see as noise, shows here when the points are dense in time
+    (the tie points: hundreds per image)."""
+    r = np.asarray(row, dtype=np.float64)
+    return parallax_covariance(ground_jac, v, np.zeros_like(r), r, t_min)
+
+
 @dataclass(frozen=True)
 class CorrelatedGroundError:
     """The part of the GCPs' ground error correlated between GCPs (the reference's noise over

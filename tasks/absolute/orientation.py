@@ -18,7 +18,6 @@ from prefect import task
 from prefect.cache_policies import NO_CACHE
 
 from core.errors import InputError
-from core.geodesy import metres_per_degree
 from core.jsonio import parse_json
 from core.orientation.absolute import (
     AbsoluteConfig,
@@ -26,19 +25,12 @@ from core.orientation.absolute import (
     Observations,
     absolute_orientation,
     check_point_stats,
-    observation_sigmas_px,
+    with_gcp_errors_as_they_are,
 )
 from core.orientation.along_track import AlongTrack, estimate_along_track
 from core.orientation.selfcal import SelfCalibration, self_calibrate
 from core.orientation.ties import TieObservations
-from core.orientation.uncertainty import (
-    NO_CORRELATION,
-    CorrelatedGroundError,
-    correlated_covariance,
-    correlated_ground_error,
-    ground_jacobian,
-    parallax_covariance,
-)
+from core.orientation.uncertainty import NO_CORRELATION, CorrelatedGroundError
 from core.points import (
     CheckPoint,
     CheckPointSet,
@@ -205,7 +197,7 @@ def orient_absolute(left: LoadedModel, right: LoadedModel, gcps: tuple[ControlPo
         kept = np.zeros_like(kept)
         kept[idx[adj.inlier]] = True
         reasons.update({int(idx[i]): r for i, r in adj.reasons.items()})
-    adj, ground_error = with_gcp_errors_as_they_are(adj, obs, kept, config)
+    adj, ground_error = with_gcp_errors_as_they_are(adj, obs, kept, config, tie_obs)
     paths = []
     for name, model in zip(NAMES, adj.models, strict=True):
         paths.append(atomic_write_json(Path(out_dir) / f"{name}.json",
@@ -215,54 +207,6 @@ def orient_absolute(left: LoadedModel, right: LoadedModel, gcps: tuple[ControlPo
                                                   np.asarray(obs.h_m)[kept], config,
                                                   ground_error),
                             at, kept, reasons)
-
-
-def with_gcp_errors_as_they_are(adj: AbsoluteOrientation, obs: Observations,
-                                kept: np.ndarray, config: AbsoluteConfig
-                                ) -> tuple[AbsoluteOrientation, CorrelatedGroundError]:
-    """``adj`` with the uncertainties the GCPs measured in both images support: the model's own
-    error only where their residuals show one their ground cannot have made
-    (:func:`~core.orientation.uncertainty.parallax_covariance`; the smooth part of the raw
-    residuals is mostly the reference's error, correlated over kilometres), and that correlated
-    ground error propagated into the parameters' covariance
-    (:func:`~core.orientation.uncertainty.correlated_covariance`) instead. Unchanged with fewer
-    than 3 such GCPs. Returned with the correlated ground error found."""
-    use = np.asarray(kept, dtype=bool) & np.isfinite(obs.col).all(axis=1) \
-        & np.isfinite(obs.row).all(axis=1)
-    if use.sum() < 3:
-        return adj, NO_CORRELATION
-    lon, lat, h = obs.lon_deg[use], obs.lat_deg[use], obs.h_m[use]
-    col, row = np.asarray(obs.col)[use], np.asarray(obs.row)[use]
-    sub = Observations(lon, lat, h, col, row, obs.sigma_xy_m[use], obs.sigma_h_m[use])
-    models = adj.models
-    ground = np.stack([ground_jacobian(m, lon, lat, h) for m in models], axis=1)
-    v = np.empty(col.shape + (2,))
-    jac = np.zeros(col.shape + (2, adj.covariance.shape[0]))
-    start = 0
-    for k, model in enumerate(models):
-        pc, pr = model.project(lon, lat, h)
-        v[:, k, 0], v[:, k, 1] = col[:, k] - pc, row[:, k] - pr
-        stop = start + len(adj.param_names[k])
-        jac[:, k, :, start:stop] = model.jacobian(lon, lat, h)
-        start = stop
-    m_lon, m_lat = metres_per_degree(float(np.mean(lat)))
-    east, north = (lon - lon.mean()) * m_lon, (lat - lat.mean()) * m_lat
-    sigma = np.repeat(observation_sigmas_px(models, sub, config.matching_sigma_px)[..., None],
-                      2, axis=2)
-    comps = adj.components
-    if comps is None:
-        sigma = sigma * max(adj.sigma0, 1e-12)
-    elif "gcp" in comps.names:
-        sigma = sigma * np.sqrt(comps.factor_of("gcp"))
-    else:
-        sigma = sigma * np.sqrt([comps.factor_of("gcp_col"), comps.factor_of("gcp_row")])
-    error = correlated_ground_error(ground, v, east, north,
-                                    absorbed=(jac, sigma, adj.covariance))
-    cov = correlated_covariance(adj.covariance, jac, sigma, ground, east, north, error)
-    mu = float(np.sqrt(parallax_covariance(ground, v, col[:, 0], row[:, 0])))
-    residuals = tuple(replace(r, unmodelled_col_px=mu, unmodelled_row_px=mu)
-                      for r in adj.residuals)
-    return replace(adj, covariance=cov, residuals=residuals), error
 
 
 GRID_SIDE = 9

@@ -93,7 +93,7 @@ def test_reference_sigma_reaches_the_absolute_configuration(no_server, monkeypat
     import tasks.archive.pair
 
     monkeypatch.setattr(prefect.artifacts, "create_progress_artifact", lambda *a, **k: None)
-    monkeypatch.setattr(tasks.archive.pair, "orientation_done", lambda out: False)
+    monkeypatch.setattr(tasks.archive.pair, "orientation_changes", lambda *a: None)
     with pytest.raises(Reached):
         no_server["real_pair_flow"].fn(params)
     assert no_server["orient"].absolute.reference_sigma_m == (3.0, 4.0, 6.0)

@@ -10,6 +10,7 @@ import pytest
 from core.errors import InputError
 from core.orientation.uncertainty import (
     CorrelatedGroundError,
+    along_track_covariance,
     correlated_covariance,
     correlated_ground_error,
     parallax_covariance,
@@ -119,3 +120,39 @@ def test_parallax_tells_a_model_error_from_a_ground_error():
                                          east, north))
     assert spurious <= 5
     assert np.sqrt(np.mean(found)) == pytest.approx(0.3, rel=0.25)
+
+
+def test_jitter_shows_in_the_tie_points_nearest_in_time():
+    """Attitude jitter of 0.3 px per image axis (two tones per axis, periods of 30-600 lines,
+    independent in the two images) under 0.1 px of matching noise and a 5 m smooth ground
+    error: 900 tie points over 6000 lines find it from their neighbours in time within 25 %
+    (over 20 draws), the 2-D neighbours of 200 GCP-like points find under a third of it, and
+    without jitter nothing is found in 18 of 20 draws."""
+    rng = np.random.default_rng(7)
+    n, lines = 900, 6000.0
+    east, north, g = layout(6)
+    g = np.concatenate([g] * 8)[:n]
+    col, row = rng.uniform(0, 6000, n), rng.uniform(0, lines, n)
+    east, north = col * 10.0, row * 10.0
+    field = CorrelatedGroundError((25.0, 25.0, 25.0), 4000.0, 0)
+
+    def jitter(rows: np.ndarray) -> np.ndarray:
+        """(n, 2): col and row displacement, two tones each of amplitude 0.3 px."""
+        out = np.zeros((rows.size, 2))
+        for axis in range(2):
+            for _ in range(2):
+                period = rng.uniform(30.0, 600.0)
+                out[:, axis] += 0.3 * np.sin(2 * np.pi * rows / period + rng.uniform(0, 6.3))
+        return out
+
+    found, sparse, spurious = [], [], 0
+    for _ in range(20):
+        ground = correlated_field(east, north, field, rng, 1)[0]
+        common = np.einsum("nmak,nk->nma", g, ground) + rng.normal(0.0, 0.1, (n, 2, 2))
+        v = common + np.stack([jitter(row), jitter(row)], axis=1)
+        found.append(along_track_covariance(g, v, row))
+        sparse.append(parallax_covariance(g[:200], v[:200], col[:200], row[:200]))
+        spurious += along_track_covariance(g, common, row) > 0
+    assert np.sqrt(np.mean(found)) == pytest.approx(0.3, rel=0.25)
+    assert np.sqrt(np.mean(sparse)) < 0.1
+    assert spurious <= 2
