@@ -14,8 +14,9 @@ report ``report.html``, ``report.md``), ``OUT/left.json``, ``OUT/right.json``,
 from __future__ import annotations
 
 import shutil
-from dataclasses import dataclass, field, replace
+from dataclasses import asdict, dataclass, field, fields, replace
 from pathlib import Path
+from typing import Any
 
 from prefect import flow
 
@@ -57,6 +58,24 @@ class OrientParams:
     absolute: AbsoluteConfig = field(default_factory=AbsoluteConfig)
     sar: Path | None = None
     sar_model: Path | None = None
+
+    # what only changes how the orientation runs, not what it is
+    RUN_ONLY = ("out", "workers", "progress")
+
+    def settings(self) -> dict[str, Any]:
+        """What the orientation is made from, as JSON values (report.json's ``settings``): the
+        pair's inputs, the check points and every option that changes a product, paths made
+        absolute; ``gcpfree pair`` keeps an orientation only when they are unchanged."""
+        from core.jsonio import json_ready
+
+        def absolute(v: Any) -> Any:
+            return str(Path(v).resolve()) if isinstance(v, Path) else v
+
+        mine = {f.name: getattr(self, f.name) for f in fields(self)
+                if f.name not in ("pair", *self.RUN_ONLY)}
+        mine["surface"], mine["absolute"] = asdict(self.surface), asdict(self.absolute)
+        pair = {f.name: absolute(getattr(self.pair, f.name)) for f in fields(self.pair)}
+        return json_ready({**pair, **{k: absolute(v) for k, v in mine.items()}})
 
 
 @dataclass(frozen=True, eq=False)
@@ -211,7 +230,8 @@ def orient_flow(params: OrientParams) -> OrientOutcome:
         dsm=FinalDsm("dsm.tif", "dsm_egm96.tif", final["ellipsoidal"]),
         sar=None if sar is None else sar.summary(
             srtm_used, {"left": absolute.models[0], "right": absolute.models[1]}, shift,
-            tuple(p for p in gcps if p.source == "sar")))
+            tuple(p for p in gcps if p.source == "sar")),
+        settings=params.settings())
     if checkpoints is not None:
         report = replace(
             report, check_points=check_points_of(check_point_report(

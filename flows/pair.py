@@ -90,7 +90,8 @@ def _reference_of(params: PairParams, out: Path) -> tuple[Path, str]:
 
 def make_orthos(params: PairParams, out: Path, skipped: list[str]) -> dict[str, str]:
     """Both images orthorectified with their oriented models over the reference DEM, on one
-    grid (the left image's GSD, its UTM zone), then compared window by window."""
+    grid (the left image's GSD, its UTM zone), then compared window by window; the products
+    that read back are kept (their names added to ``skipped``)."""
     from core.ortho_compare import CompareConfig
     from tasks.archive.pair import product_ok
     from tasks.io.rasters import open_raster
@@ -139,8 +140,9 @@ def pair_flow(params: PairParams) -> PairOutcome:
     from tasks.archive.pair import (
         ORIENT_PRODUCTS,
         json_ok,
-        orientation_done,
+        orientation_changes,
         publish_artifacts,
+        remove_downstream,
         write_manifest,
         write_stac,
     )
@@ -161,18 +163,29 @@ def pair_flow(params: PairParams) -> PairOutcome:
     def done(step: str) -> None:
         update_progress_artifact(progress, 100.0 * (steps.index(step) + 1) / len(steps))
 
-    if orientation_done(out):
+    orient = OrientParams(
+        pair=pair, out=out, checkpoints=params.checkpoints,
+        self_calibrate=params.self_calibrate, along_track=params.along_track,
+        corrections=params.corrections,
+        workers=params.workers, progress=params.progress, spacing_m=params.spacing_m,
+        min_windows=params.min_windows, surface=params.surface or SurfaceMatchConfig(),
+        absolute=AbsoluteConfig(reference_sigma_m=params.reference_sigma_m),
+        sar=params.sar, sar_model=params.sar_model)
+    changes = orientation_changes(out, orient.settings())
+    if changes == ():
         skipped.append("orient")
-        print(f"orientation kept      {out / 'report.json'} (reads back)")
+        print(f"orientation kept      {out / 'report.json'} (reads back, same settings)")
     else:
-        orient_flow(OrientParams(
-            pair=pair, out=out, checkpoints=params.checkpoints,
-            self_calibrate=params.self_calibrate, along_track=params.along_track,
-            corrections=params.corrections,
-            workers=params.workers, progress=params.progress, spacing_m=params.spacing_m,
-            min_windows=params.min_windows, surface=params.surface or SurfaceMatchConfig(),
-            absolute=AbsoluteConfig(reference_sigma_m=params.reference_sigma_m),
-            sar=params.sar, sar_model=params.sar_model))
+        if changes:
+            print(f"orientation redone    {out / 'report.json'} was made with other settings: "
+                  f"{', '.join(changes)}")
+        # what an earlier orientation's models made (orthos, evaluation, manifest) goes first,
+        # so that a run stopped before making them again never resumes on stale products
+        gone = remove_downstream(out)
+        if gone:
+            print(f"removed               {', '.join(p.name for p in gone)} (made with the "
+                  "earlier orientation)")
+        orient_flow(orient)
     done("orient")
 
     products = dict(ORIENT_PRODUCTS)

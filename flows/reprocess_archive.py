@@ -70,6 +70,19 @@ class ArchiveOutcome:
         return out
 
 
+def pair_params(entry: PairEntry, root: Path, srtm_dir: Path | None, reference: Path | None,
+                reference_vertical: str = "auto", self_calibrate: bool = False):  # -> PairParams
+    """The ``pair`` flow's parameters for one pair of the archive into ``root/<id>`` (one
+    worker: the archive's parallelism is over pairs). Raises InputError on bad inputs."""
+    from flows.pair import PairParams
+
+    return PairParams(
+        pair=entry.pair_inputs(reference, srtm_dir, reference_vertical),
+        out=Path(root) / entry.id, lidar=entry.lidar, landcover=entry.landcover,
+        checkpoints=entry.checkpoints, sar=entry.sar, sar_model=entry.sar_model,
+        self_calibrate=self_calibrate, workers=1, progress=False, pair_id=entry.id)
+
+
 def run_pair(entry: PairEntry, root: Path, srtm_dir: Path | None, reference: Path | None,
              reference_vertical: str = "auto", self_calibrate: bool = False) -> None:
     """One pair of the archive through the ``pair`` flow into ``root/<id>`` (one worker: the
@@ -78,11 +91,15 @@ def run_pair(entry: PairEntry, root: Path, srtm_dir: Path | None, reference: Pat
     interrupted attempt left (its worker killed, the run stopped by Ctrl-C) are removed and the
     ``pair`` flow resumes at its first missing product."""
     from flows._env import one_line_errors
-    from flows.pair import PairParams, pair_flow
+    from flows.pair import pair_flow
     from tasks.archive.pair import pair_complete, remove_leftovers
 
     out = Path(root) / entry.id
-    if pair_complete(out):  # an earlier attempt finished it, then its worker died
+    with one_line_errors():
+        params = pair_params(entry, root, srtm_dir, reference, reference_vertical,
+                             self_calibrate)
+    # an earlier attempt finished it with the same inputs and options, then its worker died
+    if pair_complete(out, params.to_dict()):
         print(f"pair {entry.id} already complete in {out}")
         return
     removed = remove_leftovers(out)
@@ -90,12 +107,7 @@ def run_pair(entry: PairEntry, root: Path, srtm_dir: Path | None, reference: Pat
         print(f"pair {entry.id}: removed {len(removed)} temporary file(s) of an interrupted "
               f"attempt ({', '.join(p.name for p in removed)})")
     with one_line_errors():
-        pair_flow(PairParams(
-            pair=entry.pair_inputs(reference, srtm_dir, reference_vertical),
-            out=out, lidar=entry.lidar, landcover=entry.landcover,
-            checkpoints=entry.checkpoints, sar=entry.sar, sar_model=entry.sar_model,
-            self_calibrate=self_calibrate, workers=1,
-            progress=False, pair_id=entry.id))
+        pair_flow(params)
 
 
 def _dashboard_link() -> str | None:
@@ -202,7 +214,14 @@ def reprocess_archive(catalog: Path, out: Path, srtm_dir: Path | None = None,
     cat = load_catalog(Path(catalog))
     root = Path(out)
     root.mkdir(parents=True, exist_ok=True)
-    done_before = complete_pairs(cat.ids, root)
+    wanted = {}  # the parameters each pair would run with: a pair made with others is redone
+    for e in cat.pairs:
+        try:
+            wanted[e.id] = pair_params(e, root, srtm_dir, reference, reference_vertical,
+                                       self_calibrate).to_dict()
+        except InputError:
+            pass  # not complete: its run reports the bad input
+    done_before = complete_pairs(wanted, root)
     todo = [e for e in cat.pairs if e.id not in done_before]
     results: dict[str, PairResult] = {}
     link = None

@@ -36,6 +36,10 @@ Its keys (format ``gcpfree.orient``, version 1), as the README lists them:
   SRTM, or alone where the relief verdict refused SRTM), per image the templates, counts by
   status, GCPs, matching noise and the SAR GCPs' residuals after the adjustment (RMS and mean,
   px); the points themselves are in ``sar_points.json``;
+- optional: ``settings`` (absent from older reports): the inputs and options the orientation
+  was made with (:meth:`flows.orient.OrientParams.settings`: the images, their models, the
+  reference, the check points, every orientation option, paths made absolute); a rerun of
+  ``gcpfree pair`` keeps the orientation only when they are the same;
 - optional: ``check_points`` and ``check_points_before`` (per image, the paper's Table 2;
   ``check_points.<image>`` also gives ``predicted_rms_col_px`` and ``predicted_rms_row_px``,
   the RMS the adjustment predicts at those check points, beside the measured ``rms_col_px``
@@ -122,6 +126,7 @@ class OrientReport:
     check_points_before: Mapping[str, CheckPointStats] | None = None
     report: Mapping[str, Any] | None = None
     sar: Mapping[str, Any] | None = None
+    settings: Mapping[str, Any] | None = None
     version: int = VERSION
 
     # keys given their own section in the run report (the others are listed as they are)
@@ -145,6 +150,8 @@ class OrientReport:
             d[self.RUN_REPORT_KEY] = dict(self.report)
         if self.sar is not None:
             d["sar"] = dict(self.sar)
+        if self.settings is not None:
+            d["settings"] = dict(self.settings)
         return _json(d)  # JSON values: what the file holds, NaN as null
 
     @classmethod
@@ -175,7 +182,9 @@ class OrientReport:
             check_points_before=_check_points(d.get("check_points_before"),
                                               "check_points_before"),
             report=dict(report) if report is not None else None,
-            sar=dict(_get(d, "sar", "", Mapping)) if "sar" in d else None, version=version)
+            sar=dict(_get(d, "sar", "", Mapping)) if "sar" in d else None,
+            settings=dict(_get(d, "settings", "", Mapping)) if "settings" in d else None,
+            version=version)
 
     def lines(self) -> list[str]:
         """The orientation's figures as ``gcpfree orient`` and ``gcpfree pair`` print them."""

@@ -12,7 +12,7 @@ removes before it resumes.
 
 from __future__ import annotations
 
-from collections.abc import Iterable, Mapping
+from collections.abc import Mapping
 from pathlib import Path
 from typing import Any
 
@@ -78,21 +78,39 @@ def product_ok(path: Path) -> bool:
     return path.stat().st_size > 0
 
 
-def orientation_done(out: Path) -> bool:
+def orientation_done(out: Path, settings: Mapping[str, Any] | None = None) -> bool:
     """The orientation's products are all there and read back (report.json as the
-    orientation's report)."""
+    orientation's report) and, with ``settings`` (:meth:`flows.orient.OrientParams.settings`),
+    report.json records the same: an orientation made from other inputs or options is not
+    done."""
+    return orientation_changes(out, settings) == ()
+
+
+def orientation_changes(out: Path,
+                        settings: Mapping[str, Any] | None = None) -> tuple[str, ...] | None:
+    """None when the orientation's products are not all there or do not read back; else the
+    names of the ``settings`` whose value differs from what report.json records (every name
+    when it records none, an older gcpfree's report), () when none differs."""
     from tasks.absolute.report import read_report
 
     try:
-        read_report(Path(out) / ORIENT_PRODUCTS["report"])
+        report = read_report(Path(out) / ORIENT_PRODUCTS["report"])
     except GcpFreeError:
-        return False
-    return all(product_ok(Path(out) / p) for p in ORIENT_PRODUCTS.values())
+        return None
+    if not all(product_ok(Path(out) / p) for p in ORIENT_PRODUCTS.values()):
+        return None
+    if settings is None:
+        return ()
+    had = report.settings or {}
+    return tuple(k for k in settings if k not in had or had[k] != settings[k])
 
 
-def pair_complete(out: str | Path) -> bool:
+def pair_complete(out: str | Path, params: Mapping[str, Any] | None = None) -> bool:
     """True when ``OUT/pair.json`` exists and every product it lists reads back with the
-    size it had when the pair finished: a rerun skips this pair."""
+    size it had when the pair finished: a rerun skips this pair. With ``params`` (the
+    manifest's, :meth:`flows.pair.PairParams.to_dict`), a manifest that records its parameters
+    (every one gcpfree writes) must record the same, the options that only change how a run
+    goes (:data:`RUN_ONLY_PARAMS`) aside."""
     out = Path(out)
     try:
         manifest = _read_json(out / MANIFEST)
@@ -100,12 +118,35 @@ def pair_complete(out: str | Path) -> bool:
         return False
     if not isinstance(manifest, dict) or manifest.get("format") != FORMAT:
         return False
+    had = manifest.get("params")
+    if params is not None and isinstance(had, dict) and any(
+            had.get(k) != v for k, v in params.items() if k not in RUN_ONLY_PARAMS):
+        return False
     sizes = manifest.get("sizes", {})
     for rel in manifest.get("products", {}).values():
         path = out / rel
         if not product_ok(path) or sizes.get(rel) != path.stat().st_size:
             return False
     return True
+
+
+# what the pair flow makes from the oriented models: made again whenever the orientation is
+DOWNSTREAM = ("pair.json", "ortho_left.tif", "ortho_right.tif", "ortho_compare.json",
+              "ortho_discrepancy.tif", "ortho_discrepancy.png", "eval.json")
+
+
+def remove_downstream(out: str | Path) -> list[Path]:
+    """Remove the products of :data:`DOWNSTREAM` found in the pair folder ``out`` (the
+    manifest first, so that a pair stopped mid-way is never taken for complete); the paths
+    removed."""
+    gone = [p for p in (Path(out) / n for n in DOWNSTREAM) if p.is_file()]
+    for p in gone:
+        p.unlink()
+    return gone
+
+
+# the pair's parameters that change how a run goes, not its products
+RUN_ONLY_PARAMS = ("out", "workers", "progress", "pair_id")
 
 
 # what a writer killed mid-way leaves in a pair folder (never a product: each is renamed into
@@ -142,9 +183,10 @@ def remove_leftovers(out: str | Path) -> list[Path]:
 
 
 @task(name="find-complete-pairs", cache_policy=NO_CACHE)
-def complete_pairs(ids: Iterable[str], root: Path) -> frozenset[str]:
-    """The ``ids`` whose ``ROOT/<id>`` already holds valid finished products."""
-    return frozenset(i for i in ids if pair_complete(Path(root) / i))
+def complete_pairs(params: Mapping[str, Mapping[str, Any]], root: Path) -> frozenset[str]:
+    """The pair ids (keys of ``params``, each pair's manifest parameters) whose ``ROOT/<id>``
+    already holds valid finished products made with those parameters."""
+    return frozenset(i for i, p in params.items() if pair_complete(Path(root) / i, p))
 
 
 def write_manifest(out: Path, pair_id: str, params: Mapping[str, Any],

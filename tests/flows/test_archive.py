@@ -20,9 +20,11 @@ from flows.commands import archive as archive_command
 from tests.flows.reports import finished_evaluation, finished_report
 
 
-def complete_pair(out: Path, report: dict, evaluation: dict | None = None) -> None:
+def complete_pair(out: Path, report: dict, evaluation: dict | None = None,
+                  params: dict | None = None) -> None:
     """The minimal finished products :func:`tasks.archive.pair.pair_complete` accepts: the
-    manifest ``pair.json`` listing products that read back with their recorded sizes."""
+    manifest ``pair.json`` listing products that read back with their recorded sizes (and the
+    parameters it was made with)."""
     out.mkdir(parents=True)
     products = {"report": "report.json"}
     (out / "report.json").write_text(json.dumps(report))
@@ -31,6 +33,7 @@ def complete_pair(out: Path, report: dict, evaluation: dict | None = None) -> No
         products["evaluation"] = "eval.json"
     (out / "pair.json").write_text(json.dumps({
         "format": "gcpfree.pair", "version": 1, "pair_id": out.name, "products": products,
+        **({"params": params} if params is not None else {}),
         "sizes": {rel: (out / rel).stat().st_size for rel in products.values()}}))
 
 
@@ -69,7 +72,14 @@ def archive(tiny_clean_scene, tmp_path_factory, prefect_harness):
     for name in ("left.tif", "right.tif", "right.json"):
         (bad / name).symlink_to(scene / name)
     (bad / "left.json").write_text('{"format": "gcpfree.pushbroom", "orbit": [1, 2')
-    complete_pair(root / "finished", FINISHED_REPORT, FINISHED_EVAL)
+    # finished by an earlier run of this archive with the same options (its images since lost)
+    from flows.reprocess_archive import pair_params
+    from tasks.archive.catalog import load_catalog
+
+    entry = next(e for e in load_catalog(cat).pairs if e.id == "finished")
+    complete_pair(root / "finished", FINISHED_REPORT, FINISHED_EVAL,
+                  json.loads(json.dumps(pair_params(entry, root, None,
+                                                    scene / "reference.tif").to_dict())))
     before = snapshot(root / "finished")
     outcome = reprocess_archive(catalog=cat, out=root, reference=scene / "reference.tif",
                                 workers=1, processes=False, dashboard_address=":0")

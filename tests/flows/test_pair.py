@@ -122,3 +122,53 @@ def test_pair_command_refuses_bad_input_in_one_line(tiny_scene, tmp_path, capsys
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and says in err[0] and err[0].startswith("gcpfree pair: error:")
     assert not (tmp_path / "out").exists()
+
+
+class Reached(Exception):
+    """The orientation was started."""
+
+
+def test_a_changed_option_redoes_the_orientation_and_what_follows(pair_run, tmp_path,
+                                                                   monkeypatch, capsys):
+    """A rerun with another orientation option (here without self-calibration) must not keep
+    the orientation made with the old one, nor the orthos and evaluation made from it; the
+    same options keep it (the resume test above), and an archive rerun does the same."""
+    import dataclasses
+
+    import flows.orient
+    from tasks.archive.pair import orientation_changes
+
+    _scene, done, params, _, _ = pair_run
+    out = tmp_path / "pair"
+    shutil.copytree(done, out)
+    same = dataclasses.replace(params, out=out)
+    changed = dataclasses.replace(same, self_calibrate=False)
+    assert pair_complete(out, same.to_dict()) and not pair_complete(out, changed.to_dict())
+    # the options that only change how a run goes leave it complete
+    assert pair_complete(out, dataclasses.replace(same, workers=1, pair_id="x").to_dict())
+
+    def started(p):
+        raise Reached(p)
+
+    import prefect.artifacts
+
+    monkeypatch.setattr(prefect.artifacts, "create_progress_artifact", lambda *a, **k: None)
+    monkeypatch.setattr(flows.orient, "orient_flow", started)
+    with pytest.raises(Reached):
+        pair_flow.fn(changed)
+    said = capsys.readouterr().out
+    assert "orientation redone" in said and "self_calibrate" in said
+    for name in ("pair.json", "ortho_left.tif", "ortho_right.tif", "ortho_compare.json",
+                 "eval.json"):
+        assert not (out / name).exists(), name
+    assert (out / "report.json").is_file() and (out / "left.json").is_file()  # until replaced
+
+    # a report of an older gcpfree (no settings recorded) is not trusted either
+    report = json.loads((out / "report.json").read_text())
+    settings = report.pop("settings")
+    assert settings["self_calibrate"] is True and settings["left"].endswith("left.tif")
+    (out / "report.json").write_text(json.dumps(report))
+    assert orientation_changes(out, settings) == tuple(settings)
+    assert orientation_changes(out) == ()  # the products read back
+    (out / "left.json").unlink()
+    assert orientation_changes(out, settings) is None
