@@ -5,23 +5,32 @@ reference, its planimetry from the SAR model at that height) is worth.
 
     .venv/bin/gcpfree simulate --preset tiny --seed 3 --relief-factor 0.05 --sar ers \\
         --out /tmp/s20/flat
-    .venv/bin/python bench/bench_sar_gcps.py /tmp/s20/flat [--image left] [--cell 80]
+    .venv/bin/python bench/bench_sar_gcps.py /tmp/s20/flat [--image left] [--cell 80] \\
+        [--orient /tmp/s20/o_flat]
 
 The matches and heights are the product's own (core/orientation/sar_gcps.py: both images
 on one ground grid at the reference's heights through the delivered models, oriented
 gradients, the scene's offset then a template every 8 or more cells; the parallax heights
-calibrated on the reliable reference). Truth: the optical pixel's 3-D point on the truth DSM (true optical model), projected by the true SAR
-model, against the matched SAR pixel (in SAR pixels; the optical side is the better
-conditioned one: a SAR pixel at a height step has several 3-D points). Printed: counts,
-the offsets' error (median = bias, NMAD), the share beyond one SAR pixel, and each GCP's
-error in optical pixels with the parallax heights, with the reference's, and with the true
-SAR model (the part that is the matching's, not the SAR product's).
+calibrated on the reliable reference). With ``--orient`` (a ``gcpfree orient`` output of
+the same scene) they are those ``gcpfree orient --sar`` makes: the SAR image matched
+against the SAR image predicted from the pair's relative DEM (``relative_dem.tif``; the
+right image through its relatively oriented model, ``relative/rel.json``), the parallax
+calibrated on that surface's heights (its datum from the reference).
+
+Truth: the optical pixel's 3-D point on the truth DSM (true optical model), projected by
+the true SAR model, against the matched SAR pixel (in SAR pixels; the optical side is the
+better conditioned one: a SAR pixel at a height step has several 3-D points). Printed:
+counts, the offsets' error (median = bias, NMAD), the share beyond one SAR pixel, and each
+GCP's error in optical pixels with the parallax heights, with the control heights (the
+reference's, or the surface's with ``--orient``), and with the true SAR model (the part
+that is the matching's, not the SAR product's).
 """
 
 from __future__ import annotations
 
 import argparse
 import json
+from dataclasses import replace
 import sys
 import time
 import warnings
@@ -37,6 +46,8 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 from core.dem import sample_bilinear
 from core.geodesy import BBox
 from core.orientation import sar_gcps as sg
+from core.orientation import sar_matching as sgm
+from core.orientation import sar_prediction as sgp
 from core.robust import nmad
 from core.sensors.sar import SarModel
 from tasks.io.dem import dem_datum, read_reference
@@ -60,11 +71,19 @@ def main() -> None:
                     help="leave out of the scores the cells near height steps of a DSM "
                          "(truth: the truth DSM, to see what a perfect mask gives)")
     ap.add_argument("--step-m", type=float, default=3.0)
+    ap.add_argument("--orient", type=Path, default=None,
+                    help="a gcpfree orient output of the scene: match against the SAR image "
+                         "predicted from its relative DEM")
     a = ap.parse_args()
     d = a.scene
     rec = json.loads((d / "truth" / "sar.json").read_text())
     cell = a.cell or max(rec["figures"]["ground_spacing_m"])
     opt, sar = load_model(d / f"{a.image}.tif"), load_model(d / "sar.tif")
+    if a.orient is not None and a.image == "right":  # the relative DEM's frame
+        from core.sensors.pushbroom import PushbroomModel
+
+        rel = json.loads((a.orient / "relative" / "rel.json").read_text())
+        opt = replace(opt, model=PushbroomModel.from_dict(rel["right_model"]))
     t0 = time.perf_counter()
     c = np.array([0, opt.size[0] - 1, 0, opt.size[0] - 1], float)
     r = np.array([0, 0, opt.size[1] - 1, opt.size[1] - 1], float)
@@ -74,8 +93,8 @@ def main() -> None:
                          BBox(lon.min(), lat.min(), lon.max(), lat.max()).expanded(0.05), datum)
     h_mid = float(np.nanmedian(ref.h_m))
     lon, lat = opt.model.localize(c, r, np.full(4, h_mid))
-    cfg = sg.SarGcpConfig(cell_m=cell)
-    g = sg.ground_images(opt.model, _read(d / f"{a.image}.tif"), sar.model,
+    cfg = sgm.SarGcpConfig(cell_m=a.cell)  # None: the grid may coarsen (speckle)
+    g = sgm.ground_images(opt.model, _read(d / f"{a.image}.tif"), sar.model,
                          _read(d / "sar.tif"), ref, (lon, lat), cell)
     ignore = None
     if a.ignore_steps == "truth":
@@ -93,19 +112,13 @@ def main() -> None:
         ignore = maximum_filter(step > a.step_m, 2 * reach + 1)
         print(f"ignored: {100 * ignore.mean():.0f} % of the cells ({reach} cells around "
               f"steps over {a.step_m:g} m)")
-    sm = sg.match_sar_optical(g, cfg, ignore)
+    sm = sgm.match_sar_optical(g, cfg, ignore)
     m = sm.matches
     t_match = time.perf_counter() - t0
     oi, oj = sm.offset_cells
-    print(f"grid {g.grid.shape} of {cell:g} m; scene offset ({oi:+.2f}, {oj:+.2f}) cells; "
-          f"{m.status.size} templates: {m.counts()}; {t_match:.1f} s")
-
-    ok = m.ok
-    if ok.sum() < sg.MIN_POINTS:
-        raise SystemExit(f"{int(ok.sum())} matches ({sg.MIN_POINTS} needed): nothing to measure")
-    po = sm.optical_col[ok], sm.optical_row[ok]
-    ps = sm.sar_col[ok], sm.sar_row[ok]
-    href = sm.h_ref_m[ok]
+    print(f"optical image on the reference's heights: grid {g.grid.shape} of {cell:g} m; "
+          f"scene offset ({oi:+.2f}, {oj:+.2f}) cells; {m.status.size} templates: "
+          f"{m.counts()}; {t_match:.1f} s")
 
     # truth: the optical pixel's 3-D point on the truth DSM, seen by the true SAR model
     opt_t = read_model_file(d / "truth" / f"{a.image}_truth.json").model
@@ -118,28 +131,58 @@ def main() -> None:
         x, y = to_xy.transform(lo, la)
         return sample_bilinear(dsm, (y - tr.f) / tr.e - 0.5, (x - tr.c) / tr.a - 0.5)
 
-    ht = np.full(po[0].size, h_mid)
-    for _ in range(10):
-        ht = dsm_at(*opt_t.localize(*po, ht))
-    sc, sr = sar_t.project(*opt_t.localize(*po, ht), ht)
-    ec, er = ps[0] - sc, ps[1] - sr
-    far = np.hypot(ec - np.nanmedian(ec), er - np.nanmedian(er)) > 1.0
-    print(f"SAR pixel error of the matches (true SAR model): median {np.nanmedian(ec):+.2f} "
-          f"col {np.nanmedian(er):+.2f} row, NMAD {nmad(ec[np.isfinite(ec)]):.2f} / "
-          f"{nmad(er[np.isfinite(er)]):.2f}; beyond 1 SAR pixel of the median: "
-          f"{100 * np.mean(far):.1f} %")
+    def truth_of(sm):
+        """The matched optical and SAR pixels, the true heights and the SAR pixel error."""
+        ok = sm.matches.ok
+        if ok.sum() < sgm.MIN_POINTS:
+            raise SystemExit(f"{int(ok.sum())} matches ({sgm.MIN_POINTS} needed): nothing to "
+                             "measure")
+        po = sm.optical_col[ok], sm.optical_row[ok]
+        ps = sm.sar_col[ok], sm.sar_row[ok]
+        ht = np.full(po[0].size, h_mid)
+        for _ in range(10):
+            ht = dsm_at(*opt_t.localize(*po, ht))
+        sc, sr = sar_t.project(*opt_t.localize(*po, ht), ht)
+        ec, er = ps[0] - sc, ps[1] - sr
+        far = np.hypot(ec - np.nanmedian(ec), er - np.nanmedian(er)) > 1.0
+        print(f"SAR pixel error of the matches (true SAR model): median "
+              f"{np.nanmedian(ec):+.2f} col {np.nanmedian(er):+.2f} row, NMAD "
+              f"{nmad(ec[np.isfinite(ec)]):.2f} / {nmad(er[np.isfinite(er)]):.2f}; beyond 1 "
+              f"SAR pixel of the median: {100 * np.mean(far):.1f} %")
+        return po, ps, ht
+
+    po, ps, ht = truth_of(sm)
+    if a.orient is not None:
+        from tasks.absolute.sar_control import read_surface
+
+        t0 = time.perf_counter()
+        surface = read_surface(a.orient / "relative_dem.tif")
+        sm, pred = sgp.predicted_sar_matches(opt.model, _read(d / f"{a.image}.tif"), sar.model,
+                                            _read(d / "sar.tif"), ref, surface, (lon, lat),
+                                            cfg)
+        e = pred.elevated
+        print(f"SAR image predicted from the relative DEM (render cells {pred.cell_m:.1f} m): "
+              f"vertical datum {pred.vertical_plane_m[0]:+.2f} m; elevated class "
+              f"{'dark' if e.dark else 'bright'} {e.percentile:g} %, {e.height_m:.1f} m, blur "
+              f"{e.blur_m:.0f} m, R2 {e.r2:.3f}; passes "
+              + "; ".join(f"{p['cell_m']:.0f} m {p['counts']} moved E {p['moved_east_m']:+.1f}"
+                          f" N {p['moved_north_m']:+.1f} m" for p in pred.passes)
+              + f"; {time.perf_counter() - t0:.1f} s")
+        po, ps, ht = truth_of(sm)
+    ok = sm.matches.ok
+    href = sm.h_ref_m[ok]
 
     # Goncalves: the product's heights (parallax calibrated on the reliable reference)
-    reliable = sg.reliable_reference(ref, sm.lon_deg[ok], sm.lat_deg[ok], cfg.max_slope)
+    reliable = sgm.reliable_reference(ref, sm.lon_deg[ok], sm.lat_deg[ok], cfg.max_slope)
     hts = sg.parallax_heights(opt.model, sar.model, po, ps, href, reliable, cfg)
     h_par = hts.h_parallax_m
     e = h_par - ht
     print(f"heights: parallax - truth median {np.nanmedian(e):+.2f} m NMAD "
-          f"{nmad(e[np.isfinite(e)]):.2f}; reference - truth median "
+          f"{nmad(e[np.isfinite(e)]):.2f}; control - truth median "
           f"{np.nanmedian(href - ht):+.2f} NMAD {nmad((href - ht)[np.isfinite(ht)]):.2f}; "
           f"{np.median(hts.m_per_m):.2f} m of parallax per m")
     for label, model, h in (("parallax heights", sar.model, h_par),
-                            ("reference heights", sar.model, href),
+                            ("control heights", sar.model, href),
                             ("true SAR model, true heights", sar_t, ht)):
         gc, gr = opt_t.project(*model.localize(*ps, h), h)
         ec, er = po[0] - gc, po[1] - gr

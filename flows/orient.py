@@ -158,7 +158,7 @@ def orient_flow(params: OrientParams) -> OrientOutcome:
         first = max((p.id for p in windows.gcps), default=0) + 1
         sar = sar_ground_control(sar_scene, {"left": rel.left, "right": rel.right}, reference,
                                  out / "sar_points.json", workers=params.workers,
-                                 first_id=first)
+                                 first_id=first, surface=out / "relative_dem.tif")
         for line in sar.lines():
             print(line)
     if not verdict.enough and sar is None:  # the true reason: too flat, too small, voids
@@ -202,14 +202,15 @@ def orient_flow(params: OrientParams) -> OrientOutcome:
     absolute_cfg = params.absolute
     if sar is not None and not srtm_used:
         # the ground control is the SAR scene: what the orientation cannot see is its
-        # geolocation error and the matching's bias at height steps (0.7-1.0 radar pixel on
-        # the simulator, the module docstring of core.orientation.sar_gcps), one radar pixel
+        # geolocation error and the matching's bias at height steps (the module docstring
+        # of core.orientation.sar_matching and sar_prediction)
         from core.orientation.sar_gcps import registration_sigma_m
 
         first_ok = next(r for r in sar.results if r.heights is not None)
         absolute_cfg = replace(absolute_cfg, reference_sigma_m=registration_sigma_m(
             sar.config.geolocation_sigma_m, first_ok.matches.cell_m,
-            first_ok.heights.range_direction_en, params.absolute.reference_sigma_m[2]))
+            first_ok.heights.range_direction_en, params.absolute.reference_sigma_m[2],
+            predicted=first_ok.prediction is not None))
     absolute = orient_absolute(rel.left, rel.right, gcps, out, params.corrections,
                                params.self_calibrate, absolute_cfg, ties,
                                params.along_track)

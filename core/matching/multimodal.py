@@ -23,13 +23,23 @@ registration", IEEE TGRS 57(11), 2019):
 
 The ground grid and the images' positions on it are :class:`GroundGrid` and
 :func:`image_positions` (a lattice of exact projections, interpolated, with the height
-dependence kept). No I/O here.
+dependence kept).
+
+**A SAR image predicted from a surface** (:func:`splat`, :func:`radar_shadow`,
+:func:`quantile_lut`): where the ground has height steps (forest edges, buildings) the radar
+does not show the step where an optical image does, whatever heights the two are resampled
+at: it lays the top over the ground in front of it (summed with it in one pixel) and stretches
+or hides what lies behind, and an orthoimage cannot undo a many-to-one mapping. What can be
+compared with the radar is the radar's view of a surface: every cell of it sent to its image
+position (energy kept: foreshortened slopes brighten, stretched ones dim), nothing from the
+cells hidden from the antenna, each cell's brightness a function of its optical grey level
+learnt from the two images themselves. No I/O here.
 """
 
 from __future__ import annotations
 
 from collections.abc import Callable
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from enum import IntEnum
 
 import cv2
@@ -42,6 +52,7 @@ from core.matching.peaks import quadratic_peak
 
 FloatArray = NDArray[np.float64]
 Project = Callable[[FloatArray, FloatArray, FloatArray], tuple[FloatArray, FloatArray]]
+Localize = Project  # (col, row, h) -> (lon, lat)
 
 
 @dataclass(frozen=True)
@@ -105,23 +116,51 @@ def image_positions(project: Project, grid: GroundGrid, h_m: FloatArray,
     for level in levels:
         c, r = project(lon.ravel(), lat.ravel(), np.full(lon.size, level))
         at_levels.append((np.reshape(c, LI.shape), np.reshape(r, LI.shape)))
-    # bilinear across the lattice: per output node, the lattice cell and the weights
+    # bilinear across the lattice, one axis after the other: per output row (column), the
+    # lattice cell and the weight
     ii, jj = np.arange(ni, dtype=float), np.arange(nj, dtype=float)
     ci = np.clip(np.searchsorted(li, ii, side="right") - 1, 0, li.size - 2)
     cj = np.clip(np.searchsorted(lj, jj, side="right") - 1, 0, lj.size - 2)
     wi = ((ii - li[ci]) / (li[ci + 1] - li[ci]))[:, None]
     wj = ((jj - lj[cj]) / (lj[cj + 1] - lj[cj]))[None, :]
-    I0, J0 = ci[:, None], cj[None, :]
 
     def upsample(v: FloatArray) -> FloatArray:
-        return ((1 - wi) * ((1 - wj) * v[I0, J0] + wj * v[I0, J0 + 1])
-                + wi * ((1 - wj) * v[I0 + 1, J0] + wj * v[I0 + 1, J0 + 1]))
+        rows = (1 - wi) * v[ci] + wi * v[ci + 1]  # (ni, lattice columns)
+        return (1 - wj) * rows[:, cj] + wj * rows[:, cj + 1]
 
     t = (h - levels[1]) / (0.5 * (hi - lo))  # -1 at lo, 0 mid, +1 hi
     lagrange = (0.5 * t * (t - 1), 1 - t * t, 0.5 * t * (t + 1))
     col = sum(w * upsample(c) for w, (c, _) in zip(lagrange, at_levels, strict=True))
     row = sum(w * upsample(r) for w, (_, r) in zip(lagrange, at_levels, strict=True))
     return col, row
+
+
+def remap(z: NDArray[np.float32], col: FloatArray, row: FloatArray) -> FloatArray:
+    """Bilinear values of ``z`` at (col, row) in float32 (OpenCV's remap, NaN outside): the
+    images stay in single precision, a 6000-pixel image costs 144 MB, not 288."""
+    out = cv2.remap(z, col.astype(np.float32), row.astype(np.float32), cv2.INTER_LINEAR,
+                    borderMode=cv2.BORDER_CONSTANT, borderValue=float("nan"))
+    inside = (col >= 0) & (col <= z.shape[1] - 1) & (row >= 0) & (row <= z.shape[0] - 1)
+    return np.where(inside, out, np.nan)
+
+
+def pixel_size_m(col: FloatArray, row: FloatArray, cell_m: float) -> float:
+    """An image's pixel size on the ground (m), from its positions on a grid of ``cell_m``."""
+    step = np.hypot(np.diff(col, axis=1), np.diff(row, axis=1))
+    return cell_m / max(float(np.nanmedian(step)), 1e-12)
+
+
+def remap_lowpass(img: NDArray[np.float32], col: FloatArray, row: FloatArray,
+             sigma: float) -> FloatArray:
+    """``img`` at positions (col, row), low-passed by ``sigma`` pixels first (NaN-aware:
+    a pixel next to unknown ones stays unknown)."""
+    if sigma <= 0.5:
+        return remap(img, col, row)
+    known = np.isfinite(img)
+    lo = cv2.GaussianBlur(np.where(known, img, 0.0).astype(np.float32), (0, 0), sigma)
+    w = cv2.GaussianBlur(known.astype(np.float32), (0, 0), sigma)
+    return remap(np.where(w > 0.99, lo / np.maximum(w, 1e-6), np.nan).astype(np.float32),
+                  col, row)
 
 
 def _gradients(image: FloatArray) -> tuple[NDArray[np.bool_], NDArray[np.float32],
@@ -341,3 +380,176 @@ def template_centres(valid: NDArray[np.bool_], half_cells: int, spacing_cells: i
              + bad[I - h, J - h])
     keep = n_bad == 0
     return I[keep], J[keep]
+
+
+def splat(col: FloatArray, row: FloatArray, weight: FloatArray,
+          shape: tuple[int, int]) -> NDArray[np.float32]:
+    """The weights at fractional image positions (col, row) accumulated into an image of
+    ``shape`` (rows, cols), each spread bilinearly over its four pixels (sum and centroid
+    kept); positions off the image add nothing."""
+    col, row, w = (np.ravel(np.asarray(a, dtype=np.float64)) for a in (col, row, weight))
+    ok = np.isfinite(col) & np.isfinite(row) & np.isfinite(w) & (w != 0)
+    ok &= (col > -1) & (row > -1) & (col < shape[1]) & (row < shape[0])
+    col, row, w = col[ok], row[ok], w[ok]
+    ci, ri = np.floor(col).astype(np.int64), np.floor(row).astype(np.int64)
+    fc, fr = col - ci, row - ri
+    width = shape[1] + 2  # one pixel of margin each side, cut at the end
+    idx = (ri + 1) * width + ci + 1
+    out = np.zeros((shape[0] + 2) * width)
+    for step, wt in ((0, (1 - fr) * (1 - fc)), (1, (1 - fr) * fc), (width, fr * (1 - fc)),
+                     (width + 1, fr * fc)):
+        out += np.bincount(idx + step, weights=w * wt, minlength=out.size)
+    return out.reshape(shape[0] + 2, width)[1:-1, 1:-1].astype(np.float32)
+
+
+def radar_shadow(h_m: FloatArray, towards_cells: tuple[float, float],
+                 rise_m_per_cell: float) -> NDArray[np.bool_]:
+    """Cells of a height grid hidden from a radar: somewhere towards the radar (the unit
+    step ``towards_cells`` = (rows, cols) on the grid) the surface rises above the line of
+    sight, which climbs ``rise_m_per_cell`` (the cell size over tan(incidence)) per cell.
+    Marched in half cells as far as the grid's height range needs; NaN heights hide
+    nothing."""
+    h = np.asarray(h_m, dtype=np.float64)
+    finite = np.isfinite(h)
+    if not finite.any() or rise_m_per_cell <= 0:
+        return np.zeros(h.shape, bool)
+    span = float(np.nanmax(h) - np.nanmin(h))
+    z = np.where(finite, h, -np.inf).astype(np.float32)
+    ii, jj = np.mgrid[0:h.shape[0], 0:h.shape[1]].astype(np.float32)
+    hidden = np.zeros(h.shape, bool)
+    k = 1
+    while 0.5 * k * rise_m_per_cell <= span:
+        d = 0.5 * k
+        ahead = cv2.remap(z, jj + np.float32(d * towards_cells[1]),
+                          ii + np.float32(d * towards_cells[0]), cv2.INTER_LINEAR,
+                          borderMode=cv2.BORDER_CONSTANT, borderValue=float("-inf"))
+        hidden |= ahead > h + d * rise_m_per_cell
+        k += 1
+    return hidden & finite
+
+
+def quantile_lut(values: FloatArray, target: FloatArray, n_bins: int = 32
+                 ) -> tuple[FloatArray, FloatArray]:
+    """The median of ``target`` per quantile bin of ``values`` (both finite where used):
+    ``(edges, lut)`` for :func:`apply_lut`. How the grey level of one image maps to the
+    other's where the two see different physics (a forest dark in the optical, bright in the
+    radar), learnt from the images themselves; an empty bin takes its neighbour's value."""
+    ok = np.isfinite(values) & np.isfinite(target)
+    if ok.sum() < n_bins:
+        raise InputError(f"{int(ok.sum())} values to learn a {n_bins}-bin grey-level table")
+    v, t = values[ok], target[ok]
+    edges = np.quantile(v, np.linspace(0.0, 1.0, n_bins + 1))
+    b = np.clip(np.searchsorted(edges, v, side="right") - 1, 0, n_bins - 1)
+    lut = np.full(n_bins, np.nan)
+    for k in range(n_bins):
+        if (b == k).any():
+            lut[k] = np.median(t[b == k])
+    filled = np.flatnonzero(np.isfinite(lut))
+    lut = np.interp(np.arange(n_bins), filled, lut[filled])
+    return edges, lut
+
+
+def apply_lut(values: FloatArray, edges: FloatArray, lut: FloatArray) -> FloatArray:
+    """The table of :func:`quantile_lut` applied (NaN stays NaN)."""
+    b = np.clip(np.searchsorted(edges, values, side="right") - 1, 0, lut.size - 1)
+    return np.where(np.isfinite(values), lut[b], np.nan)
+
+
+@dataclass(frozen=True)
+class ElevatedClass:
+    """The optical pair's surface sharpened: the DSM sees height steps through its matching
+    window (a blur of ``blur_m``); the optical image sees them sharp, as the edges of a
+    class of grey levels (``dark``: darker than the ``percentile``-th percentile, else
+    brighter) standing ``height_m`` above the rest, chosen where it explains most of the
+    DSM's detail (``r2``, the share of the DSM's variance finer than ``highpass_m``); the
+    DSM gets back that class's sharp edges. ``height_m`` 0: no class explains the DSM as
+    trees or roofs would (``r2`` under :data:`MIN_R2`, or a class taller than
+    :data:`MAX_ELEVATED_M`, or blurred as much as the widest blur tried: the shading of
+    slopes follows the terrain's relief, not its steps); the DSM is kept as it is."""
+
+    dark: bool
+    percentile: float
+    blur_m: float
+    height_m: float
+    r2: float
+    highpass_m: float
+
+    def to_dict(self) -> dict[str, float | bool]:
+        return {"dark": self.dark, "percentile": self.percentile, "blur_m": self.blur_m,
+                "height_m": self.height_m, "r2": self.r2, "highpass_m": self.highpass_m}
+
+
+MIN_R2 = 0.005  # below it no grey-level class explains the DSM's detail: no sharpening
+MAX_ELEVATED_M = 40.0  # trees and roofs: a grey-level class "taller" follows the terrain
+BLURS_CELLS = (1.0, 1.5, 2.0, 2.5, 3.0)  # the DSM's blur tried, in its own cells
+
+
+def _blur(z: FloatArray, sigma_cells: float) -> FloatArray:
+    return cv2.GaussianBlur(np.asarray(z, np.float32), (0, 0), float(sigma_cells)
+                            ).astype(np.float64)
+
+
+def sharpened_surface(dsm_m: FloatArray, optical: FloatArray, cell_m: float, dsm_cell_m: float,
+                      max_fit_cells: int = 512
+                      ) -> tuple[FloatArray, ElevatedClass, NDArray[np.bool_]]:
+    """The DSM (a grid of ``cell_m``, NaN where unknown) with the sharp edges of the grey
+    level class of ``optical`` (the same grid) that explains its detail (see
+    :class:`ElevatedClass`): ``dsm + height (M - G_blur M)``, M the class's mask, its height
+    and the DSM's blur (1 to 3 of its cells, ``dsm_cell_m``) fitted by least squares on the
+    DSM's detail finer than about 1 km, over a window of at most ``max_fit_cells`` square
+    in the middle of the known cells. NaN stays NaN. Also the cells of the other class
+    away from the elevated one (the bare ground: everywhere when there is no class)."""
+    known_all = np.isfinite(dsm_m) & np.isfinite(optical)
+    hp = max(10.0 * dsm_cell_m, 1000.0) / cell_m
+    o_all = _blur(np.where(np.isfinite(optical), optical, np.nanmedian(optical)),
+                  max(0.5 * dsm_cell_m / cell_m, 0.5))
+    none = ElevatedClass(True, 50.0, 0.0, 0.0, 0.0, hp * cell_m)
+    everywhere = np.ones(np.shape(dsm_m), bool)
+    if known_all.sum() < 100:
+        return dsm_m, none, everywhere
+    rows, cols = np.flatnonzero(known_all.any(axis=1)), np.flatnonzero(known_all.any(axis=0))
+    ci, cj = (rows[0] + rows[-1]) // 2, (cols[0] + cols[-1]) // 2
+    half = max_fit_cells // 2
+    win = (slice(max(ci - half, 0), ci + half), slice(max(cj - half, 0), cj + half))
+    known, o = known_all[win], o_all[win]
+    w = known.astype(np.float64)
+    w_blur = np.maximum(_blur(w, hp), 1e-6)
+
+    def detail(z: FloatArray) -> FloatArray:  # high-pass normalised over the known cells
+        return (z - _blur(z * w, hp) / w_blur)[known]
+
+    if known.sum() < 100:
+        return dsm_m, none, everywhere
+    d = detail(np.where(known, dsm_m[win], 0.0))
+    d -= d.mean()
+    best = (0.0, 50.0, 1.0, 0.0, 0.0)
+    for pct in range(10, 91, 5):
+        threshold = float(np.percentile(o[known], pct))
+        mask = (o < threshold).astype(np.float64)
+        for blur in BLURS_CELLS:
+            x = detail(_blur(mask, blur * dsm_cell_m / cell_m))
+            x -= x.mean()
+            a = float(x @ d / max(float(x @ x), 1e-12))
+            r2 = a * a * float(x @ x) / max(float(d @ d), 1e-12)
+            if r2 > best[0]:
+                best = (r2, float(pct), blur, a, threshold)
+    r2, pct, blur, a, threshold = best
+    cls = ElevatedClass(a > 0, pct, blur * dsm_cell_m, abs(a), r2, hp * cell_m)
+    if r2 < MIN_R2 or abs(a) > MAX_ELEVATED_M or blur == BLURS_CELLS[-1]:
+        return dsm_m, replace(cls, height_m=0.0), everywhere
+    mask = (o_all < threshold).astype(np.float64)
+    elevated = mask if a > 0 else 1.0 - mask
+    ground = _blur(elevated, 2.0 * blur * dsm_cell_m / cell_m) < 0.05
+    return dsm_m + a * (mask - _blur(mask, blur * dsm_cell_m / cell_m)), cls, ground
+
+
+def radar_step(project: Project, localize: Localize, lon: float, lat: float, h: float,
+               cell_m: float) -> tuple[tuple[float, float], float]:
+    """The unit step towards the radar on a lon/lat grid (rows go south) and the rise of its
+    line of sight per cell of ``cell_m``, at one ground point."""
+    c, r = project(np.array([lon]), np.array([lat]), np.array([h + 10.0]))
+    lon1, lat1 = localize(c, r, np.array([h]))  # a raised point's pixel: nearer the radar
+    mx, my = metres_per_degree(lat)
+    east, north = (float(lon1[0]) - lon) * mx / 10.0, (float(lat1[0]) - lat) * my / 10.0
+    cot_incidence = float(np.hypot(east, north))
+    return (-north / cot_incidence, east / cot_incidence), cot_incidence * cell_m

@@ -17,17 +17,18 @@ from prefect import task
 from prefect.cache_policies import NO_CACHE
 from rasterio.errors import NotGeoreferencedWarning
 
-from core.dem import GeoDEM
+from core.dem import GeoDEM, SurfaceGrid
 from core.errors import GeometryError, InputError
 from core.orientation.sar_gcps import (
     CommonShift,
-    SarGcpConfig,
     SarImageResult,
     geolocation_sigma_m,
     sar_gcps_of_image,
 )
+from core.orientation.sar_matching import SarGcpConfig
 from core.points import ControlPoint
-from tasks.io.rasters import atomic_write_json
+from tasks.io.crs import Projection
+from tasks.io.rasters import atomic_write_json, open_raster, read_surface_window
 from tasks.io.sensors import LoadedModel, load_model
 from tasks.scheduling import compute
 
@@ -85,6 +86,33 @@ def check_overlap(sar: LoadedModel, images: Mapping[str, LoadedModel], h_m: floa
                              f"{name} image (20 % needed): it does not overlap the pair")
 
 
+@dataclass(frozen=True, eq=False)
+class ProjectedSurface:
+    """A DEM in a projected CRS (the relative DEM, ellipsoidal heights) read at lon/lat
+    points through that CRS: :class:`core.orientation.sar_matching.Surface`."""
+
+    grid: SurfaceGrid
+    projection: Projection
+
+    def height_m(self, lon_deg: np.ndarray, lat_deg: np.ndarray) -> np.ndarray:
+        return self.grid.sample(*self.projection.to_xy(lon_deg, lat_deg))
+
+    def cell_size_m(self) -> float:
+        return float(abs(self.grid.dx_m))
+
+
+def read_surface(path: Path) -> ProjectedSurface:
+    """The relative DEM written by the dense step (a north-up projected COG): the optical
+    pair's own surface, crowns and roofs included, in the frame of its relative models."""
+    with open_raster(path, "relative DEM", "run the relative DEM step first") as src:
+        epsg, b = src.crs.to_epsg() if src.crs is not None else None, src.bounds
+    if epsg is None:
+        raise InputError(f"relative DEM {path} has no EPSG CRS; give the DEM gcpfree wrote")
+    grid = read_surface_window(path, (b.left, b.bottom, b.right, b.top), 0,
+                               what="relative DEM")
+    return ProjectedSurface(grid, Projection(int(epsg)))
+
+
 def mission_of(sar: LoadedModel) -> str:
     """The SAR model's mission id (``S1A``, ``ERS2``; empty when it does not say)."""
     return str(getattr(sar.model, "mission", ""))
@@ -128,6 +156,7 @@ class SarControl:
                 continue
             images[r.name] = {
                 **head,
+                "prediction": None if r.prediction is None else r.prediction.to_dict(),
                 "sigma_match_m": h.sigma_match_m, "control_points": int(h.control.sum()),
                 "parallax_m_per_m": float(np.median(h.m_per_m)),
                 "heights_from_parallax_only": int((~h.from_reference & h.inlier).sum()),
@@ -142,9 +171,11 @@ class SarControl:
         return {"format": "gcpfree.sar_points", "version": 1,
                 "sar_image": str(self.sar.image), "sar_model": str(self.sar.source),
                 "mission": self.mission,
-                "method": "oriented-gradient (CFOG) matching on a common ground grid; heights "
-                          "from the SAR-optical parallax calibrated on the reference "
-                          "(Goncalves 2002); planimetry from the SAR model",
+                "method": "oriented-gradient (CFOG) matching on a common ground grid, of the "
+                          "SAR image and the SAR image predicted from the pair's relative "
+                          "DEM (or, without it, the optical image on the reference's "
+                          "heights); heights from the SAR-optical parallax calibrated on the "
+                          "reference (Goncalves 2002); planimetry from the SAR model",
                 "cell_m": self.results[0].matches.cell_m if self.results else None,
                 "geolocation_sigma_m": self.config.geolocation_sigma_m,
                 "images": images}
@@ -194,17 +225,20 @@ class SarControl:
 @task(name="sar-ground-control", cache_policy=NO_CACHE)
 def sar_ground_control(sar: LoadedModel, images: Mapping[str, LoadedModel], reference: GeoDEM,
                        out: Path | None = None, config: SarGcpConfig | None = None,
-                       workers: int | None = None, first_id: int = 1) -> SarControl:
+                       workers: int | None = None, first_id: int = 1,
+                       surface: Path | None = None) -> SarControl:
     """GCPs of every optical image in ``images`` (name -> model, their images read) from the
-    SAR scene ``sar`` (:func:`load_sar`), numbered from ``first_id``; ``out``:
-    ``sar_points.json`` written there."""
+    SAR scene ``sar`` (:func:`load_sar`), numbered from ``first_id``; ``surface``: the
+    pair's relative DEM (in the frame of ``images``' models), whence the SAR image is
+    predicted; ``out``: ``sar_points.json`` written there."""
     cfg = config or SarGcpConfig(geolocation_sigma_m=geolocation_sigma_m(mission_of(sar)))
     h_mid = float(np.nanmedian(reference.h_m))
     check_overlap(sar, images, h_mid)
     sar_pixels = _read(sar.image)
+    dsm = read_surface(surface) if surface is not None else None
     parts = [dask.delayed(sar_gcps_of_image)(name, m.model, _read(m.image or m.source),
                                              sar.model, sar_pixels, reference,
-                                             _corners(m, h_mid), cfg)
+                                             _corners(m, h_mid), cfg, surface=dsm)
              for name, m in images.items()]
     results, next_id = [], first_id
     for r in compute(parts, workers=workers):  # ids unique across images

@@ -117,3 +117,85 @@ def test_bad_settings_are_refused():
         mm.MultimodalConfig(min_score=1.5)
     with pytest.raises(InputError):
         mm.GroundGrid.covering([5.0, np.nan], [44.0, 44.1], 20.0)
+
+
+def test_splat_keeps_the_sum_and_the_centroid_and_drops_what_is_off_the_image():
+    rng = np.random.default_rng(5)
+    col, row = rng.uniform(2, 37, 500), rng.uniform(2, 27, 500)
+    w = rng.uniform(0.5, 2.0, 500)
+    img = mm.splat(col, row, w, (30, 40)).astype(np.float64)
+    assert img.sum() == pytest.approx(w.sum(), rel=1e-5)
+    r, c = np.mgrid[0:30, 0:40]
+    assert (img * c).sum() / img.sum() == pytest.approx((w * col).sum() / w.sum(), abs=1e-4)
+    assert (img * r).sum() / img.sum() == pytest.approx((w * row).sum() / w.sum(), abs=1e-4)
+    one = mm.splat(np.array([3.0, 3.25, 99.0]), np.array([4.0, 4.0, 1.0]),
+                   np.ones(3), (10, 10))
+    # an integer position lands whole in its pixel, a quarter pixel splits 3:1, off: nothing
+    assert one[4, 3] == pytest.approx(1.75) and one[4, 4] == pytest.approx(0.25)
+    assert one.sum() == pytest.approx(2.0)
+
+
+def test_radar_shadow_is_the_wall_height_over_the_rise_behind_the_wall():
+    h = np.zeros((20, 60))
+    h[:, 30:35] = 20.0  # a 20 m wall, the radar to the east (towards +columns)
+    # the line of sight climbs 2.5 m per cell (a 5 m cell at cot(incidence) = 0.5... any):
+    # behind the wall (west of column 30) the ground is hidden over 20 / 2.5 = 8 cells
+    hidden = mm.radar_shadow(h, (0.0, 1.0), 2.5)
+    row = hidden[10]
+    assert not row[30:].any()  # the wall and the ground in front of it see the radar
+    assert row[23:30].all() and not row[:21].any()
+    # the radar to the west: the shadow falls east of the wall
+    hidden_w = mm.radar_shadow(h, (0.0, -1.0), 2.5)[10]
+    assert hidden_w[35:42].all() and not hidden_w[:35].any() and not hidden_w[44:].any()
+
+
+def test_quantile_lut_learns_a_non_monotonic_grey_level_mapping():
+    rng = np.random.default_rng(6)
+    v = rng.uniform(0, 100, 20000)
+    truth = np.where(v < 30, 2.0, np.where(v < 70, -1.0, 0.5))  # dark bright, mid dark...
+    edges, lut = mm.quantile_lut(v, truth + rng.normal(0, 0.3, v.size), 20)
+    got = mm.apply_lut(v, edges, lut)
+    inside = (np.abs(v - 30) > 6) & (np.abs(v - 70) > 6)  # away from the bins astride a step
+    assert np.abs(got - truth)[inside].max() < 0.1
+    assert np.isnan(mm.apply_lut(np.array([np.nan]), edges, lut)[0])
+
+
+def _patches(n=256, seed=7, cover=0.3, scale=6.0):
+    rng = np.random.default_rng(seed)
+    f = gaussian_filter(rng.standard_normal((n, n)), scale)
+    return f > np.quantile(f, 1 - cover)
+
+
+def test_sharpening_gives_the_blurred_dsm_back_its_steps():
+    rng = np.random.default_rng(8)
+    forest = _patches()
+    truth = 500.0 + 0.01 * np.arange(256)[None, :] + 15.0 * forest  # 15 m trees on ground
+    dsm = gaussian_filter(truth, 2.0) + rng.normal(0, 1.0, truth.shape)  # seen through a
+    optical = np.where(forest, 60.0, 140.0) + rng.normal(0, 15.0, truth.shape)  # window
+    dsm[:20, :20] = np.nan  # a hole stays a hole
+    sharp, cls, ground = mm.sharpened_surface(dsm, optical, 20.0, 20.0)
+    assert cls.dark and cls.height_m == pytest.approx(15.0, rel=0.15)
+    assert cls.blur_m == pytest.approx(40.0, abs=10.0) and cls.r2 > 0.3
+    assert cls.percentile == pytest.approx(30.0, abs=5.0)  # the darkest 30 %: the trees
+    inner = (slice(25, -25), slice(25, -25))
+    before = np.sqrt(np.nanmean((dsm - truth)[inner] ** 2))
+    after = np.sqrt(np.nanmean((sharp - truth)[inner] ** 2))
+    assert after < 0.6 * before
+    assert np.isnan(sharp[:20, :20]).all()
+    # the bare ground: the other class, away from the trees
+    assert not (ground & forest).any() and 0.2 < ground.mean() < 0.7
+    # a DSM the grey levels do not explain is left as it is
+    noise = 500.0 + rng.normal(0, 3.0, truth.shape)
+    same, none, everywhere = mm.sharpened_surface(noise, optical, 20.0, 20.0)
+    assert none.height_m == 0.0 and np.array_equal(same, noise) and everywhere.all()
+
+
+def test_the_shading_of_hills_is_no_class_of_trees():
+    rng = np.random.default_rng(9)
+    hills = 200.0 * gaussian_filter(rng.standard_normal((256, 256)), 12.0) / 0.02
+    hills = 800.0 + hills * 150.0 / np.ptp(hills)  # 150 m of relief over 5 km
+    dsm = gaussian_filter(hills, 2.0) + rng.normal(0, 1.0, hills.shape)
+    sun_east = np.gradient(hills, axis=1) / 20.0  # slopes facing the sun are bright
+    optical = 120.0 + 300.0 * sun_east + rng.normal(0, 5.0, hills.shape)
+    same, cls, ground = mm.sharpened_surface(dsm, optical, 20.0, 20.0)
+    assert cls.height_m == 0.0 and np.array_equal(same, dsm) and ground.all()
