@@ -6,7 +6,10 @@ orient` on each (degraded SRTM-like reference, no GCP) and prints, per factor: t
 of the windows (std of heights about their plane), the windows that qualified, and the check
 point RMS (worst of P and L over both images), or the refusal. Writes relief_sweep.png (and
 .json) into GCPFREE_RELIEF_OUT (default the current folder) when matplotlib is there. About a
-minute and a half per factor on 2 cores. Prints figures, asserts nothing.
+minute and a half per factor on 2 cores. GCPFREE_RELIEF_ERRORS: the simulator's errors,
+realistic (default: measured attitude profile, ephemeris and detector errors, an SRTM-like
+reference with partial canopy and misregistration) or simple (attitude biases and rates only).
+Prints figures, asserts nothing.
 """
 
 from __future__ import annotations
@@ -21,6 +24,7 @@ from pathlib import Path
 
 FACTORS = [float(f) for f in os.environ.get(
     "GCPFREE_RELIEF_FACTORS", "0.05,0.1,0.15,0.2,0.3,0.5,1.0").split(",")]
+ERRORS = os.environ.get("GCPFREE_RELIEF_ERRORS", "realistic")
 
 
 def cli(args: list[str], env: dict[str, str]) -> subprocess.CompletedProcess:
@@ -31,7 +35,8 @@ def cli(args: list[str], env: dict[str, str]) -> subprocess.CompletedProcess:
 def one(factor: float, tmp: Path, env: dict[str, str]) -> dict:
     scene = tmp / f"tiny_{factor:g}"
     r = cli(["simulate", "--preset", "tiny", "--seed", "21", "--lens", "--date-change", "0.1",
-             "--relief-factor", str(factor), "--no-lidar", "--out", str(scene)], env)
+             "--relief-factor", str(factor), "--errors", ERRORS, "--no-lidar",
+             "--out", str(scene)], env)
     if r.returncode:
         raise SystemExit(r.stdout[-1500:] + r.stderr[-1500:])
     out = tmp / f"orient_{factor:g}"
@@ -40,7 +45,7 @@ def one(factor: float, tmp: Path, env: dict[str, str]) -> dict:
              "--reference", str(scene / "reference.tif"), "--checkpoints",
              str(scene / "truth" / "checkpoints.json"), "--self-calibrate", "--no-progress",
              "--out", str(out)], env)
-    row: dict = {"factor": factor, "seconds": time.perf_counter() - t0}
+    row: dict = {"factor": factor, "errors": ERRORS, "seconds": time.perf_counter() - t0}
     windows = out / "windows.json"
     if windows.is_file():
         ws = json.loads(windows.read_text())["windows"]
@@ -74,8 +79,8 @@ def main() -> None:
     ok = [r for r in rows if r.get("check_rms_px", 99) <= 1.0]
     if ok:
         low = min(ok, key=lambda r: r["factor"])
-        print(f"lowest relief reaching 1 px: factor {low['factor']:g}, median window relief "
-              f"{low['relief_m']:.1f} m")
+        print(f"errors {ERRORS}: lowest relief reaching 1 px: factor {low['factor']:g}, "
+              f"median window relief {low['relief_m']:.1f} m")
     (dest / "relief_sweep.json").write_text(json.dumps(rows, indent=1))
     try:
         import matplotlib
