@@ -20,24 +20,18 @@ from __future__ import annotations
 
 import json
 import os
-import subprocess
-import sys
 import tempfile
 import time
 from pathlib import Path
 
 import numpy as np
+from relief_sweep import cli
 
 DEFAULT_CASES = ("1:5.75:44.75,2:5.5:44.5,3:5.25:44.2,4:5.3:44.8,5:5.7:44.3,6:5.45:44.15,"
                  "7:5.78:44.55,8:5.22:44.5")
 CASES = [tuple(c.split(":")) for c in os.environ.get("GCPFREE_UNCERTAINTY_CASES",
                                                      DEFAULT_CASES).split(",")]
 ERRORS = os.environ.get("GCPFREE_UNCERTAINTY_ERRORS", "realistic")
-
-
-def cli(args: list[str], env: dict[str, str]) -> subprocess.CompletedProcess:
-    return subprocess.run([sys.executable, "-m", "flows.cli", *args], capture_output=True,
-                          text=True, env=env, check=False)
 
 
 def one(seed: str, lon: str, lat: str, tmp: Path, env: dict[str, str]) -> dict:
