@@ -24,6 +24,12 @@ DEFAULTS = {
     "PREFECT_LOGGING_TO_API_WHEN_MISSING_FLOW": "ignore",
     "PREFECT_SERVER_EPHEMERAL_STARTUP_TIMEOUT_SECONDS": "90",  # 20 s (default) times out
     "DASK_LOGGING__DISTRIBUTED": "warning",  # otherwise ~90 log lines per small flow
+    # one BLAS thread per worker: the parallelism is Dask's (tasks.scheduling), and OpenBLAS's
+    # own threads on the chain's small products only spin (spot surface matching, one worker:
+    # 59.7 s wall and 88 CPU-s with them, 52.7 s and 49 CPU-s without; two workers 43.8 ->
+    # 30.5 s). Read when NumPy loads: the CLI sets it before; worker processes inherit it.
+    "OPENBLAS_NUM_THREADS": "1",
+    "MKL_NUM_THREADS": "1",  # the same for a NumPy built on MKL
 }
 
 
