@@ -113,6 +113,8 @@ FloatArray = NDArray[np.float64]
 
 FORMAT = "gcpfree.pushbroom"
 _FD_TIME_S = 0.01  # time step of the finite differences in time (the motion is smooth)
+_RATE_ITERATIONS = 2  # Newton steps that re-measure the rate; the later ones reuse it (chord)
+
 
 def _rotation_axes(ang: FloatArray) -> tuple[FloatArray, FloatArray, FloatArray]:
     """Axes (m, 3) of roll, pitch and yaw, in the camera frame, at angles ``ang`` (3, m): a change
@@ -381,13 +383,16 @@ class PushbroomModel:
         t = np.full(m, self.t0_s + 0.5 * (self.n_rows - 1) * self.line_period_s)
         c = np.full(m, 0.5 * (self.n_cols - 1))
         todo = np.arange(m)
-        for _ in range(max_iter):
+        rate = np.zeros((m, 2))  # d(observation)/dt, the platform's sweep of the ground
+        for it in range(max_iter):
             if todo.size == 0:
                 break
             ga, ta, ca = g[todo], t[todo], c[todo]
             ox, oy, vz = self._observe(ta, ga)
-            xp, yp, _ = self._observe(ta + _FD_TIME_S, ga)
-            dox, doy = (xp - ox) / _FD_TIME_S, (yp - oy) / _FD_TIME_S
+            if it < _RATE_ITERATIONS:  # then held: it varies little near the solution
+                xp, yp, _ = self._observe(ta + _FD_TIME_S, ga)
+                rate[todo] = np.column_stack([(xp - ox) / _FD_TIME_S, (yp - oy) / _FD_TIME_S])
+            dox, doy = rate[todo, 0], rate[todo, 1]
             xi, yi, dxi, dyi = self._ideal_and_dcol(ca)
             fx, fy = xi - ox, yi - oy
             det = dxi * doy - dox * dyi
