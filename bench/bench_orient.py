@@ -60,7 +60,8 @@ def steps_3_4(scene: Path, out: Path) -> None:
     t3 = time.perf_counter()
     print(f"steps 3-4 in-process: reference read {t1 - t0:.1f} s, surface matching "
           f"{len(matched.matches)} windows ({len(matched.gcps)} GCPs) {t2 - t1:.1f} s, "
-          f"adjustment with self-calibration, tie points and along-track {t3 - t2:.1f} s; total {t3 - t0:.1f} s "
+          f"adjustment with self-calibration, tie points and along-track {t3 - t2:.1f} s; "
+          f"total {t3 - t0:.1f} s "
           f"(target < 60 s); sigma0 {absolute.adjustment.sigma0:.2f}")
 
 

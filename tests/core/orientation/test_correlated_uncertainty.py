@@ -43,6 +43,34 @@ def correlated_field(east: np.ndarray, north: np.ndarray, error: CorrelatedGroun
     return np.einsum("ij,djk->dik", chol, z) * np.sqrt(error.variance_m2)
 
 
+def affine_adjustment(east: np.ndarray, north: np.ndarray, w: np.ndarray
+                      ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """An adjustment of 6 parameters (a shift, a rate and a tilt in each image axis) of both
+    images to GCPs at ``east``, ``north`` with the weights ``w`` (n * 4,): the partials
+    (n, 2, 2, 6), the weighted flat partials ``W A`` (n * 4, 6) and ``N^-1``."""
+    n = east.size
+    x, y = east / EXTENT_M - 0.5, north / EXTENT_M - 0.5
+    a = np.zeros((n, 2, 2, 6))
+    for k in range(2):
+        a[:, k, 0, :3] = np.column_stack([np.ones(n), x, y])
+        a[:, k, 1, 3:] = np.column_stack([np.ones(n), x, y])
+    af = a.reshape(-1, 6)
+    wa = af * w[:, None]
+    return a, wa, np.linalg.inv(af.T @ wa)
+
+
+def check_point_partials(n: int = 50) -> np.ndarray:
+    """(n, 6): the first image's column at ``n`` check points across the scene."""
+    jj = np.zeros((n, 6))
+    jj[:, :3] = np.column_stack([np.ones(n), np.linspace(-0.5, 0.5, n), np.zeros(n)])
+    return jj
+
+
+def fitted(cov: np.ndarray, wa: np.ndarray, obs: np.ndarray) -> np.ndarray:
+    """(draws, 6) the parameters fitted to each draw of the observations ``obs``."""
+    return np.einsum("uv,dv->du", cov, np.einsum("iu,di->du", wa, obs.reshape(len(obs), -1)))
+
+
 def test_sandwich_predicts_the_spread_of_the_parameters_under_correlated_gcp_errors():
     """An adjustment of 6 parameters (a shift, a rate and a tilt in each image axis) to 120
     GCPs whose ground errors are correlated (3 m east and north, 2 m up, 3 km) on top of
@@ -52,24 +80,14 @@ def test_sandwich_predicts_the_spread_of_the_parameters_under_correlated_gcp_err
     it; with no correlation the sandwich is ``N^-1`` itself."""
     east, north, g = layout()
     error = CorrelatedGroundError((9.0, 9.0, 4.0), 3000.0, 0)
-    x, y = east / EXTENT_M - 0.5, north / EXTENT_M - 0.5
-    a = np.zeros((N, 2, 2, 6))
-    for k in range(2):
-        a[:, k, 0, :3] = np.column_stack([np.ones(N), x, y])
-        a[:, k, 1, 3:] = np.column_stack([np.ones(N), x, y])
     sigma2 = 0.3**2 + np.einsum("nmak,k->nma", g**2, error.variance_m2)  # true diagonal
-    af, w = a.reshape(-1, 6), 1.0 / sigma2.reshape(-1)
-    cov = np.linalg.inv(af.T @ (af * w[:, None]))
+    a, wa, cov = affine_adjustment(east, north, 1.0 / sigma2.reshape(-1))
     pred = correlated_covariance(cov, a, np.sqrt(sigma2), g, east, north, error)
     rng = np.random.default_rng(1)
     e = correlated_field(east, north, error, rng, 4000)
     obs = np.einsum("nmak,dnk->dnma", g, e) + rng.normal(0.0, 0.3, (4000, N, 2, 2))
-    xhat = np.einsum("uv,dv->du", cov, np.einsum("iu,di->du", af * w[:, None],
-                                                 obs.reshape(4000, -1)))
-    j = np.column_stack([np.ones(50), np.linspace(-0.5, 0.5, 50), np.zeros(50)])
-    jj = np.zeros((50, 6))
-    jj[:, :3] = j
-    measured = np.var(xhat @ jj.T, axis=0)
+    jj = check_point_partials()
+    measured = np.var(fitted(cov, wa, obs) @ jj.T, axis=0)
     assert np.mean(measured) / np.mean(np.einsum("iu,uv,iv->i", jj, pred, jj)) \
         == pytest.approx(1.0, abs=0.05)
     assert np.mean(np.einsum("iu,uv,iv->i", jj, cov, jj)) < 0.4 * np.mean(measured)
@@ -173,23 +191,14 @@ def test_a_dozen_gcps_sharing_a_ground_error_are_not_taken_for_independent_ones(
     _, _, g0 = layout(8)
     g = g0[:n]
     truth = CorrelatedGroundError((625.0, 100.0, 25.0), 15_000.0, 0)
-    x, y = east / EXTENT_M - 0.5, north / EXTENT_M - 0.5
-    a = np.zeros((n, 2, 2, 6))
-    for k in range(2):
-        a[:, k, 0, :3] = np.column_stack([np.ones(n), x, y])
-        a[:, k, 1, 3:] = np.column_stack([np.ones(n), x, y])
     sigma = np.full((n, 2, 2), 0.2)  # the GCPs' stated precision: noise only
-    af, w = a.reshape(-1, 6), 1.0 / sigma.reshape(-1) ** 2
-    cov = np.linalg.inv(af.T @ (af * w[:, None]))
-    hat = af @ cov @ (af * w[:, None]).T  # fitted values of the observations
+    a, wa, cov = affine_adjustment(east, north, 1.0 / sigma.reshape(-1) ** 2)
+    hat = a.reshape(-1, 6) @ cov @ wa.T  # fitted values of the observations
     draws = 300
     e = correlated_field(east, north, truth, rng, draws)
     obs = np.einsum("nmak,dnk->dnma", g, e) + rng.normal(0.0, 0.2, (draws, n, 2, 2))
-    jj = np.zeros((50, 6))
-    jj[:, :3] = np.column_stack([np.ones(50), np.linspace(-0.5, 0.5, 50), np.zeros(50)])
-    xhat = np.einsum("uv,dv->du", cov, np.einsum("iu,di->du", af * w[:, None],
-                                                 obs.reshape(draws, -1)))
-    measured = float(np.mean(np.var(xhat @ jj.T, axis=0)))
+    jj = check_point_partials()
+    measured = float(np.mean(np.var(fitted(cov, wa, obs) @ jj.T, axis=0)))
     predicted, lengths = [], []
     for d in range(draws):
         v = (obs[d].reshape(-1) - hat @ obs[d].reshape(-1)).reshape(n, 2, 2)
