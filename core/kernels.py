@@ -1,8 +1,8 @@
-"""Compiled (Numba) kernels of the hot loops: RPC00B projection, the ortho lattice
-interpolation and image resampling.
+"""Compiled (Numba) kernels of the hot loops: RPC00B projection, the orbit's interpolation
+and local frames, the ortho lattice interpolation and image resampling.
 
 This module imports Numba, which takes a second or more: the modules that use it
-(:mod:`core.sensors.rpc`, :mod:`core.ortho`) import it inside the functions that call it, so
+(:mod:`core.sensors.rpc`, :mod:`core.sensors.orbit`, :mod:`core.ortho`) import it inside the functions that call it, so
 ``gcpfree --help`` and every module import stay fast. Each kernel compiles on its first call
 and is cached on disk (``cache=True``), so a later process only loads it.
 
@@ -106,6 +106,75 @@ def rpc_project(coeffs: FloatArray, lon: FloatArray, lat: FloatArray, h: FloatAr
     run_split(_rpc_project_range, n, *polys, norm,
               *(np.ascontiguousarray(a, dtype=np.float64) for a in (lon, lat, h)), col, row)
     return col, row
+
+
+# ---------------------------------------------------------------------------- orbits
+
+
+@numba.njit(cache=True, nogil=True, error_model="numpy")
+def _orbit_states(times: FloatArray, positions: FloatArray, velocities: FloatArray, k: int,
+                  t: FloatArray, pos: FloatArray, vel: FloatArray, start: int,
+                  stop: int) -> None:
+    n = times.size
+    for m in range(start, stop):
+        tm = t[m]
+        s = min(max(np.searchsorted(times, tm) - k // 2, 0), n - k)
+        px = py = pz = vx = vy = vz = 0.0
+        for j in range(k):
+            tj = times[s + j]
+            w = 1.0
+            for i in range(k):
+                if i != j:
+                    w *= (tm - times[s + i]) / (tj - times[s + i])
+            px += w * positions[s + j, 0]
+            py += w * positions[s + j, 1]
+            pz += w * positions[s + j, 2]
+            vx += w * velocities[s + j, 0]
+            vy += w * velocities[s + j, 1]
+            vz += w * velocities[s + j, 2]
+        pos[m, 0], pos[m, 1], pos[m, 2] = px, py, pz
+        vel[m, 0], vel[m, 1], vel[m, 2] = vx, vy, vz
+
+
+def orbit_states(times: FloatArray, positions: FloatArray, velocities: FloatArray,
+                 k: int, t: FloatArray) -> tuple[FloatArray, FloatArray]:
+    """Positions and velocities (m, 3) at times ``t`` (m,): Lagrange polynomials through the
+    ``k`` samples around each time (``times`` (n,) increasing, ``k <= n``; the window starts
+    ``k // 2`` samples before the first sample after t, clipped to the ends)."""
+    t = np.ascontiguousarray(t, dtype=np.float64).ravel()
+    pos, vel = np.empty((t.size, 3)), np.empty((t.size, 3))
+    run_split(_orbit_states, t.size, np.ascontiguousarray(times, dtype=np.float64),
+              np.ascontiguousarray(positions, dtype=np.float64),
+              np.ascontiguousarray(velocities, dtype=np.float64), int(k), t, pos, vel)
+    return pos, vel
+
+
+@numba.njit(cache=True, nogil=True, error_model="numpy")
+def _orbital_frames(pos: FloatArray, vel: FloatArray, frame: FloatArray, start: int,
+                    stop: int) -> None:
+    for m in range(start, stop):
+        px, py, pz = pos[m, 0], pos[m, 1], pos[m, 2]
+        r = np.sqrt(px * px + py * py + pz * pz)
+        zx, zy, zz = -px / r, -py / r, -pz / r
+        vx, vy, vz = vel[m, 0], vel[m, 1], vel[m, 2]
+        yx, yy, yz = zy * vz - zz * vy, zz * vx - zx * vz, zx * vy - zy * vx
+        ny = np.sqrt(yx * yx + yy * yy + yz * yz)
+        yx, yy, yz = yx / ny, yy / ny, yz / ny
+        frame[m, 0, 0] = yy * zz - yz * zy
+        frame[m, 1, 0] = yz * zx - yx * zz
+        frame[m, 2, 0] = yx * zy - yy * zx
+        frame[m, 0, 1], frame[m, 1, 1], frame[m, 2, 1] = yx, yy, yz
+        frame[m, 0, 2], frame[m, 1, 2], frame[m, 2, 2] = zx, zy, zz
+
+
+def orbital_frames(pos: FloatArray, vel: FloatArray) -> FloatArray:
+    """Local orbital frames (m, 3, 3), columns X (Y x Z), Y (Z x V, unit), Z (-P/|P|), of
+    positions and velocities (m, 3); see :mod:`core.sensors.orbit`."""
+    pos = np.ascontiguousarray(pos, dtype=np.float64).reshape(-1, 3)
+    vel = np.ascontiguousarray(vel, dtype=np.float64).reshape(-1, 3)
+    frame = np.empty((pos.shape[0], 3, 3))
+    run_split(_orbital_frames, pos.shape[0], pos, vel, frame)
+    return frame
 
 
 # ---------------------------------------------------------------------------- lattices

@@ -40,18 +40,6 @@ def _readonly(a: ArrayLike) -> FloatArray:
     return out
 
 
-def lagrange_weights(nodes: FloatArray, t: FloatArray) -> FloatArray:
-    """Lagrange interpolation weights, shape (m, k), of ``k`` nodes per row (m, k) at times t (m,)."""
-    diff = t[:, None] - nodes
-    k = nodes.shape[1]
-    w = np.ones_like(nodes)
-    for j in range(k):
-        for i in range(k):
-            if i != j:
-                w[:, j] *= diff[:, i] / (nodes[:, j] - nodes[:, i])
-    return w
-
-
 @dataclass(frozen=True, eq=False)
 class Orbit:
     """ECEF state vectors, interpolated by Lagrange polynomials over 8 neighbouring samples.
@@ -98,16 +86,11 @@ class Orbit:
 
     def interpolate(self, t_s: ArrayLike) -> tuple[FloatArray, FloatArray]:
         """ECEF position (m, 3) metres and velocity (m, 3) m/s at times ``t_s`` (m,) seconds."""
+        from core.kernels import orbit_states  # imports Numba: only when interpolating
+
         t = np.atleast_1d(np.asarray(t_s, dtype=np.float64)).ravel()
-        n = self.times_s.size
-        k = min(LAGRANGE_POINTS, n)
-        start = np.searchsorted(self.times_s, t) - k // 2
-        start = np.clip(start, 0, n - k)
-        idx = start[:, None] + np.arange(k)
-        w = lagrange_weights(self.times_s[idx], t)
-        pos = np.einsum("mk,mkj->mj", w, self.positions_m[idx])
-        vel = np.einsum("mk,mkj->mj", w, self.velocities_m_s[idx])
-        return pos, vel
+        k = min(LAGRANGE_POINTS, self.times_s.size)
+        return orbit_states(self.times_s, self.positions_m, self.velocities_m_s, k, t)
 
     def ground_velocity(self, pos_m: FloatArray, vel_m_s: FloatArray) -> FloatArray:
         """Earth-relative dP/dt (m, 3) from interpolated positions and delivered velocities."""
@@ -137,11 +120,9 @@ class Orbit:
 
 def orbital_frame(pos_m: FloatArray, vel_m_s: FloatArray) -> FloatArray:
     """Local orbital frame (m, 3, 3): columns X (along track), Y (right), Z (to Earth centre)."""
-    z = -pos_m / np.linalg.norm(pos_m, axis=1, keepdims=True)
-    y = np.cross(z, vel_m_s)
-    y /= np.linalg.norm(y, axis=1, keepdims=True)
-    x = np.cross(y, z)
-    return np.stack([x, y, z], axis=2)
+    from core.kernels import orbital_frames
+
+    return orbital_frames(pos_m, vel_m_s)
 
 
 def rotation_rpy(roll_rad: FloatArray, pitch_rad: FloatArray, yaw_rad: FloatArray) -> FloatArray:
