@@ -41,7 +41,8 @@ class OrientParams:
     qualify, else InsufficientReliefError, unless a SAR scene is given: ``sar`` (its image;
     its model beside it or ``sar_model``) adds SAR-optical GCPs
     (:mod:`core.orientation.sar_gcps`) to the SRTM ones, or replaces them where the relief
-    verdict refuses SRTM matching.
+    verdict refuses SRTM matching. ``write_report``: the run report (report.html, .md) at the
+    end; ``gcpfree pair`` writes it once, after its orthos and evaluation.
     """
 
     pair: PairInputs
@@ -58,9 +59,10 @@ class OrientParams:
     absolute: AbsoluteConfig = field(default_factory=AbsoluteConfig)
     sar: Path | None = None
     sar_model: Path | None = None
+    write_report: bool = True
 
     # what only changes how the orientation runs, not what it is
-    RUN_ONLY = ("out", "workers", "progress")
+    RUN_ONLY = ("out", "workers", "progress", "write_report")
 
     def settings(self) -> dict[str, Any]:
         """What the orientation is made from, as JSON values (report.json's ``settings``): the
@@ -241,11 +243,12 @@ def orient_flow(params: OrientParams) -> OrientOutcome:
             check_points_before=check_points_of(check_point_report(
                 (rel.left.model, rel.right.model), checkpoints)))
     path = report.write(out / "report.json")
-    from tasks.report.build import write_report
+    if params.write_report:
+        from tasks.report.build import write_report
 
-    # report.html/.md and their figures; it adds its own "report" key to report.json
-    write_report(out, reference=given.reference, checkpoints=params.checkpoints,
-                 reference_vertical=given.reference_vertical, surface=params.surface)
+        # report.html/.md and their figures; it adds its own "report" key to report.json
+        write_report(out, reference=given.reference, checkpoints=params.checkpoints,
+                     reference_vertical=given.reference_vertical, surface=params.surface)
     outcome = OrientOutcome(path, read_report(path))
     for line in outcome.lines():
         print(line)

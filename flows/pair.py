@@ -170,7 +170,7 @@ def pair_flow(params: PairParams) -> PairOutcome:
         workers=params.workers, progress=params.progress, spacing_m=params.spacing_m,
         min_windows=params.min_windows, surface=params.surface or SurfaceMatchConfig(),
         absolute=AbsoluteConfig(reference_sigma_m=params.reference_sigma_m),
-        sar=params.sar, sar_model=params.sar_model)
+        sar=params.sar, sar_model=params.sar_model, write_report=False)  # made once, below
     changes = orientation_changes(out, orient.settings())
     if changes == ():
         skipped.append("orient")
