@@ -27,13 +27,14 @@ from numpy.typing import NDArray
 FloatArray = NDArray[np.float64]
 
 MIN_SPLIT = 65_536  # elements per thread below which a call stays on one thread
+_CORES = os.cpu_count() or 1
 
 
 def run_split(kernel: Callable[..., None], n: int, *args: object,
               min_split: int = MIN_SPLIT) -> None:
     """Run ``kernel(*args, start, stop)`` over ``0 .. n`` in contiguous parts, one thread each
     (as many as the cores and ``n / min_split`` allow; the calling thread takes a part)."""
-    k = max(1, min(os.cpu_count() or 1, n // max(min_split, 1)))
+    k = 1 if n < 2 * min_split else max(1, min(_CORES, n // max(min_split, 1)))
     if k == 1:
         kernel(*args, 0, n)
         return
@@ -111,29 +112,48 @@ def rpc_project(coeffs: FloatArray, lon: FloatArray, lat: FloatArray, h: FloatAr
 # ---------------------------------------------------------------------------- orbits
 
 
+@numba.njit(cache=True, nogil=True, error_model="numpy", inline="always")
+def _state_at(times: FloatArray, positions: FloatArray, velocities: FloatArray, k: int,
+              tm: float) -> tuple[float, float, float, float, float, float]:
+    """Position and velocity at time tm: the Lagrange polynomial of its window of samples."""
+    n = times.size
+    s = min(max(np.searchsorted(times, tm) - k // 2, 0), n - k)
+    px = py = pz = vx = vy = vz = 0.0
+    for j in range(k):
+        tj = times[s + j]
+        w = 1.0
+        for i in range(k):
+            if i != j:
+                w *= (tm - times[s + i]) / (tj - times[s + i])
+        px += w * positions[s + j, 0]
+        py += w * positions[s + j, 1]
+        pz += w * positions[s + j, 2]
+        vx += w * velocities[s + j, 0]
+        vy += w * velocities[s + j, 1]
+        vz += w * velocities[s + j, 2]
+    return px, py, pz, vx, vy, vz
+
+
+@numba.njit(cache=True, nogil=True, error_model="numpy", inline="always")
+def _frame_of(p: FloatArray, v: FloatArray, frame: FloatArray) -> None:
+    """The local orbital frame of position p and velocity v (3,) into frame (3, 3)."""
+    r = np.sqrt(p[0] * p[0] + p[1] * p[1] + p[2] * p[2])
+    zx, zy, zz = -p[0] / r, -p[1] / r, -p[2] / r
+    yx, yy, yz = zy * v[2] - zz * v[1], zz * v[0] - zx * v[2], zx * v[1] - zy * v[0]
+    ny = np.sqrt(yx * yx + yy * yy + yz * yz)
+    yx, yy, yz = yx / ny, yy / ny, yz / ny
+    frame[0, 0], frame[1, 0], frame[2, 0] = yy * zz - yz * zy, yz * zx - yx * zz, yx * zy - yy * zx
+    frame[0, 1], frame[1, 1], frame[2, 1] = yx, yy, yz
+    frame[0, 2], frame[1, 2], frame[2, 2] = zx, zy, zz
+
+
 @numba.njit(cache=True, nogil=True, error_model="numpy")
 def _orbit_states(times: FloatArray, positions: FloatArray, velocities: FloatArray, k: int,
                   t: FloatArray, pos: FloatArray, vel: FloatArray, start: int,
                   stop: int) -> None:
-    n = times.size
     for m in range(start, stop):
-        tm = t[m]
-        s = min(max(np.searchsorted(times, tm) - k // 2, 0), n - k)
-        px = py = pz = vx = vy = vz = 0.0
-        for j in range(k):
-            tj = times[s + j]
-            w = 1.0
-            for i in range(k):
-                if i != j:
-                    w *= (tm - times[s + i]) / (tj - times[s + i])
-            px += w * positions[s + j, 0]
-            py += w * positions[s + j, 1]
-            pz += w * positions[s + j, 2]
-            vx += w * velocities[s + j, 0]
-            vy += w * velocities[s + j, 1]
-            vz += w * velocities[s + j, 2]
-        pos[m, 0], pos[m, 1], pos[m, 2] = px, py, pz
-        vel[m, 0], vel[m, 1], vel[m, 2] = vx, vy, vz
+        (pos[m, 0], pos[m, 1], pos[m, 2], vel[m, 0], vel[m, 1],
+         vel[m, 2]) = _state_at(times, positions, velocities, k, t[m])
 
 
 def orbit_states(times: FloatArray, positions: FloatArray, velocities: FloatArray,
@@ -153,18 +173,7 @@ def orbit_states(times: FloatArray, positions: FloatArray, velocities: FloatArra
 def _orbital_frames(pos: FloatArray, vel: FloatArray, frame: FloatArray, start: int,
                     stop: int) -> None:
     for m in range(start, stop):
-        px, py, pz = pos[m, 0], pos[m, 1], pos[m, 2]
-        r = np.sqrt(px * px + py * py + pz * pz)
-        zx, zy, zz = -px / r, -py / r, -pz / r
-        vx, vy, vz = vel[m, 0], vel[m, 1], vel[m, 2]
-        yx, yy, yz = zy * vz - zz * vy, zz * vx - zx * vz, zx * vy - zy * vx
-        ny = np.sqrt(yx * yx + yy * yy + yz * yz)
-        yx, yy, yz = yx / ny, yy / ny, yz / ny
-        frame[m, 0, 0] = yy * zz - yz * zy
-        frame[m, 1, 0] = yz * zx - yx * zz
-        frame[m, 2, 0] = yx * zy - yy * zx
-        frame[m, 0, 1], frame[m, 1, 1], frame[m, 2, 1] = yx, yy, yz
-        frame[m, 0, 2], frame[m, 1, 2], frame[m, 2, 2] = zx, zy, zz
+        _frame_of(pos[m], vel[m], frame[m])
 
 
 def orbital_frames(pos: FloatArray, vel: FloatArray) -> FloatArray:
@@ -175,6 +184,47 @@ def orbital_frames(pos: FloatArray, vel: FloatArray) -> FloatArray:
     frame = np.empty((pos.shape[0], 3, 3))
     run_split(_orbital_frames, pos.shape[0], pos, vel, frame)
     return frame
+
+
+@numba.njit(cache=True, nogil=True, error_model="numpy")
+def _platform_frames(times: FloatArray, positions: FloatArray, velocities: FloatArray, k: int,
+                     t: FloatArray, ang: FloatArray, pos: FloatArray, frame: FloatArray,
+                     rot: FloatArray, cam: FloatArray, start: int, stop: int) -> None:
+    v = np.empty(3)
+    for m in range(start, stop):
+        (pos[m, 0], pos[m, 1], pos[m, 2], v[0], v[1],
+         v[2]) = _state_at(times, positions, velocities, k, t[m])
+        _frame_of(pos[m], v, frame[m])
+        cr, sr = np.cos(ang[0, m]), np.sin(ang[0, m])
+        cp, sp = np.cos(ang[1, m]), np.sin(ang[1, m])
+        cy, sy = np.cos(ang[2, m]), np.sin(ang[2, m])
+        r = rot[m]
+        r[0, 0], r[0, 1], r[0, 2] = cy * cp, cy * sp * sr - sy * cr, cy * sp * cr + sy * sr
+        r[1, 0], r[1, 1], r[1, 2] = sy * cp, sy * sp * sr + cy * cr, sy * sp * cr - cy * sr
+        r[2, 0], r[2, 1], r[2, 2] = -sp, cp * sr, cp * cr
+        f = frame[m]
+        for i in range(3):
+            for j in range(3):
+                cam[m, i, j] = f[i, 0] * r[0, j] + f[i, 1] * r[1, j] + f[i, 2] * r[2, j]
+
+
+def platform_frames(times: FloatArray, positions: FloatArray, velocities: FloatArray, k: int,
+                    t: FloatArray, ang: FloatArray
+                    ) -> tuple[FloatArray, FloatArray, FloatArray, FloatArray]:
+    """A pushbroom platform at times ``t`` (m,) with attitude angles ``ang`` (3, m) (roll,
+    pitch, yaw, rad): position (m, 3) (:func:`orbit_states`), orbital frame (m, 3, 3)
+    (:func:`orbital_frames`), attitude rotation ``Rz(yaw) Ry(pitch) Rx(roll)`` (m, 3, 3)
+    and camera -> ECEF (frame @ rotation), in one pass."""
+    t = np.ascontiguousarray(t, dtype=np.float64).ravel()
+    ang = np.ascontiguousarray(ang, dtype=np.float64).reshape(3, t.size)
+    n = t.size
+    pos, frame = np.empty((n, 3)), np.empty((n, 3, 3))
+    rot, cam = np.empty((n, 3, 3)), np.empty((n, 3, 3))
+    run_split(_platform_frames, n, np.ascontiguousarray(times, dtype=np.float64),
+              np.ascontiguousarray(positions, dtype=np.float64),
+              np.ascontiguousarray(velocities, dtype=np.float64), int(k), t, ang, pos, frame,
+              rot, cam)
+    return pos, frame, rot, cam
 
 
 # ---------------------------------------------------------------------------- lattices

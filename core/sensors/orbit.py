@@ -92,6 +92,19 @@ class Orbit:
         k = min(LAGRANGE_POINTS, self.times_s.size)
         return orbit_states(self.times_s, self.positions_m, self.velocities_m_s, k, t)
 
+    def platform(self, t_s: FloatArray, angles_rad: FloatArray
+                 ) -> tuple[FloatArray, FloatArray, FloatArray, FloatArray]:
+        """At times ``t_s`` (m,) with attitude ``angles_rad`` (3, m) (roll, pitch, yaw): the
+        position (m, 3) as :meth:`interpolate`, the local orbital frame (m, 3, 3) as
+        :func:`orbital_frame`, the attitude's rotation (m, 3, 3) as :func:`rotation_rpy` and
+        camera -> ECEF, their product; in one compiled pass."""
+        from core.kernels import platform_frames
+
+        t = np.atleast_1d(np.asarray(t_s, dtype=np.float64)).ravel()
+        k = min(LAGRANGE_POINTS, self.times_s.size)
+        return platform_frames(self.times_s, self.positions_m, self.velocities_m_s, k, t,
+                               angles_rad)
+
     def ground_velocity(self, pos_m: FloatArray, vel_m_s: FloatArray) -> FloatArray:
         """Earth-relative dP/dt (m, 3) from interpolated positions and delivered velocities."""
         if self.velocity_frame == "inertial":

@@ -105,8 +105,6 @@ from core.sensors.orbit import (
     AttitudeModel,
     Orbit,
     attitude_from_dict,
-    orbital_frame,
-    rotation_rpy,
 )
 
 FloatArray = NDArray[np.float64]
@@ -261,17 +259,15 @@ class PushbroomModel:
 
     def _platform(self, t: FloatArray) -> tuple[FloatArray, FloatArray, FloatArray, FloatArray]:
         """Position (m, 3), camera->ECEF (m, 3, 3), camera->orbital (m, 3, 3), angles (3, m)."""
-        pos, vel = self.orbit.interpolate(t)
-        frame = orbital_frame(pos, vel)
+        ang = self.attitude_angles(t)
+        pos, frame, rot, cam2ecef = self.orbit.platform(t, ang)
         c = self.corrections
         off = np.zeros(3)
         for name, (axis, sign) in ORBIT_TERMS.items():
             off[axis] = sign * getattr(c, name)
         if np.any(off):
             pos = pos + frame @ off
-        ang = self.attitude_angles(t)
-        rot = rotation_rpy(*ang)
-        return pos, frame @ rot, rot, ang
+        return pos, cam2ecef, rot, ang
 
     def _harmonic_term(self, t: FloatArray, derivative: bool = False) -> FloatArray | None:
         """(3, m) the along-track harmonics' angles at times t (``sum_k a_k cos(pi k u)``, u =

@@ -88,3 +88,28 @@ def test_orbital_frames_are_the_cross_products_of_position_and_velocity(m: int):
                                                                                f.shape),
                                atol=1e-13)
     np.testing.assert_allclose(np.linalg.det(f), 1.0, atol=1e-13)
+
+
+@pytest.mark.parametrize("m", [7, 2 * MIN_SPLIT + 5])
+def test_platform_is_the_orbit_the_frame_and_the_attitude_composed(m: int):
+    from scipy.spatial.transform import Rotation
+
+    o = _orbit(20, seed=3)
+    rng = np.random.default_rng(m)
+    t = rng.uniform(o.times_s[0], o.times_s[-1], m)
+    ang = rng.uniform(-0.5, 0.5, (3, m))
+    pos, frame, rot, cam = o.platform(t, ang)
+    if m < 100:
+        ref_p, ref_v = _scipy_states(o, t)
+        np.testing.assert_allclose(pos, ref_p, rtol=0, atol=1e-5)
+    else:
+        ref_p, ref_v = o.interpolate(t)
+        np.testing.assert_array_equal(pos, ref_p)
+    z = -ref_p / np.linalg.norm(ref_p, axis=1, keepdims=True)
+    y = np.cross(z, ref_v)
+    y /= np.linalg.norm(y, axis=1, keepdims=True)
+    np.testing.assert_allclose(frame, np.stack([np.cross(y, z), y, z], axis=2), atol=1e-12)
+    # Rz(yaw) Ry(pitch) Rx(roll): SciPy's intrinsic z-y'-x'' Euler angles
+    ref_rot = Rotation.from_euler("ZYX", np.column_stack([ang[2], ang[1], ang[0]])).as_matrix()
+    np.testing.assert_allclose(rot, ref_rot, atol=1e-14)
+    np.testing.assert_allclose(cam, frame @ ref_rot, atol=1e-13)
