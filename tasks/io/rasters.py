@@ -88,7 +88,8 @@ def write_arrays_cog(items: list[CogItem], extra: list[Any] | None = None) -> tu
     values (statistics) are computed in the same pass and returned.
 
     Blocks are computed by Dask threads and streamed into tiled GeoTIFFs under one write
-    lock each (memory stays bounded), then GDAL's COG driver copies them with overviews.
+    lock each (memory stays bounded), then GDAL's COG driver copies them with overviews,
+    compressing in as many threads as the blocks were computed in.
     Everything happens in temporary folders beside the outputs; each finished file
     replaces its output by a rename, so a failure never leaves a half-written product and
     an earlier product survives a failed rerun.
@@ -132,7 +133,7 @@ def write_arrays_cog(items: list[CogItem], extra: list[Any] | None = None) -> tu
         stored = darr.store(sources, targets, lock=False, compute=False)
         from tasks.scheduling import threads
 
-        with threads():  # the window writers share this process's open datasets
+        with threads() as sched:  # the window writers share this process's open datasets
             results = dask.compute(stored, *(extra or []))[1:]
         for dst, tmp, out, predictor, blocksize, resampling in jobs:
             dst.close()
@@ -142,6 +143,7 @@ def write_arrays_cog(items: list[CogItem], extra: list[Any] | None = None) -> tu
                     tmp / "tiled.tif", cog, driver="COG", COMPRESS="DEFLATE",
                     PREDICTOR=str(predictor) if predictor else "NO", BLOCKSIZE=str(blocksize),
                     OVERVIEWS="AUTO", RESAMPLING=str(resampling).upper(), BIGTIFF="IF_SAFER",
+                    NUM_THREADS=str(sched.workers),  # compression in as many threads
                 )
             _chmod_default(cog)
         for _, tmp, out, *_ in jobs:

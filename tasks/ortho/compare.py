@@ -44,7 +44,7 @@ from tasks.io.rasters import (
     read_window,
     write_arrays_cog,
 )
-from tasks.scheduling import schedule
+from tasks.scheduling import schedule, threads
 
 DEFAULT_CONFIG = CompareConfig()
 BLOCK_WINDOWS = 8  # windows per side of a Dask block
@@ -232,11 +232,12 @@ def compare_orthos(plan: ComparePlan, out: Path, map_path: Path | None = None,
     if map_path is not None:
         step = cfg.step_px * plan.grid.res_m
         transform = (step, 0.0, float(x[0]) - 0.5 * step, 0.0, -step, float(y[0]) + 0.5 * step)
-        write_arrays_cog([CogItem(norm.astype(np.float32), Path(map_path), CogOptions(
-            transform=transform, crs=plan.crs_wkt, nodata=math.nan,
-            tags={"values": "discrepancy norm between the orthos per window, cells",
-                  "cell_m": f"{plan.grid.res_m:g}", "software": "gcpfree ortho-compare"},
-            blocksize=256))])
+        with threads(num_workers):
+            write_arrays_cog([CogItem(norm.astype(np.float32), Path(map_path), CogOptions(
+                transform=transform, crs=plan.crs_wkt, nodata=math.nan,
+                tags={"values": "discrepancy norm between the orthos per window, cells",
+                      "cell_m": f"{plan.grid.res_m:g}", "software": "gcpfree ortho-compare"},
+                blocksize=256))])
     if quiver_path is not None:
         atomic_write_bytes(quiver_path, _quiver_png(xx, yy, shifts, stats))
     atomic_write_json(out, doc)
