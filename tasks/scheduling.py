@@ -28,6 +28,10 @@ the archive (:func:`archive_task_runner`)   a Dask cluster, one pair per worker
 On the local scheduler a single worker always runs in a thread (a pool of one process would
 only add its start-up); the archive's LocalCluster keeps its worker processes even alone,
 so that a pair that kills its process never takes the flow with it.
+
+Worker processes are spawned once per command and size (:func:`process_pool`) and serve every
+later step: each spawn imports NumPy, OpenCV and the task modules and loads the Numba kernels,
+about 1.5 CPU-seconds a process, which a pool per step paid again at every step.
 """
 
 from __future__ import annotations
@@ -60,7 +64,34 @@ class Schedule:
         return "processes" if self.processes and self.workers > 1 else "threads"
 
     def compute_kwargs(self) -> dict[str, Any]:
+        if self.scheduler == "processes":
+            return {"scheduler": "processes", "pool": process_pool(self.workers)}
         return {"scheduler": self.scheduler, "num_workers": self.workers}
+
+
+_POOLS: dict[int, Any] = {}  # workers -> the command's ProcessPoolExecutor of that size
+
+
+def process_pool(workers: int) -> Any:
+    """The pool of ``workers`` spawned processes this command's steps share: made as Dask's
+    processes scheduler makes its own (spawned, the same hash seed and initializer), kept
+    until the command exits; a pool broken by a lost worker is replaced at the next step."""
+    import os
+    from concurrent.futures import ProcessPoolExecutor
+    from functools import partial
+
+    from dask.multiprocessing import get_context, initialize_worker_process
+
+    pool = _POOLS.get(workers)
+    if pool is not None and not getattr(pool, "_broken", False):
+        return pool
+    if os.environ.get("PYTHONHASHSEED") in (None, "0"):
+        os.environ["PYTHONHASHSEED"] = "6640"  # what Dask sets for its own pools
+    pool = ProcessPoolExecutor(workers, mp_context=get_context(),
+                               initializer=partial(initialize_worker_process,
+                                                   user_initializer=None))
+    _POOLS[workers] = pool
+    return pool
 
 
 def schedule(n_tasks: int | None = None, workers: int | None = None,

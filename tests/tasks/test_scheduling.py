@@ -4,6 +4,9 @@ no step decides it elsewhere."""
 from __future__ import annotations
 
 import ast
+import os
+import signal
+import time
 from pathlib import Path
 
 import dask
@@ -11,7 +14,7 @@ import pytest
 from dask.system import CPU_COUNT
 
 from core.errors import InputError
-from tasks.scheduling import PROCESS_MIN_TASKS, compute, schedule, threads
+from tasks.scheduling import PROCESS_MIN_TASKS, compute, process_pool, schedule, threads
 
 REPO = Path(__file__).resolve().parents[2]
 CORES = CPU_COUNT
@@ -77,3 +80,20 @@ def test_compute_restores_opencv_threads_its_parts_change():
         assert cv2.getNumThreads() == 3
     finally:
         cv2.setNumThreads(before)
+
+
+def test_worker_processes_serve_every_step_and_a_lost_one_is_replaced():
+    def pids() -> set[int]:
+        return set(compute([dask.delayed(os.getpid)() for _ in range(8)], workers=2,
+                           processes=True))
+
+    first = pids() | pids() | pids()  # the pool starts its processes as work comes
+    assert os.getpid() not in first
+    assert len(first) <= 2  # later steps run in the same processes: none spawned again
+    pool = process_pool(2)
+    os.kill(next(iter(first)), signal.SIGKILL)
+    deadline = time.monotonic() + 30.0
+    while process_pool(2) is pool:  # broken once the executor sees its worker gone
+        assert time.monotonic() < deadline, "the lost worker was never noticed"
+        time.sleep(0.05)
+    assert pids().isdisjoint(first)  # a new pool, new processes
