@@ -2,8 +2,8 @@
 and local frames, the ortho lattice interpolation and image resampling.
 
 This module imports Numba, which takes a second or more: the modules that use it
-(:mod:`core.sensors.rpc`, :mod:`core.sensors.orbit`, :mod:`core.ortho`) import it inside the functions that call it, so
-``gcpfree --help`` and every module import stay fast. Each kernel compiles on its first call
+(:mod:`core.sensors.rpc`, :mod:`core.sensors.orbit`, :mod:`core.ortho`) import it inside the
+functions that call it, so ``gcpfree --help`` and every module import stay fast. Each kernel compiles on its first call
 and is cached on disk (``cache=True``), so a later process only loads it.
 
 The kernels are serial and release the GIL (``nogil=True``); :func:`run_split` spreads one
@@ -147,6 +147,34 @@ def _frame_of(p: FloatArray, v: FloatArray, frame: FloatArray) -> None:
     frame[0, 2], frame[1, 2], frame[2, 2] = zx, zy, zz
 
 
+@numba.njit(cache=True, nogil=True, error_model="numpy", inline="always")
+def _rpy_into(roll: float, pitch: float, yaw: float, r: FloatArray) -> None:
+    """``Rz(yaw) Ry(pitch) Rx(roll)`` into r (3, 3)."""
+    cr, sr = np.cos(roll), np.sin(roll)
+    cp, sp = np.cos(pitch), np.sin(pitch)
+    cy, sy = np.cos(yaw), np.sin(yaw)
+    r[0, 0], r[0, 1], r[0, 2] = cy * cp, cy * sp * sr - sy * cr, cy * sp * cr + sy * sr
+    r[1, 0], r[1, 1], r[1, 2] = sy * cp, sy * sp * sr + cy * cr, sy * sp * cr - cy * sr
+    r[2, 0], r[2, 1], r[2, 2] = -sp, cp * sr, cp * cr
+
+
+@numba.njit(cache=True, nogil=True, error_model="numpy")
+def _rotations_rpy(ang: FloatArray, rot: FloatArray, start: int, stop: int) -> None:
+    for m in range(start, stop):
+        _rpy_into(ang[0, m], ang[1, m], ang[2, m], rot[m])
+
+
+def rotations_rpy(roll: FloatArray, pitch: FloatArray, yaw: FloatArray) -> FloatArray:
+    """``Rz(yaw) Ry(pitch) Rx(roll)`` of angles (rad) of one shape: that shape + (3, 3)."""
+    ang = np.stack(np.broadcast_arrays(*(np.asarray(a, dtype=np.float64)
+                                         for a in (roll, pitch, yaw))))
+    shape = ang.shape[1:]
+    ang = np.ascontiguousarray(ang.reshape(3, -1))
+    rot = np.empty((ang.shape[1], 3, 3))
+    run_split(_rotations_rpy, ang.shape[1], ang, rot)
+    return rot.reshape(shape + (3, 3))
+
+
 @numba.njit(cache=True, nogil=True, error_model="numpy")
 def _orbit_states(times: FloatArray, positions: FloatArray, velocities: FloatArray, k: int,
                   t: FloatArray, pos: FloatArray, vel: FloatArray, start: int,
@@ -195,13 +223,8 @@ def _platform_frames(times: FloatArray, positions: FloatArray, velocities: Float
         (pos[m, 0], pos[m, 1], pos[m, 2], v[0], v[1],
          v[2]) = _state_at(times, positions, velocities, k, t[m])
         _frame_of(pos[m], v, frame[m])
-        cr, sr = np.cos(ang[0, m]), np.sin(ang[0, m])
-        cp, sp = np.cos(ang[1, m]), np.sin(ang[1, m])
-        cy, sy = np.cos(ang[2, m]), np.sin(ang[2, m])
         r = rot[m]
-        r[0, 0], r[0, 1], r[0, 2] = cy * cp, cy * sp * sr - sy * cr, cy * sp * cr + sy * sr
-        r[1, 0], r[1, 1], r[1, 2] = sy * cp, sy * sp * sr + cy * cr, sy * sp * cr - cy * sr
-        r[2, 0], r[2, 1], r[2, 2] = -sp, cp * sr, cp * cr
+        _rpy_into(ang[0, m], ang[1, m], ang[2, m], r)
         f = frame[m]
         for i in range(3):
             for j in range(3):

@@ -140,20 +140,9 @@ def orbital_frame(pos_m: FloatArray, vel_m_s: FloatArray) -> FloatArray:
 
 def rotation_rpy(roll_rad: FloatArray, pitch_rad: FloatArray, yaw_rad: FloatArray) -> FloatArray:
     """``Rz(yaw) Ry(pitch) Rx(roll)``, shape (m, 3, 3): camera frame -> local orbital frame."""
-    cr, sr = np.cos(roll_rad), np.sin(roll_rad)
-    cp, sp = np.cos(pitch_rad), np.sin(pitch_rad)
-    cy, sy = np.cos(yaw_rad), np.sin(yaw_rad)
-    r = np.empty(np.shape(roll_rad) + (3, 3))
-    r[..., 0, 0] = cy * cp
-    r[..., 0, 1] = cy * sp * sr - sy * cr
-    r[..., 0, 2] = cy * sp * cr + sy * sr
-    r[..., 1, 0] = sy * cp
-    r[..., 1, 1] = sy * sp * sr + cy * cr
-    r[..., 1, 2] = sy * sp * cr - cy * sr
-    r[..., 2, 0] = -sp
-    r[..., 2, 1] = cp * sr
-    r[..., 2, 2] = cp * cr
-    return r
+    from core.kernels import rotations_rpy
+
+    return rotations_rpy(roll_rad, pitch_rad, yaw_rad)
 
 
 @dataclass(frozen=True)

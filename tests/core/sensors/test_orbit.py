@@ -9,7 +9,7 @@ import pytest
 from scipy.interpolate import BarycentricInterpolator
 
 from core.kernels import MIN_SPLIT
-from core.sensors.orbit import LAGRANGE_POINTS, Orbit, orbital_frame
+from core.sensors.orbit import LAGRANGE_POINTS, Orbit, orbital_frame, rotation_rpy
 
 
 def _orbit(n: int, seed: int = 0) -> Orbit:
@@ -112,4 +112,8 @@ def test_platform_is_the_orbit_the_frame_and_the_attitude_composed(m: int):
     # Rz(yaw) Ry(pitch) Rx(roll): SciPy's intrinsic z-y'-x'' Euler angles
     ref_rot = Rotation.from_euler("ZYX", np.column_stack([ang[2], ang[1], ang[0]])).as_matrix()
     np.testing.assert_allclose(rot, ref_rot, atol=1e-14)
+    np.testing.assert_array_equal(rotation_rpy(*ang), rot)  # one formula, both paths
+    one = rotation_rpy(*ang[:, 0])  # scalars give one matrix
+    assert one.shape == (3, 3)
+    np.testing.assert_array_equal(one, rot[0])
     np.testing.assert_allclose(cam, frame @ ref_rot, atol=1e-13)
