@@ -12,12 +12,16 @@ position (:func:`core.robust.robust_fit`). The window's local 3-D shift moves th
 relative ground coordinates onto the reference.
 
 Cells are first averaged onto a lattice of about the reference's cell size (finer detail is
-absent from SRTM and would only cost time). Quality of a window: peak correlation, the peak's
-sharpness turned into a horizontal precision in metres, the relief (std of ``h'``), the number
-of cells, the share of the window masked (mismatched cells or reference voids), and a
-precision predicted from the relief before matching (relief sufficiency): with RMS slope ``g``
-and height noise ``s`` over ``N`` independent patches (the window's area over the squared
-correlation length of the reference's errors) the shift is known to about ``s / (g sqrt(N))``.
+absent from SRTM and would only cost time; :mod:`core.matching.lattice`). The correlation is
+least squares and follows the relative DEM's gross blunders (dense matching leaves some 8 % of
+cells tens to hundreds of metres off, in clusters), so they are kept out of it: spikes before
+the search, then the cells far from the reference at the peak, and the peak searched again
+without them. Quality of a window: peak correlation, the peak's sharpness turned into a
+horizontal precision in metres, the relief (std of the ``h'`` correlated), the number of cells,
+the share of the window masked (mismatched cells or reference voids), and a precision predicted
+from the relief before matching (relief sufficiency): with RMS slope ``g`` and height noise
+``s`` over ``N`` independent patches (the window's area over the squared correlation length of
+the reference's errors) the shift is known to about ``s / (g sqrt(N))``.
 
 **The scene.** :func:`choose_windows` puts one window per ground cell on the best tie point;
 :func:`search_windows` searches the first :data:`FIRST_PASS` windows over the whole shift range,
@@ -31,7 +35,7 @@ and runs them on Dask threads.
 from __future__ import annotations
 
 from collections.abc import Callable, Mapping, Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from enum import IntEnum
 from typing import Any
 
@@ -41,12 +45,18 @@ from numpy.typing import ArrayLike, NDArray
 from core.dem import GeoDEM
 from core.errors import InputError
 from core.geodesy import ARCSEC, geodetic_to_enu, metres_per_degree
+from core.matching.lattice import WindowCells, despike, window_cells
 from core.matching.peaks import peak_hessian, quadratic_peak
 from core.matching.tiepoints import best_per_cell
 from core.points import ControlPoint, ImagePoint
 from core.robust import nmad, robust_fit
 
 FloatArray = NDArray[np.float64]
+
+#: at the peak, a cell further from the reference than this many robust spreads is a blunder,
+#: and the peak is searched again without the blunders at most ``BLUNDER_ROUNDS`` times
+BLUNDER_K = 3.0
+BLUNDER_ROUNDS = 2
 
 
 class WindowStatus(IntEnum):
@@ -69,10 +79,13 @@ class SurfaceMatchConfig:
     is the correlation length of the reference's height errors (SRTM: a few hundred metres),
     ``height_noise_m`` their standard deviation (SRTM: about 4-5 m), both used by the
     predicted precision. A window is refused when that prediction, or the measured precision,
-    exceeds ``max_precision_m``. ``detrend``: compare the two surfaces about their best-fit
-    planes (the relative DEM may be tilted: an along-epipolar drift that tie points cannot see
-    tilts it by metres per kilometre), the vertical shift then being the plane's height at
-    the window's centre.
+    exceeds ``max_precision_m``: 20 m, because on a low-relief simulated pair (26 m of relief
+    per window) the windows' honest precisions were 10-20 m, their GCPs' errors matching them,
+    and 30 of them oriented the pair to 0.3 px where a 10 m limit left 2; each GCP is weighted
+    by its own precision, the limit only refuses windows too vague to help. ``detrend``:
+    compare the two surfaces about their best-fit planes (the relative DEM may be tilted: an
+    along-epipolar drift that tie points cannot see tilts it by metres per kilometre), the
+    vertical shift then being the plane's height at the window's centre.
     """
 
     radius_m: float = 4000.0
@@ -83,7 +96,7 @@ class SurfaceMatchConfig:
     min_cells: int = 100
     max_masked_share: float = 0.5
     min_correlation: float = 0.6
-    max_precision_m: float = 10.0
+    max_precision_m: float = 20.0
     height_noise_m: float = 5.0
     error_length_m: float = 300.0
     detrend: bool = True
@@ -157,74 +170,6 @@ class WindowMatch:
         kw = {k: (float("nan") if v is None else v) for k, v in d.items()}
         kw["status"] = WindowStatus[d["status"]]
         return cls(**kw)
-
-
-# ------------------------------------------------------------------------- window lattice
-
-
-@dataclass(frozen=True, eq=False)
-class WindowCells:
-    """The relative DEM in a window, averaged on a lattice: lon/lat (degrees) and height ``h_m``
-    of each lattice cell (NaN when no valid relative cell fell in it), ``cell_m`` its size."""
-
-    lon_deg: FloatArray
-    lat_deg: FloatArray
-    h_m: FloatArray
-    x_m: FloatArray
-    y_m: FloatArray
-    cell_m: float
-    shape: tuple[int, int]
-    n_input: int
-    n_masked: int
-    n_disk: int
-
-
-def window_cells(lon_deg: ArrayLike, lat_deg: ArrayLike, h_m: ArrayLike,
-                 centre: tuple[float, float], radius_m: float, cell_m: float) -> WindowCells:
-    """Average the relative DEM's cells (NaN heights = mismatched) within ``radius_m`` of
-    ``centre`` onto a square lattice of ``cell_m`` around it, or coarser when the relative DEM
-    is: a lattice cell is at least sqrt(2) times the input's spacing, so that every cell of a
-    complete input receives a value whatever the grids' orientations."""
-    lon = np.ravel(np.asarray(lon_deg, dtype=np.float64))
-    lat = np.ravel(np.asarray(lat_deg, dtype=np.float64))
-    h = np.ravel(np.asarray(h_m, dtype=np.float64))
-    m_lon, m_lat = metres_per_degree(centre[1])
-    x = (lon - centre[0]) * float(m_lon)
-    y = (lat - centre[1]) * float(m_lat)
-    inside = np.hypot(x, y) <= radius_m
-    cell_m = max(float(cell_m), np.sqrt(2.0) * _spacing_m(x[inside], y[inside]))
-    n_side = 2 * int(np.ceil(radius_m / cell_m))
-    ix = np.floor((x[inside] + n_side * cell_m / 2) / cell_m).astype(np.int64)
-    iy = np.floor((y[inside] + n_side * cell_m / 2) / cell_m).astype(np.int64)
-    keep = (ix >= 0) & (ix < n_side) & (iy >= 0) & (iy < n_side)
-    idx = iy[keep] * n_side + ix[keep]
-    hv = h[inside][keep]
-    good = np.isfinite(hv)
-    total = np.bincount(idx[good], weights=hv[good], minlength=n_side * n_side)
-    count = np.bincount(idx[good], minlength=n_side * n_side)
-    with np.errstate(invalid="ignore", divide="ignore"):
-        mean = np.where(count > 0, total / count, np.nan)
-    gx = (np.arange(n_side) + 0.5) * cell_m - n_side * cell_m / 2
-    xx, yy = np.meshgrid(gx, gx)
-    in_disk = (np.hypot(xx, yy) <= radius_m).ravel()
-    mean = np.where(in_disk, mean, np.nan)
-    return WindowCells(centre[0] + xx.ravel() / float(m_lon), centre[1] + yy.ravel() / float(m_lat),
-                       mean, xx.ravel(), yy.ravel(), float(cell_m), (n_side, n_side),
-                       int(inside.sum()),
-                       int((~np.isfinite(h[inside])).sum()), int(in_disk.sum()))
-
-
-def _spacing_m(x: FloatArray, y: FloatArray, n_sample: int = 400) -> float:
-    """Typical distance between neighbouring input cells (median nearest-neighbour distance of
-    a sample)."""
-    if x.size < 2:
-        return 0.0
-    from scipy.spatial import cKDTree
-
-    pts = np.stack([x, y], axis=1)
-    sample = pts[np.linspace(0, len(pts) - 1, min(n_sample, len(pts))).astype(np.int64)]
-    d, _ = cKDTree(pts).query(sample, k=2)
-    return float(np.median(d[:, 1]))
 
 
 # ------------------------------------------------------------------------- matching
@@ -328,34 +273,22 @@ def _relief_m(cells: WindowCells, detrend: bool) -> float:
     return float(np.std(cells.h_m[ok] - b @ coef))
 
 
-def match_window(lon_deg: ArrayLike, lat_deg: ArrayLike, h_m: ArrayLike,
-                 centre: tuple[float, float], reference: GeoDEM,
-                 cfg: SurfaceMatchConfig = SurfaceMatchConfig(),
-                 prior: tuple[float, float, float] | None = None) -> WindowMatch:
-    """The local 3-D shift of the relative DEM around ``centre`` (lon, lat degrees) onto the
-    reference. ``lon_deg``, ``lat_deg``, ``h_m``: the relative DEM's cells (NaN heights: cells
-    the matching could not fill), at least those within ``cfg.radius_m``.
+@dataclass(frozen=True)
+class _Peak:
+    """The correlation peak of a search: shift (arcsec), Hessian per arcsec squared, the best
+    correlation; or why there is none (``status``, with the best correlation when known)."""
 
-    ``prior``: (dlon, dlat, half-width) in arcseconds, the shift expected from other windows:
-    only shifts within the half-width of it are searched (inside the ``cfg`` range); a peak
-    on the border of that box is ``EDGE_PEAK`` (search again without the prior)."""
-    m_lon, m_lat = (float(v) for v in metres_per_degree(centre[1]))
-    cell = cfg.cell_m if cfg.cell_m is not None else reference.cell_size_m()
-    cells = window_cells(lon_deg, lat_deg, h_m, centre, cfg.radius_m, cell)
-    valid = np.isfinite(cells.h_m)
-    ref0 = reference.height_m(cells.lon_deg[valid], cells.lat_deg[valid])
-    n_pairs = int(np.isfinite(ref0).sum())
-    masked = 1.0 - n_pairs / max(cells.n_disk, 1)  # mismatched cells or reference voids
-    pred, relief, slope, n_eff = predicted_precision_m(cells, cfg)
-    base = dict(relief_m=relief, rms_slope=slope, n_cells=n_pairs, masked_share=masked,
-                predicted_precision_m=pred, n_dem_cells=int(valid.sum()))
-    if n_pairs < cfg.min_cells:
-        return WindowMatch(WindowStatus.TOO_FEW_CELLS, **base)
-    if masked > cfg.max_masked_share:
-        return WindowMatch(WindowStatus.MASKED, **base)
-    if not pred <= cfg.max_precision_m:
-        return WindowMatch(WindowStatus.LOW_RELIEF, **base)
-    # coarse to fine: every other step over the whole range, then every step around the best
+    status: WindowStatus
+    sx: float = float("nan")
+    sy: float = float("nan")
+    hess: FloatArray | None = None
+    correlation: float = float("nan")
+
+
+def _search(cells: WindowCells, reference: GeoDEM, cfg: SurfaceMatchConfig,
+            prior: tuple[float, float, float] | None) -> _Peak:
+    """The correlation peak over the shift grid (within the ``prior`` box if any): every other
+    step first, then every step around the best, a quadratic fit, then the fine grid."""
     grid = _grid(cfg.shift_max_arcsec, cfg.shift_step_arcsec)
     gx, gy = np.meshgrid(grid, grid)
     rho = np.full(gx.shape, np.nan)
@@ -363,14 +296,14 @@ def match_window(lon_deg: ArrayLike, lat_deg: ArrayLike, h_m: ArrayLike,
     if prior is not None:
         box = (np.abs(gx - prior[0]) <= prior[2]) & (np.abs(gy - prior[1]) <= prior[2])
         if not box.any():
-            return WindowMatch(WindowStatus.EDGE_PEAK, **base)
+            return _Peak(WindowStatus.EDGE_PEAK)
     coarse = np.zeros(gx.shape, dtype=bool)
     coarse[::2, ::2] = True
     coarse &= box
     rho[coarse] = _valid_rho(cells, reference, gx[coarse], gy[coarse], cfg.min_cells,
                               cfg.detrend)
     if not np.isfinite(rho).any():
-        return WindowMatch(WindowStatus.MASKED, **base)
+        return _Peak(WindowStatus.MASKED)
     cy, cx = np.unravel_index(int(np.nanargmax(rho)), rho.shape)
     near = np.zeros(gx.shape, dtype=bool)
     near[max(cy - 3, 0):cy + 4, max(cx - 3, 0):cx + 4] = True
@@ -384,10 +317,10 @@ def match_window(lon_deg: ArrayLike, lat_deg: ArrayLike, h_m: ArrayLike,
         inner &= ((np.abs(gx - prior[0]) < prior[2] - 0.5 * cfg.shift_step_arcsec)
                   & (np.abs(gy - prior[1]) < prior[2] - 0.5 * cfg.shift_step_arcsec))
     if not inner[iy, ix]:
-        return WindowMatch(WindowStatus.EDGE_PEAK, correlation=float(rho[iy, ix]), **base)
+        return _Peak(WindowStatus.EDGE_PEAK, correlation=float(rho[iy, ix]))
     patch = rho[iy - 1:iy + 2, ix - 1:ix + 2]
     if not np.all(np.isfinite(patch)):
-        return WindowMatch(WindowStatus.MASKED, **base)
+        return _Peak(WindowStatus.MASKED)
     (dx,), (dy,) = quadratic_peak(patch)
     step = cfg.shift_step_arcsec
     sx, sy = grid[ix] + dx * step, grid[iy] + dy * step
@@ -405,27 +338,107 @@ def match_window(lon_deg: ArrayLike, lat_deg: ArrayLike, h_m: ArrayLike,
             (ddx,), (ddy,) = quadratic_peak(rf[jy - 1:jy + 2, jx - 1:jx + 2])
             sx = float(fx[jy, jx] + ddx * cfg.refine_step_arcsec)
             sy = float(fy[jy, jx] + ddy * cfg.refine_step_arcsec)
-    peak = float(np.nanmax(rho))
-    ref = reference.height_m(cells.lon_deg[valid] + sx * ARCSEC,
-                             cells.lat_deg[valid] + sy * ARCSEC)
+    return _Peak(WindowStatus.OK, float(sx), float(sy), hess, float(np.nanmax(rho)))
+
+
+def _vertical(cells: WindowCells, reference: GeoDEM, peak: _Peak, cfg: SurfaceMatchConfig
+              ) -> tuple[float, float, NDArray[np.bool_]]:
+    """(vertical shift at the centre, robust spread, blunders) of the height differences at the
+    peak's shift: the robust plane (or constant) of reference minus relative heights moved to
+    their dominant mode (:func:`core.robust.robust_fit`), and the lattice cells further than
+    :data:`BLUNDER_K` spreads from it."""
+    valid = np.isfinite(cells.h_m)
+    ref = reference.height_m(cells.lon_deg[valid] + peak.sx * ARCSEC,
+                             cells.lat_deg[valid] + peak.sy * ARCSEC)
     diff = ref - cells.h_m[valid]
     use = np.isfinite(diff)
     basis = _basis(cells, valid, cfg.detrend)[use]
     coef, spread = robust_fit(diff[use], basis, mode_scale_m=cfg.height_noise_m)
-    dz = float(coef[0])  # at the centre: x = y = 0 there
+    far = np.zeros(cells.h_m.size, dtype=bool)
+    far[np.flatnonzero(valid)[use]] = (np.abs(diff[use] - basis @ coef)
+                                       > BLUNDER_K * max(spread, cfg.height_noise_m))
+    return float(coef[0]), float(spread), far  # coef[0]: at the centre, x = y = 0 there
+
+
+def _without_blunders(cells: WindowCells, reference: GeoDEM, cfg: SurfaceMatchConfig,
+                      prior: tuple[float, float, float] | None
+                      ) -> tuple[WindowCells, _Peak, float, float]:
+    """(cells kept, their peak, vertical shift, spread): the peak searched, then, at most
+    :data:`BLUNDER_ROUNDS` times, searched again around it without the cells :func:`_vertical`
+    finds far from the reference there (over the whole range when the blunders had moved the
+    first peak further than the box around it)."""
+    peak = _search(cells, reference, cfg, prior)
+    if peak.status != WindowStatus.OK:
+        return cells, peak, float("nan"), float("nan")
+    dz, spread, far = _vertical(cells, reference, peak, cfg)
+    box = 2.5 * cfg.shift_step_arcsec
+    for _ in range(BLUNDER_ROUNDS):
+        kept = replace(cells, h_m=np.where(far, np.nan, cells.h_m))
+        if not far.any() or np.count_nonzero(np.isfinite(kept.h_m)) < cfg.min_cells:
+            break
+        again = _search(kept, reference, cfg, (peak.sx, peak.sy, box))
+        if again.status == WindowStatus.EDGE_PEAK:
+            again = _search(kept, reference, cfg, prior)
+        if again.status != WindowStatus.OK:
+            break
+        cells, peak = kept, again
+        dz, spread, far = _vertical(cells, reference, peak, cfg)
+    return cells, peak, dz, spread
+
+
+def match_window(lon_deg: ArrayLike, lat_deg: ArrayLike, h_m: ArrayLike,
+                 centre: tuple[float, float], reference: GeoDEM,
+                 cfg: SurfaceMatchConfig = SurfaceMatchConfig(),
+                 prior: tuple[float, float, float] | None = None) -> WindowMatch:
+    """The local 3-D shift of the relative DEM around ``centre`` (lon, lat degrees) onto the
+    reference. ``lon_deg``, ``lat_deg``, ``h_m``: the relative DEM's cells (NaN heights: cells
+    the matching could not fill), at least those within ``cfg.radius_m``.
+
+    ``prior``: (dlon, dlat, half-width) in arcseconds, the shift expected from other windows:
+    only shifts within the half-width of it are searched (inside the ``cfg`` range); a peak
+    on the border of that box is ``EDGE_PEAK`` (search again without the prior).
+
+    Blunders of the relative DEM are kept out of the correlation, which is least squares and
+    follows them: spikes first (:func:`despike`), then, at the peak, cells further than
+    :data:`BLUNDER_K` robust spreads from the reference (at least ``cfg.height_noise_m``), and
+    the peak is searched again around the first one without them (at most
+    :data:`BLUNDER_ROUNDS` times). The relief is the spread of the heights correlated."""
+    m_lon, m_lat = (float(v) for v in metres_per_degree(centre[1]))
+    cell = cfg.cell_m if cfg.cell_m is not None else reference.cell_size_m()
+    raw = window_cells(lon_deg, lat_deg, h_m, centre, cfg.radius_m, cell)
+    valid = np.isfinite(raw.h_m)
+    paired = np.isfinite(reference.height_m(raw.lon_deg, raw.lat_deg)) & valid
+    masked = 1.0 - paired.sum() / max(raw.n_disk, 1)  # mismatched cells or reference voids
+    cells = despike(raw)
+    valid = np.isfinite(cells.h_m)
+    n_pairs = int(np.count_nonzero(paired & valid))
+    pred, relief, slope, n_eff = predicted_precision_m(cells, cfg)
+    base = dict(relief_m=relief, rms_slope=slope, n_cells=n_pairs, masked_share=masked,
+                predicted_precision_m=pred, n_dem_cells=int(valid.sum()))
+    if n_pairs < cfg.min_cells:
+        return WindowMatch(WindowStatus.TOO_FEW_CELLS, **base)
+    if masked > cfg.max_masked_share:
+        return WindowMatch(WindowStatus.MASKED, **base)
+    if not pred <= cfg.max_precision_m:
+        return WindowMatch(WindowStatus.LOW_RELIEF, **base)
+    cells, peak, dz, spread = _without_blunders(cells, reference, cfg, prior)
+    if peak.status != WindowStatus.OK:
+        return WindowMatch(peak.status, correlation=peak.correlation, **base)
+    relief = _relief_m(cells, cfg.detrend)
     # precision: near its peak rho(s) ~ 1 - k s^2 / 2 with k = slope^2 / relief^2 along the
     # flattest direction (the peak's curvature, per m^2); least squares then knows the shift to
     # spread / (slope sqrt(N)) = spread / (relief sqrt(k N)) over N independent patches
     scale = np.diag([1.0 / (ARCSEC * m_lon), 1.0 / (ARCSEC * m_lat)])  # arcsec per metre
-    curv = float(np.min(np.abs(np.linalg.eigvalsh(scale @ hess @ scale))))
+    curv = float(np.min(np.abs(np.linalg.eigvalsh(scale @ peak.hess @ scale))))
     precision = (float(spread / (relief * np.sqrt(curv * n_eff))) if curv > 0 and relief > 0
                  else float("inf"))
     result = WindowMatch(
-        WindowStatus.OK, shift_lon_arcsec=float(sx), shift_lat_arcsec=float(sy),
-        shift_h_m=dz, shift_east_m=float(sx * ARCSEC * m_lon),
-        shift_north_m=float(sy * ARCSEC * m_lat), correlation=peak, precision_m=precision,
-        precision_h_m=float(spread / np.sqrt(max(n_eff, 1))), spread_m=float(spread), **base)
-    if peak < cfg.min_correlation:
+        WindowStatus.OK, shift_lon_arcsec=peak.sx, shift_lat_arcsec=peak.sy,
+        shift_h_m=dz, shift_east_m=float(peak.sx * ARCSEC * m_lon),
+        shift_north_m=float(peak.sy * ARCSEC * m_lat), correlation=peak.correlation,
+        precision_m=precision, precision_h_m=float(spread / np.sqrt(max(n_eff, 1))),
+        spread_m=float(spread), **{**base, "relief_m": relief})
+    if peak.correlation < cfg.min_correlation:
         return WindowMatch(**{**vars(result), "status": WindowStatus.LOW_CORRELATION})
     if not precision <= cfg.max_precision_m:
         return WindowMatch(**{**vars(result), "status": WindowStatus.IMPRECISE})
@@ -558,16 +571,19 @@ def correlation_surface(lon_deg: ArrayLike, lat_deg: ArrayLike, h_m: ArrayLike,
                         ) -> tuple[FloatArray, FloatArray]:
     """The correlation of one window over the whole grid of shifts (Goncalves's Fig. 5).
 
-    Same inputs as :func:`match_window`. Returns the shifts ``(n,)`` in arcseconds (the same
-    for dlon and dlat: ``-cfg.shift_max_arcsec .. +cfg.shift_max_arcsec`` every
-    ``cfg.shift_step_arcsec``) and the correlation ``(n, n)`` indexed ``[dlat, dlon]``, NaN
-    where fewer than ``cfg.min_cells`` pairs are valid (all NaN for an empty window).
+    Same inputs as :func:`match_window`, and the same cells: despiked, without the blunders
+    found at the peak (searched over the whole range). Returns the shifts ``(n,)`` in
+    arcseconds (the same for dlon and dlat: ``-cfg.shift_max_arcsec ..
+    +cfg.shift_max_arcsec`` every ``cfg.shift_step_arcsec``) and the correlation ``(n, n)``
+    indexed ``[dlat, dlon]``, NaN where fewer than ``cfg.min_cells`` pairs are valid (all NaN
+    for an empty window).
     """
     cell = cfg.cell_m if cfg.cell_m is not None else reference.cell_size_m()
-    cells = window_cells(lon_deg, lat_deg, h_m, centre, cfg.radius_m, cell)
+    cells = despike(window_cells(lon_deg, lat_deg, h_m, centre, cfg.radius_m, cell))
     grid = _grid(cfg.shift_max_arcsec, cfg.shift_step_arcsec)
     if np.count_nonzero(np.isfinite(cells.h_m)) < cfg.min_cells:
         return grid, np.full((grid.size, grid.size), np.nan)
+    cells = _without_blunders(cells, reference, cfg, None)[0]
     gx, gy = np.meshgrid(grid, grid)
     rho = _valid_rho(cells, reference, gx.ravel(), gy.ravel(), cfg.min_cells, cfg.detrend)
     return grid, rho.reshape(gx.shape)

@@ -15,7 +15,7 @@ from dataclasses import replace
 import numpy as np
 import pytest
 
-from core.errors import InputError, InsufficientReliefError
+from core.errors import InputError, InsufficientDataError, InsufficientReliefError
 from core.geodesy import geodetic_to_enu
 from core.intersection import triangulate
 from core.matching.relief import relief_sufficiency
@@ -195,28 +195,40 @@ def test_too_few_windows_with_relief_is_refused_with_the_figures(tiny_scene, tmp
 @pytest.mark.slow
 def test_nearly_flat_terrain_is_refused_with_the_relief_figures(tmp_path_factory,
                                                                prefect_harness):
-    """The tiny pair with its relief scaled by 0.05 (some 20 m of relief per 4 km window,
-    40 m pixels): too flat for the relative DEM's noise. Refused with the relief found and
-    needed; never an orientation."""
+    """The tiny pair with its relief scaled by 0.05 (some 11 m of relief about the plane per
+    4 km window, 40 m pixels, the simulator's simple errors): too flat for the relative DEM's
+    noise. Refused in one line with the relief found, either by the relief verdict (too few
+    windows promise the precision: the relief found and needed) or, when the windows' relief
+    passes it, because none of them correlates (their fate and the relief); never an
+    orientation. (With the realistic errors and reference the same relief orients to 0.44 px:
+    ``bench/relief_sweep.py``.)"""
     from flows.orient import OrientParams, orient_flow
     from tests.scenes import run_scene
 
     scene = tmp_path_factory.mktemp("flat")
     run_scene(scene, seed=21, jitter=False, lidar=False, relief_factor=0.05, date_change=0.1)
     out = tmp_path_factory.mktemp("flat_out")
-    with pytest.raises(InsufficientReliefError) as err:
+    with pytest.raises((InsufficientReliefError, InsufficientDataError)) as err:
         orient_flow(OrientParams(pair=PairInputs(scene / "left.tif", scene / "right.tif",
                                                  reference=scene / "reference.tif"),
                                  out=out, progress=False))
     msg = str(err.value)
-    m = re.search(r"too flat for GCP-free orientation: (\d+) of (\d+) windows judged.* "
-                  r"\((\d+) needed\); relief found ([0-9.]+) m .*needed about ([0-9.]+) m", msg)
-    assert m, msg
-    qualified, judged, needed = int(m[1]), int(m[2]), int(m[3])
-    found_m, needed_m = float(m[4]), float(m[5])
-    # the figures say why: fewer windows qualify than are needed, less relief than needed
-    assert qualified < needed <= judged and found_m < needed_m, msg
-    assert 10.0 < found_m < 40.0  # some 20 m of relief per window at this scale
+    assert "\n" not in msg
+    if isinstance(err.value, InsufficientReliefError):
+        m = re.search(r"too flat for GCP-free orientation: (\d+) of (\d+) windows judged.* "
+                      r"\((\d+) needed\); relief found ([0-9.]+) m .*needed about ([0-9.]+) m",
+                      msg)
+        assert m, msg
+        qualified, judged, needed = int(m[1]), int(m[2]), int(m[3])
+        found_m, needed_m = float(m[4]), float(m[5])
+        # the figures say why: fewer windows qualify than are needed, less relief than needed
+        assert qualified < needed <= judged and found_m < needed_m, msg
+    else:
+        m = re.search(r"only (\d+) surface-matching windows gave a GCP \((\d+) needed\).*"
+                      r"too flat for its noise \(median relief ([0-9.]+) m per window\)", msg)
+        assert m and int(m[1]) < int(m[2]), msg
+        found_m = float(m[3])
+    assert 5.0 < found_m < 25.0, msg  # about their plane, spikes and blunders left out
     assert not (out / "report.json").exists() and not (out / "left.json").exists()
 
 

@@ -1,0 +1,114 @@
+"""The relative DEM in a surface-matching window, on a lattice of about the reference's cell
+size (:func:`window_cells`), and without its spikes (:func:`despike`): the cells
+:func:`core.matching.surface.match_window` correlates with the reference. No I/O here.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, replace
+
+import numpy as np
+from numpy.lib.stride_tricks import sliding_window_view
+from numpy.typing import ArrayLike, NDArray
+
+from core.geodesy import metres_per_degree
+from core.robust import nmad
+
+FloatArray = NDArray[np.float64]
+
+#: a lattice cell further from its 5 x 5 neighbourhood's median than this many robust spreads
+#: of those departures is a spike of the relative DEM (:func:`despike`)
+DESPIKE_K = 3.0
+
+
+@dataclass(frozen=True, eq=False)
+class WindowCells:
+    """The relative DEM in a window, averaged on a lattice: lon/lat (degrees) and height ``h_m``
+    of each lattice cell (NaN when no valid relative cell fell in it), ``cell_m`` its size."""
+
+    lon_deg: FloatArray
+    lat_deg: FloatArray
+    h_m: FloatArray
+    x_m: FloatArray
+    y_m: FloatArray
+    cell_m: float
+    shape: tuple[int, int]
+    n_input: int
+    n_masked: int
+    n_disk: int
+
+
+def window_cells(lon_deg: ArrayLike, lat_deg: ArrayLike, h_m: ArrayLike,
+                 centre: tuple[float, float], radius_m: float, cell_m: float) -> WindowCells:
+    """Average the relative DEM's cells (NaN heights = mismatched) within ``radius_m`` of
+    ``centre`` onto a square lattice of ``cell_m`` around it, or coarser when the relative DEM
+    is: a lattice cell is at least sqrt(2) times the input's spacing, so that every cell of a
+    complete input receives a value whatever the grids' orientations."""
+    lon = np.ravel(np.asarray(lon_deg, dtype=np.float64))
+    lat = np.ravel(np.asarray(lat_deg, dtype=np.float64))
+    h = np.ravel(np.asarray(h_m, dtype=np.float64))
+    m_lon, m_lat = metres_per_degree(centre[1])
+    x = (lon - centre[0]) * float(m_lon)
+    y = (lat - centre[1]) * float(m_lat)
+    inside = np.hypot(x, y) <= radius_m
+    cell_m = max(float(cell_m), np.sqrt(2.0) * _spacing_m(x[inside], y[inside]))
+    n_side = 2 * int(np.ceil(radius_m / cell_m))
+    ix = np.floor((x[inside] + n_side * cell_m / 2) / cell_m).astype(np.int64)
+    iy = np.floor((y[inside] + n_side * cell_m / 2) / cell_m).astype(np.int64)
+    keep = (ix >= 0) & (ix < n_side) & (iy >= 0) & (iy < n_side)
+    idx = iy[keep] * n_side + ix[keep]
+    hv = h[inside][keep]
+    good = np.isfinite(hv)
+    total = np.bincount(idx[good], weights=hv[good], minlength=n_side * n_side)
+    count = np.bincount(idx[good], minlength=n_side * n_side)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        mean = np.where(count > 0, total / count, np.nan)
+    gx = (np.arange(n_side) + 0.5) * cell_m - n_side * cell_m / 2
+    xx, yy = np.meshgrid(gx, gx)
+    in_disk = (np.hypot(xx, yy) <= radius_m).ravel()
+    mean = np.where(in_disk, mean, np.nan)
+    return WindowCells(centre[0] + xx.ravel() / float(m_lon), centre[1] + yy.ravel() / float(m_lat),
+                       mean, xx.ravel(), yy.ravel(), float(cell_m), (n_side, n_side),
+                       int(inside.sum()),
+                       int((~np.isfinite(h[inside])).sum()), int(in_disk.sum()))
+
+
+def _spacing_m(x: FloatArray, y: FloatArray, n_sample: int = 400) -> float:
+    """Typical distance between neighbouring input cells (median nearest-neighbour distance of
+    a sample)."""
+    if x.size < 2:
+        return 0.0
+    from scipy.spatial import cKDTree
+
+    pts = np.stack([x, y], axis=1)
+    sample = pts[np.linspace(0, len(pts) - 1, min(n_sample, len(pts))).astype(np.int64)]
+    d, _ = cKDTree(pts).query(sample, k=2)
+    return float(np.median(d[:, 1]))
+
+
+def despike(cells: WindowCells, k: float = DESPIKE_K, size: int = 5) -> WindowCells:
+    """The window's lattice without its spikes: cells whose height departs from the median of
+    their ``size`` x ``size`` neighbourhood by more than ``k`` robust spreads (:func:`nmad`) of
+    those departures over the window become NaN (mismatched). Dense matching leaves gross
+    blunders in the relative DEM (patches tens to hundreds of metres off, clustered next to
+    mismatched cells); they inflate the heights' spread and pull the least-squares correlation
+    off the true shift (1.8 px of bias in columns on a low-relief simulated pair)."""
+    n = size // 2
+    h = cells.h_m.reshape(cells.shape)
+    if np.count_nonzero(np.isfinite(h)) < 2 * size * size:
+        return cells
+    padded = np.pad(h, n, constant_values=np.nan)
+    hoods = sliding_window_view(padded, (size, size)).reshape(h.size, size * size)
+    some = np.isfinite(hoods).any(axis=1)  # an all-NaN neighbourhood has no median
+    local = np.full(h.size, np.nan)
+    local[some] = np.nanmedian(hoods[some], axis=1)
+    local = local.reshape(h.shape)
+    dev = h - local
+    fin = np.isfinite(dev)
+    scale = nmad(dev[fin], centre=0.0)
+    if not scale > 0:
+        return cells
+    spike = fin & (np.abs(dev) > k * scale)
+    if not spike.any():
+        return cells
+    return replace(cells, h_m=np.where(spike.ravel(), np.nan, cells.h_m))
