@@ -182,3 +182,28 @@ def test_wald_test_alone_applies_the_lens_only_to_the_distorted_image(pair):
                                   min_col_drop=0.0).applied, seed
         if seed == 2:  # the gate alone refuses this one (column drop 13 %): the Wald test
             assert not self_calibrate(delivered, obs, ("left", "right")).applied  # decides
+
+
+def test_a_few_gcps_alone_never_decide_the_lens(pair):
+    """Surface-matching GCPs share the relative DEM's and the reference's errors over
+    kilometres, a smooth pattern a camera term fits. Fewer than 4 GCPs per term (16 for the
+    menu's 4) left after the blunders decide nothing however large their Wald statistic (15
+    GCPs, of which a 3 px distortion leaves 11 inliers without the lens); 40 (28 inliers)
+    decide as many would."""
+    from dataclasses import replace
+
+    from core.orientation.selfcal import LENS_TERMS, MIN_GCPS_PER_TERM, self_calibrate
+    from core.sensors.linear_array import LensDistortion
+
+    assert MIN_GCPS_PER_TERM * len(LENS_TERMS) == 16
+    delivered, truth = pair
+    r_edge = float(np.hypot(*delivered[0].camera.detector_xy(np.array([0.0])))[0])
+    px = r_edge / 1499.5
+    distorted = (replace(truth[0], distortion=LensDistortion(k3=3.0 * px / r_edge**3)),
+                 truth[1])
+    few = self_calibrate(delivered, gcps(distorted, n=15, sxy=1.0, sh=1.0, seed=4)[0],
+                         ("left", "right"))
+    assert few.wald["left"] > few.wald_limit and not few.applied
+    enough = self_calibrate(delivered, gcps(distorted, n=40, sxy=1.0, sh=1.0, seed=4)[0],
+                            ("left", "right"))
+    assert enough.wald["left"] > enough.wald_limit and set(enough.significant) == {"left"}
