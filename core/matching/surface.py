@@ -288,7 +288,8 @@ class _Peak:
 def _search(cells: WindowCells, reference: GeoDEM, cfg: SurfaceMatchConfig,
             prior: tuple[float, float, float] | None) -> _Peak:
     """The correlation peak over the shift grid (within the ``prior`` box if any): every other
-    step first, then every step around the best, a quadratic fit, then the fine grid."""
+    step first, then every step around the best, and a quadratic fit (:func:`_refined` then
+    refines it on the fine grid)."""
     grid = _grid(cfg.shift_max_arcsec, cfg.shift_step_arcsec)
     gx, gy = np.meshgrid(grid, grid)
     rho = np.full(gx.shape, np.nan)
@@ -325,20 +326,28 @@ def _search(cells: WindowCells, reference: GeoDEM, cfg: SurfaceMatchConfig,
     step = cfg.shift_step_arcsec
     sx, sy = grid[ix] + dx * step, grid[iy] + dy * step
     hess = peak_hessian(patch)[0] / step**2  # per arcsec squared
-    if cfg.refine_step_arcsec is not None:
-        fine = _grid(0.5 * step, cfg.refine_step_arcsec)  # the 1" quadratic is within 0.2"
-        fx, fy = np.meshgrid(sx + fine, sy + fine)
-        rf, _ = _correlations(cells, reference,
-                              np.stack([fx.ravel(), fy.ravel()], 1) * ARCSEC, cfg.detrend)
-        rf = rf.reshape(fx.shape)
-        if np.isfinite(rf).all():
-            jy, jx = np.unravel_index(int(np.argmax(rf)), rf.shape)
-            jy = int(np.clip(jy, 1, rf.shape[0] - 2))
-            jx = int(np.clip(jx, 1, rf.shape[1] - 2))
-            (ddx,), (ddy,) = quadratic_peak(rf[jy - 1:jy + 2, jx - 1:jx + 2])
-            sx = float(fx[jy, jx] + ddx * cfg.refine_step_arcsec)
-            sy = float(fy[jy, jx] + ddy * cfg.refine_step_arcsec)
     return _Peak(WindowStatus.OK, float(sx), float(sy), hess, float(np.nanmax(rho)))
+
+
+def _refined(cells: WindowCells, reference: GeoDEM, cfg: SurfaceMatchConfig,
+             peak: _Peak) -> _Peak:
+    """The peak refined on the fine grid (``cfg.refine_step_arcsec``, none: as it is) over the
+    half step around it the quadratic fit on the search grid is good to (0.2")."""
+    if cfg.refine_step_arcsec is None or peak.status != WindowStatus.OK:
+        return peak
+    fine = _grid(0.5 * cfg.shift_step_arcsec, cfg.refine_step_arcsec)
+    fx, fy = np.meshgrid(peak.sx + fine, peak.sy + fine)
+    rf, _ = _correlations(cells, reference, np.stack([fx.ravel(), fy.ravel()], 1) * ARCSEC,
+                          cfg.detrend)
+    rf = rf.reshape(fx.shape)
+    if not np.isfinite(rf).all():
+        return peak
+    jy, jx = np.unravel_index(int(np.argmax(rf)), rf.shape)
+    jy = int(np.clip(jy, 1, rf.shape[0] - 2))
+    jx = int(np.clip(jx, 1, rf.shape[1] - 2))
+    (ddx,), (ddy,) = quadratic_peak(rf[jy - 1:jy + 2, jx - 1:jx + 2])
+    return replace(peak, sx=float(fx[jy, jx] + ddx * cfg.refine_step_arcsec),
+                   sy=float(fy[jy, jx] + ddy * cfg.refine_step_arcsec))
 
 
 def _vertical(cells: WindowCells, reference: GeoDEM, peak: _Peak, cfg: SurfaceMatchConfig
@@ -366,7 +375,8 @@ def _without_blunders(cells: WindowCells, reference: GeoDEM, cfg: SurfaceMatchCo
     """(cells kept, their peak, vertical shift, spread): the peak searched, then, at most
     :data:`BLUNDER_ROUNDS` times, searched again around it without the cells :func:`_vertical`
     finds far from the reference there (over the whole range when the blunders had moved the
-    first peak further than the box around it)."""
+    first peak further than the box around it), until it moves less than a tenth of a step;
+    refined on the fine grid once, at the end."""
     peak = _search(cells, reference, cfg, prior)
     if peak.status != WindowStatus.OK:
         return cells, peak, float("nan"), float("nan")
@@ -377,12 +387,18 @@ def _without_blunders(cells: WindowCells, reference: GeoDEM, cfg: SurfaceMatchCo
         if not far.any() or np.count_nonzero(np.isfinite(kept.h_m)) < cfg.min_cells:
             break
         again = _search(kept, reference, cfg, (peak.sx, peak.sy, box))
-        if again.status == WindowStatus.EDGE_PEAK:
+        if again.status != WindowStatus.OK:  # the peak left the box (or its edge)
             again = _search(kept, reference, cfg, prior)
         if again.status != WindowStatus.OK:
             break
+        moved = float(np.hypot(again.sx - peak.sx, again.sy - peak.sy))
         cells, peak = kept, again
         dz, spread, far = _vertical(cells, reference, peak, cfg)
+        if moved < 0.1 * cfg.shift_step_arcsec:  # the blunders did not hold the peak
+            break
+    if cfg.refine_step_arcsec is not None:
+        peak = _refined(cells, reference, cfg, peak)
+        dz, spread, _ = _vertical(cells, reference, peak, cfg)
     return cells, peak, dz, spread
 
 
