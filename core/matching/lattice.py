@@ -1,6 +1,7 @@
 """The relative DEM in a surface-matching window, on a lattice of about the reference's cell
 size (:func:`window_cells`), and without its spikes (:func:`despike`): the cells
-:func:`core.matching.surface.match_window` correlates with the reference. No I/O here.
+:func:`core.matching.surface.match_window` correlates with the reference, about their plane
+(:func:`plane_basis`), and their relief (:func:`relief_m`). No I/O here.
 """
 
 from __future__ import annotations
@@ -112,3 +113,23 @@ def despike(cells: WindowCells, k: float = DESPIKE_K, size: int = 5) -> WindowCe
     if not spike.any():
         return cells
     return replace(cells, h_m=np.where(spike.ravel(), np.nan, cells.h_m))
+
+
+def plane_basis(cells: WindowCells, ok: NDArray[np.bool_], detrend: bool) -> FloatArray:
+    """Regressors removed before correlating the cells ``ok``: a constant, and a plane with
+    ``detrend`` (x, y in kilometres from the centre, for conditioning)."""
+    one = np.ones(int(ok.sum()))
+    if not detrend:
+        return one[:, None]
+    return np.stack([one, cells.x_m[ok] / 1000.0, cells.y_m[ok] / 1000.0], axis=1)
+
+
+def relief_m(cells: WindowCells, detrend: bool) -> float:
+    """Standard deviation of the window's heights (about their best-fit plane with
+    ``detrend``)."""
+    ok = np.isfinite(cells.h_m)
+    if ok.sum() < 4:
+        return 0.0
+    b = plane_basis(cells, ok, detrend)
+    coef, *_ = np.linalg.lstsq(b, cells.h_m[ok], rcond=None)
+    return float(np.std(cells.h_m[ok] - b @ coef))

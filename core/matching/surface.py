@@ -45,7 +45,7 @@ from numpy.typing import ArrayLike, NDArray
 from core.dem import GeoDEM
 from core.errors import InputError
 from core.geodesy import ARCSEC, geodetic_to_enu, metres_per_degree
-from core.matching.lattice import WindowCells, despike, window_cells
+from core.matching.lattice import WindowCells, despike, plane_basis, relief_m, window_cells
 from core.matching.peaks import peak_hessian, quadratic_peak
 from core.matching.tiepoints import best_per_cell
 from core.points import ControlPoint, ImagePoint
@@ -175,15 +175,6 @@ class WindowMatch:
 # ------------------------------------------------------------------------- matching
 
 
-def _basis(cells: WindowCells, ok: NDArray[np.bool_], detrend: bool) -> FloatArray:
-    """Regressors removed before correlating: a constant, and a plane with ``detrend`` (x, y
-    in kilometres from the centre, for conditioning)."""
-    one = np.ones(int(ok.sum()))
-    if not detrend:
-        return one[:, None]
-    return np.stack([one, cells.x_m[ok] / 1000.0, cells.y_m[ok] / 1000.0], axis=1)
-
-
 def _correlations(cells: WindowCells, reference: GeoDEM, shifts_deg: FloatArray,
                   detrend: bool = True, chunk: int = 128) -> tuple[FloatArray, FloatArray]:
     """Correlation coefficient (partial: about the best constant, or plane with ``detrend``,
@@ -193,7 +184,7 @@ def _correlations(cells: WindowCells, reference: GeoDEM, shifts_deg: FloatArray,
     lon, lat = cells.lon_deg[ok], cells.lat_deg[ok]
     h0 = float(np.mean(cells.h_m[ok]))  # near the reference's heights: conditioning only
     h = cells.h_m[ok] - h0
-    b = _basis(cells, ok, detrend)
+    b = plane_basis(cells, ok, detrend)
     bb = b[:, :, None] * b[:, None, :]  # (n, k, k)
     rho = np.full(len(shifts_deg), np.nan)
     count = np.zeros(len(shifts_deg))
@@ -251,7 +242,7 @@ def predicted_precision_m(cells: WindowCells, cfg: SurfaceMatchConfig) -> tuple[
         gx, gy = gx - np.nanmean(gx), gy - np.nanmean(gy)
     g2 = gx**2 + gy**2
     ok = np.isfinite(g2)
-    relief = _relief_m(cells, cfg.detrend)
+    relief = relief_m(cells, cfg.detrend)
     if ok.sum() < 3:
         return float("inf"), relief, 0.0, 0
     slope = float(np.sqrt(np.mean(g2[ok])))
@@ -260,17 +251,6 @@ def predicted_precision_m(cells: WindowCells, cfg: SurfaceMatchConfig) -> tuple[
     if slope <= 0:
         return float("inf"), relief, slope, n_eff
     return cfg.height_noise_m / (slope * np.sqrt(n_eff)), relief, slope, n_eff
-
-
-def _relief_m(cells: WindowCells, detrend: bool) -> float:
-    """Standard deviation of the window's heights (about their best-fit plane with
-    ``detrend``)."""
-    ok = np.isfinite(cells.h_m)
-    if ok.sum() < 4:
-        return 0.0
-    b = _basis(cells, ok, detrend)
-    coef, *_ = np.linalg.lstsq(b, cells.h_m[ok], rcond=None)
-    return float(np.std(cells.h_m[ok] - b @ coef))
 
 
 @dataclass(frozen=True)
@@ -361,7 +341,7 @@ def _vertical(cells: WindowCells, reference: GeoDEM, peak: _Peak, cfg: SurfaceMa
                              cells.lat_deg[valid] + peak.sy * ARCSEC)
     diff = ref - cells.h_m[valid]
     use = np.isfinite(diff)
-    basis = _basis(cells, valid, cfg.detrend)[use]
+    basis = plane_basis(cells, valid, cfg.detrend)[use]
     coef, spread = robust_fit(diff[use], basis, mode_scale_m=cfg.height_noise_m)
     far = np.zeros(cells.h_m.size, dtype=bool)
     far[np.flatnonzero(valid)[use]] = (np.abs(diff[use] - basis @ coef)
@@ -440,7 +420,7 @@ def match_window(lon_deg: ArrayLike, lat_deg: ArrayLike, h_m: ArrayLike,
     cells, peak, dz, spread = _without_blunders(cells, reference, cfg, prior)
     if peak.status != WindowStatus.OK:
         return WindowMatch(peak.status, correlation=peak.correlation, **base)
-    relief = _relief_m(cells, cfg.detrend)
+    relief = relief_m(cells, cfg.detrend)
     # precision: near its peak rho(s) ~ 1 - k s^2 / 2 with k = slope^2 / relief^2 along the
     # flattest direction (the peak's curvature, per m^2); least squares then knows the shift to
     # spread / (slope sqrt(N)) = spread / (relief sqrt(k N)) over N independent patches
