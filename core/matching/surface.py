@@ -360,7 +360,7 @@ def _without_blunders(cells: WindowCells, reference: GeoDEM, cfg: SurfaceMatchCo
     peak = _search(cells, reference, cfg, prior)
     if peak.status != WindowStatus.OK:
         return cells, peak, float("nan"), float("nan")
-    dz, spread, far = _vertical(cells, reference, peak, cfg)
+    far = _vertical(cells, reference, peak, cfg)[2]
     box = 2.5 * cfg.shift_step_arcsec
     for _ in range(BLUNDER_ROUNDS):
         kept = replace(cells, h_m=np.where(far, np.nan, cells.h_m))
@@ -373,12 +373,11 @@ def _without_blunders(cells: WindowCells, reference: GeoDEM, cfg: SurfaceMatchCo
             break
         moved = float(np.hypot(again.sx - peak.sx, again.sy - peak.sy))
         cells, peak = kept, again
-        dz, spread, far = _vertical(cells, reference, peak, cfg)
         if moved < 0.1 * cfg.shift_step_arcsec:  # the blunders did not hold the peak
             break
-    if cfg.refine_step_arcsec is not None:
-        peak = _refined(cells, reference, cfg, peak)
-        dz, spread, _ = _vertical(cells, reference, peak, cfg)
+        far = _vertical(cells, reference, peak, cfg)[2]
+    peak = _refined(cells, reference, cfg, peak)
+    dz, spread, _ = _vertical(cells, reference, peak, cfg)
     return cells, peak, dz, spread
 
 
@@ -403,7 +402,8 @@ def match_window(lon_deg: ArrayLike, lat_deg: ArrayLike, h_m: ArrayLike,
     cell = cfg.cell_m if cfg.cell_m is not None else reference.cell_size_m()
     raw = window_cells(lon_deg, lat_deg, h_m, centre, cfg.radius_m, cell)
     valid = np.isfinite(raw.h_m)
-    paired = np.isfinite(reference.height_m(raw.lon_deg, raw.lat_deg)) & valid
+    paired = valid.copy()  # and a reference height there
+    paired[valid] = np.isfinite(reference.height_m(raw.lon_deg[valid], raw.lat_deg[valid]))
     masked = 1.0 - paired.sum() / max(raw.n_disk, 1)  # mismatched cells or reference voids
     cells = despike(raw)
     valid = np.isfinite(cells.h_m)
