@@ -57,6 +57,7 @@ class SelfCalibration:
     ``significant`` maps each image name to its kept terms with (estimate, sigma);
     ``applied`` says whether any term was kept (then ``with_lens`` is the result to use).
     ``improvement`` gives, per image, the relative drop of the GCP residual RMS in col and row.
+    ``decision``: why, in one line (the evidence that kept the terms, or why none was kept).
     """
 
     without: AbsoluteOrientation
@@ -66,6 +67,7 @@ class SelfCalibration:
     wald: dict[str, float] = field(default_factory=dict)
     wald_limit: float = float("nan")
     ties: dict[str, float] = field(default_factory=dict)
+    decision: str = ""
 
     @property
     def applied(self) -> bool:
@@ -116,7 +118,7 @@ class SelfCalibration:
                                 for n, terms in self.significant.items()},
                 "wald": self.wald, "wald_limit": self.wald_limit,
                 "tie_points": self.ties or None,
-                "improvement": self.improvement()}
+                "improvement": self.improvement(), "decision": self.decision}
 
 
 def _with_terms(model: SensorModel, terms: Sequence[str]) -> SensorModel:
@@ -168,22 +170,28 @@ def self_calibrate(models: Sequence[SensorModel], obs: Observations, names: Sequ
     without = absolute_orientation(models, obs, names, config, ties)
     trial_models = [_with_terms(m, terms) for m in without.models]
     if all(tm is m for tm, m in zip(trial_models, without.models, strict=True)):
-        return SelfCalibration(without, None, {}, t_threshold)
+        return SelfCalibration(without, None, {}, t_threshold,
+                               decision="no pushbroom image: RPC images take no lens terms")
     keep = without.inlier
     trial_obs = Observations(obs.lon_deg[keep], obs.lat_deg[keep], obs.h_m[keep],
                              np.asarray(obs.col)[keep], np.asarray(obs.row)[keep],
                              obs.sigma_xy_m[keep], obs.sigma_h_m[keep])
     try:
         trial = absolute_orientation(trial_models, trial_obs, names, config, ties)
-    except (ConvergenceError, GeometryError):  # lens terms the GCPs cannot carry: none kept
-        return SelfCalibration(without, None, {}, t_threshold)
+    except (ConvergenceError, GeometryError) as exc:  # terms the GCPs cannot carry: none kept
+        return SelfCalibration(without, None, {}, t_threshold, decision=(
+            f"none kept: the adjustment with lens terms failed ({exc})"))
     p_two = 2.0 * norm.sf(t_threshold)
     limit = float(chi2.ppf(1.0 - p_two, len(terms)))
     calibrated = [n for n, m in zip(names, trial_models, strict=True)
                   if isinstance(m, PushbroomModel)]
     wald = {n: _wald(trial, n, terms) for n in calibrated}
-    chosen = ([n for n in calibrated if wald[n] > limit]
-              if keep.sum() >= MIN_GCPS_PER_TERM * len(terms) else [])
+    enough = keep.sum() >= MIN_GCPS_PER_TERM * len(terms)
+    chosen = [n for n in calibrated if wald[n] > limit] if enough else []
+    walds = ", ".join(f"{n} {w:.1f}" for n, w in wald.items())
+    why = (f"GCPs: Wald {walds} against {limit:.1f}" if enough else
+           f"GCPs decide nothing: {int(keep.sum())} kept, {MIN_GCPS_PER_TERM * len(terms)} "
+           f"needed ({MIN_GCPS_PER_TERM} per term; Wald {walds} against {limit:.1f})")
     tie_info: dict[str, float] = {}
     tie_evidence = False
     if ties is not None and without.tie_rms_px and trial.tie_rms_px is not None:
@@ -198,6 +206,8 @@ def self_calibrate(models: Sequence[SensorModel], obs: Observations, names: Sequ
         # the tie points' parallax says the cameras need the terms: every pushbroom image's
         tie_evidence = stat > tie_info["f_limit"] and tie_info["drop"] >= min_col_drop
         tie_info["evidence"] = float(tie_evidence)
+        why += (f"; tie points' parallax F {stat:.1f} against {tie_info['f_limit']:.1f}, "
+                f"{100.0 * tie_info['drop']:.0f} % lower with the terms")
         if tie_evidence:
             chosen = list(calibrated)
     with_lens = None
@@ -214,7 +224,11 @@ def self_calibrate(models: Sequence[SensorModel], obs: Observations, names: Sequ
             break
         chosen.remove(min(weak, key=lambda n: drops[n]))
     if not chosen or with_lens is None:
-        return SelfCalibration(without, None, {}, t_threshold, wald, limit, tie_info)
+        verdict = ("none kept: they lowered no image's column RMS by "
+                   f"{100.0 * min_col_drop:.0f} %" if with_lens is not None
+                   else "none significant")
+        return SelfCalibration(without, None, {}, t_threshold, wald, limit, tie_info,
+                               f"{verdict} ({why})")
     if with_lens.tie_rms_px is not None:
         tie_info["rms_px_with"] = with_lens.tie_rms_px
     significant: dict[str, dict[str, tuple[float, float]]] = {}
@@ -223,4 +237,5 @@ def self_calibrate(models: Sequence[SensorModel], obs: Observations, names: Sequ
         if name in chosen:
             significant[name] = {t: (float(pa[pn.index(t)]), float(sd[pn.index(t)]))
                                  for t in terms}
-    return SelfCalibration(without, with_lens, significant, t_threshold, wald, limit, tie_info)
+    return SelfCalibration(without, with_lens, significant, t_threshold, wald, limit, tie_info,
+                           f"kept in {', '.join(chosen)} ({why})")

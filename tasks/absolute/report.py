@@ -215,7 +215,7 @@ class OrientReport:
                        " px with them)")
             out.append("lens terms            " + (
                 ", ".join(f"{n}: {', '.join(t)}" for n, t in lens.significant.items()) + why
-                if lens.applied else "none significant (not applied)"))
+                if lens.applied else "not applied: " + (lens.decision or "none significant")))
         at = self.absolute.along_track
         if at is not None:
             rows = ", ".join(f"{n} {at['rms_row_px_without'][n]:.3f} -> "

@@ -196,7 +196,8 @@ class LensCalibration:
     whether terms were ``applied``, the terms kept per image (``significant``: term ->
     estimate, sigma, the term's name in the menu), the GCP residual RMS without and with them
     per image, each image's Wald statistic against its limit, and the tie points' evidence
-    (their parallax RMS without and with the terms, the F test; null without tie points)."""
+    (their parallax RMS without and with the terms, the F test; null without tie points);
+    ``decision``: why, in one line (absent from older reports, read as None)."""
 
     applied: bool
     t_threshold: float
@@ -205,6 +206,7 @@ class LensCalibration:
     wald: Mapping[str, float] | None = None
     wald_limit: float | None = None
     tie_points: Mapping[str, float] | None = None
+    decision: str | None = None
 
     def to_dict(self) -> dict[str, Any]:
         return {"applied": self.applied, "t_threshold": self.t_threshold,
@@ -212,17 +214,20 @@ class LensCalibration:
                 "improvement": {k: dict(v) for k, v in self.improvement.items()},
                 "wald": dict(self.wald) if self.wald is not None else None,
                 "wald_limit": self.wald_limit,
-                "tie_points": dict(self.tie_points) if self.tie_points is not None else None}
+                "tie_points": dict(self.tie_points) if self.tie_points is not None else None,
+                **({"decision": self.decision} if self.decision is not None else {})}
 
     @classmethod
     def from_dict(cls, d: Doc, where: str = "absolute.self_calibration") -> LensCalibration:
         limit = d.get("wald_limit")
+        decision = (None if d.get("decision") is None
+                    else str(_get(d, "decision", where, str)))
         return cls(_get(d, "applied", where, bool), _get(d, "t_threshold", where, NUMBER),
                    dict(_get(d, "significant", where, Mapping)),
                    dict(_get(d, "improvement", where, Mapping)),
                    _optional(d, "wald", where),
                    float(limit) if isinstance(limit, (int, float)) else None,
-                   _optional(d, "tie_points", where))
+                   _optional(d, "tie_points", where), decision)
 
 
 @dataclass(frozen=True)

@@ -63,6 +63,7 @@ def test_pushbroom_pair_reaches_the_check_points_with_no_gcp(oriented):
     lens = report["absolute"]["self_calibration"]
     assert lens["applied"]
     assert max(v["col_drop"] for v in lens["improvement"].values()) >= 0.3
+    assert lens["decision"].startswith("kept in ")  # and says on what evidence
 
 
 def test_products_are_what_the_report_says(oriented):
@@ -165,6 +166,7 @@ def test_rpc_family_is_oriented_too(tiny_scene, tmp_path, prefect_harness):
     r = outcome.report
     assert json.loads((tmp_path / "left.json").read_text())["type"] == "rpc"
     assert not r.absolute.self_calibration.applied
+    assert r.absolute.self_calibration.decision.startswith("no pushbroom image")
     for name in ("left", "right"):
         assert r.check_points_before[name].rms_row_px > 2.0
         assert r.check_points[name].rms_row_px < 0.8

@@ -541,6 +541,14 @@ def test_the_schema_keeps_every_key_its_records_write():
     assert OrientReport.from_dict({**finished_report(1, {"left": (0.1, 0.2)}),
                                    "check_points": {"left": stats.to_dict()}}
                                   ).check_points["left"] == stats
+    from core.orientation.selfcal import SelfCalibration
+    from tasks.absolute.report_sections import LensCalibration
+
+    lens = SelfCalibration(None, None, {}, 3.0, {"left": 2.0}, 16.3, {},  # type: ignore[arg-type]
+                           "none significant (GCPs decide nothing: 11 kept, 16 needed)").to_dict()
+    assert LensCalibration.from_dict(lens).to_dict() == lens
+    old = {k: v for k, v in lens.items() if k != "decision"}  # a report before the key
+    assert LensCalibration.from_dict(old).decision is None
 
 
 def test_report_json_carries_the_predicted_accuracy_beside_the_measured():

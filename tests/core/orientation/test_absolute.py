@@ -204,6 +204,8 @@ def test_a_few_gcps_alone_never_decide_the_lens(pair):
     few = self_calibrate(delivered, gcps(distorted, n=15, sxy=1.0, sh=1.0, seed=4)[0],
                          ("left", "right"))
     assert few.wald["left"] > few.wald_limit and not few.applied
+    assert "decide nothing: 11 kept, 16 needed" in few.decision  # the report says why
     enough = self_calibrate(delivered, gcps(distorted, n=40, sxy=1.0, sh=1.0, seed=4)[0],
                             ("left", "right"))
     assert enough.wald["left"] > enough.wald_limit and set(enough.significant) == {"left"}
+    assert enough.decision.startswith("kept in left (GCPs: Wald left ")
