@@ -1,7 +1,7 @@
 """The relative DEM in a surface-matching window, on a lattice of about the reference's cell
 size (:func:`window_cells`), and without its spikes (:func:`despike`): the cells
-:func:`core.matching.surface.match_window` correlates with the reference, about their plane
-(:func:`plane_basis`), and their relief (:func:`relief_m`). No I/O here.
+:func:`core.matching.surface.match_window` correlates with the reference, about their
+quadratic surface (:func:`surface_basis`), and their relief (:func:`relief_m`). No I/O here.
 """
 
 from __future__ import annotations
@@ -115,21 +115,43 @@ def despike(cells: WindowCells, k: float = DESPIKE_K, size: int = 5) -> WindowCe
     return replace(cells, h_m=np.where(spike.ravel(), np.nan, cells.h_m))
 
 
-def plane_basis(cells: WindowCells, ok: NDArray[np.bool_], detrend: bool) -> FloatArray:
-    """Regressors removed before correlating the cells ``ok``: a constant, and a plane with
-    ``detrend`` (x, y in kilometres from the centre, for conditioning)."""
+def surface_basis(cells: WindowCells, ok: NDArray[np.bool_], detrend: bool) -> FloatArray:
+    """Regressors removed from the cells ``ok`` before they are compared with the reference: a
+    constant, and with ``detrend`` a quadratic surface (x, y in kilometres from the centre, for
+    conditioning; the constant is the value at the centre).
+
+    The relative DEM of a pair whose delivered models miss a lens or a look-angle error is
+    curved across the swath (simulated tiny with ``--lens``: the windows' vertical shift +80 m
+    at one end, 0 in the middle, -68 m at the other, 5 m/km2 near the ends). About a plane
+    that curvature biased the window's height at the centre by the curvature times R^2 / 4
+    (the GCPs' height errors followed the vertical shift, +4 to -5 m across the swath) and,
+    where the terrain shares it, its horizontal shift (-6 to -14 m east at the swath's end,
+    which the lens terms extrapolated to -0.45 px of check-point columns beyond the last GCP).
+    """
     one = np.ones(int(ok.sum()))
     if not detrend:
         return one[:, None]
-    return np.stack([one, cells.x_m[ok] / 1000.0, cells.y_m[ok] / 1000.0], axis=1)
+    x, y = cells.x_m[ok] / 1000.0, cells.y_m[ok] / 1000.0
+    return np.stack([one, x, y, x * x, x * y, y * y], axis=1)
+
+
+def centre_inflation(cells: WindowCells, detrend: bool) -> float:
+    """How many times the variance of the difference surface's value at the centre exceeds
+    that of a mean over the same cells (``n (B'B)^-1`` at the constant; 1 without
+    ``detrend``, about 4 for a quadratic over a disk)."""
+    ok = np.isfinite(cells.h_m)
+    b = surface_basis(cells, ok, detrend)
+    if b.shape[0] <= b.shape[1]:
+        return 1.0
+    return float(b.shape[0] * np.linalg.pinv(b.T @ b)[0, 0])
 
 
 def relief_m(cells: WindowCells, detrend: bool) -> float:
-    """Standard deviation of the window's heights (about their best-fit plane with
-    ``detrend``)."""
+    """Standard deviation of the window's heights (about their best-fit quadratic surface with
+    ``detrend``, :func:`surface_basis`)."""
     ok = np.isfinite(cells.h_m)
     if ok.sum() < 4:
         return 0.0
-    b = plane_basis(cells, ok, detrend)
+    b = surface_basis(cells, ok, detrend)
     coef, *_ = np.linalg.lstsq(b, cells.h_m[ok], rcond=None)
     return float(np.std(cells.h_m[ok] - b @ coef))

@@ -45,7 +45,14 @@ from numpy.typing import ArrayLike, NDArray
 from core.dem import GeoDEM
 from core.errors import InputError
 from core.geodesy import ARCSEC, geodetic_to_enu, metres_per_degree
-from core.matching.lattice import WindowCells, despike, plane_basis, relief_m, window_cells
+from core.matching.lattice import (
+    WindowCells,
+    centre_inflation,
+    despike,
+    relief_m,
+    surface_basis,
+    window_cells,
+)
 from core.matching.peaks import peak_hessian, quadratic_peak
 from core.matching.tiepoints import best_per_cell
 from core.points import ControlPoint, ImagePoint
@@ -83,9 +90,11 @@ class SurfaceMatchConfig:
     per window) the windows' honest precisions were 10-20 m, their GCPs' errors matching them,
     and 30 of them oriented the pair to 0.3 px where a 10 m limit left 2; each GCP is weighted
     by its own precision, the limit only refuses windows too vague to help. ``detrend``:
-    compare the two surfaces about their best-fit planes (the relative DEM may be tilted: an
-    along-epipolar drift that tie points cannot see tilts it by metres per kilometre), the
-    vertical shift then being the plane's height at the window's centre.
+    compare the two surfaces about their best-fit quadratic surfaces (the relative DEM may be
+    tilted: an along-epipolar drift that tie points cannot see tilts it by metres per
+    kilometre; and curved: a lens the delivered models miss,
+    :func:`core.matching.lattice.surface_basis`), the vertical shift then being that surface's
+    height at the window's centre.
     """
 
     radius_m: float = 4000.0
@@ -177,14 +186,14 @@ class WindowMatch:
 
 def _correlations(cells: WindowCells, reference: GeoDEM, shifts_deg: FloatArray,
                   detrend: bool = True, chunk: int = 128) -> tuple[FloatArray, FloatArray]:
-    """Correlation coefficient (partial: about the best constant, or plane with ``detrend``,
+    """Correlation coefficient (partial: about the best constant, or quadratic with ``detrend``,
     of each set over the pairs valid at that shift) and valid-pair count for each (dlon, dlat)
     shift (n, 2)."""
     ok = np.isfinite(cells.h_m)
     lon, lat = cells.lon_deg[ok], cells.lat_deg[ok]
     h0 = float(np.mean(cells.h_m[ok]))  # near the reference's heights: conditioning only
     h = cells.h_m[ok] - h0
-    b = plane_basis(cells, ok, detrend)
+    b = surface_basis(cells, ok, detrend)
     bb = b[:, :, None] * b[:, None, :]  # (n, k, k)
     rho = np.full(len(shifts_deg), np.nan)
     count = np.zeros(len(shifts_deg))
@@ -233,13 +242,16 @@ def predicted_precision_m(cells: WindowCells, cfg: SurfaceMatchConfig) -> tuple[
                                                                                  float, int]:
     """(precision m, relief m, RMS slope, independent patches) the window's relief promises.
 
-    With ``cfg.detrend`` the relief is the heights' spread about their best-fit plane and the
-    slopes are taken about their mean: a plane carries no information once a tilt is free.
+    With ``cfg.detrend`` the relief and the slopes are those of the heights about their
+    best-fit quadratic surface (:func:`core.matching.lattice.surface_basis`): it carries no
+    information once the window's tilt and curvature are free.
     """
-    h = cells.h_m.reshape(cells.shape)
-    gy, gx = np.gradient(h, cells.cell_m)
-    if cfg.detrend and np.isfinite(gx).any() and np.isfinite(gy).any():
-        gx, gy = gx - np.nanmean(gx), gy - np.nanmean(gy)
+    h = cells.h_m.copy()
+    ok = np.isfinite(h)
+    if cfg.detrend and ok.sum() > 6:
+        b = surface_basis(cells, ok, True)
+        h[ok] -= b @ np.linalg.lstsq(b, h[ok], rcond=None)[0]
+    gy, gx = np.gradient(h.reshape(cells.shape), cells.cell_m)
     g2 = gx**2 + gy**2
     ok = np.isfinite(g2)
     relief = relief_m(cells, cfg.detrend)
@@ -341,7 +353,7 @@ def _vertical(cells: WindowCells, reference: GeoDEM, peak: _Peak, cfg: SurfaceMa
                              cells.lat_deg[valid] + peak.sy * ARCSEC)
     diff = ref - cells.h_m[valid]
     use = np.isfinite(diff)
-    basis = plane_basis(cells, valid, cfg.detrend)[use]
+    basis = surface_basis(cells, valid, cfg.detrend)[use]
     coef, spread = robust_fit(diff[use], basis, mode_scale_m=cfg.height_noise_m)
     far = np.zeros(cells.h_m.size, dtype=bool)
     far[np.flatnonzero(valid)[use]] = (np.abs(diff[use] - basis @ coef)
@@ -432,7 +444,8 @@ def match_window(lon_deg: ArrayLike, lat_deg: ArrayLike, h_m: ArrayLike,
         WindowStatus.OK, shift_lon_arcsec=peak.sx, shift_lat_arcsec=peak.sy,
         shift_h_m=dz, shift_east_m=float(peak.sx * ARCSEC * m_lon),
         shift_north_m=float(peak.sy * ARCSEC * m_lat), correlation=peak.correlation,
-        precision_m=precision, precision_h_m=float(spread / np.sqrt(max(n_eff, 1))),
+        precision_m=precision, precision_h_m=float(spread * np.sqrt(centre_inflation(
+            cells, cfg.detrend) / max(n_eff, 1))),
         spread_m=float(spread), **{**base, "relief_m": relief})
     if peak.correlation < cfg.min_correlation:
         return WindowMatch(**{**vars(result), "status": WindowStatus.LOW_CORRELATION})
