@@ -51,6 +51,7 @@ from core.matching.lattice import (
     despike,
     relief_m,
     surface_basis,
+    symmetric,
     window_cells,
 )
 from core.matching.peaks import peak_hessian, quadratic_peak
@@ -417,7 +418,7 @@ def match_window(lon_deg: ArrayLike, lat_deg: ArrayLike, h_m: ArrayLike,
     paired = valid.copy()  # and a reference height there
     paired[valid] = np.isfinite(reference.height_m(raw.lon_deg[valid], raw.lat_deg[valid]))
     masked = 1.0 - paired.sum() / max(raw.n_disk, 1)  # mismatched cells or reference voids
-    cells = despike(raw)
+    cells = symmetric(despike(raw))
     valid = np.isfinite(cells.h_m)
     n_pairs = int(np.count_nonzero(paired & valid))
     pred, relief, slope, n_eff = predicted_precision_m(cells, cfg)
