@@ -1,8 +1,9 @@
 """The relative DEM in a surface-matching window, on a lattice of about the reference's cell
 size (:func:`window_cells`), and without its spikes (:func:`despike`): the cells
-:func:`core.matching.surface.match_window` correlates with the reference, about their
-quadratic surface (:func:`surface_basis`), point-symmetric about the centre where the DEM's
-edge cuts the window (:func:`symmetric`), and their relief (:func:`relief_m`). No I/O here.
+:func:`core.matching.surface.match_window` correlates with the reference (:func:`correlations`)
+about their plane or, where they are curved (:func:`curvature_m`), their quadratic surface
+(:func:`surface_basis`), point-symmetric about the centre where the DEM's edge cuts the window
+(:func:`symmetric`), and their relief (:func:`relief_m`). No I/O here.
 """
 
 from __future__ import annotations
@@ -13,8 +14,9 @@ import numpy as np
 from numpy.lib.stride_tricks import sliding_window_view
 from numpy.typing import ArrayLike, NDArray
 
-from core.geodesy import metres_per_degree
-from core.robust import nmad
+from core.dem import GeoDEM
+from core.geodesy import ARCSEC, metres_per_degree
+from core.robust import nmad, robust_fit
 
 FloatArray = NDArray[np.float64]
 
@@ -102,8 +104,9 @@ def symmetric(cells: WindowCells, max_offset: float = SYMMETRY_OFFSET) -> Window
     delivered models miss makes it steepest at the swath's ends, 15 m/km on simulated tiny with
     ``--lens``) a window cut by the DEM's edge measured it about 1.7 km inward, and the swath's
     end GCPs were 10-17 m off east, which the lens terms extrapolated to the image's edges
-    (check points 0.18 / 0.20 px in columns, 0.09 / 0.12 px with the windows kept symmetric;
-    always symmetric: the same)."""
+    (check points 0.18 / 0.20 px in columns, 0.12 / 0.14 px with the windows kept symmetric).
+    It costs the cells the reflection removes: on low relief, too many for a GCP, and
+    :func:`core.matching.surface.match_window` then matches the whole window."""
     h = cells.h_m.reshape(cells.shape)
     ok = np.isfinite(h)
     if not ok.any():
@@ -144,10 +147,10 @@ def despike(cells: WindowCells, k: float = DESPIKE_K, size: int = 5) -> WindowCe
     return replace(cells, h_m=np.where(spike.ravel(), np.nan, cells.h_m))
 
 
-def surface_basis(cells: WindowCells, ok: NDArray[np.bool_], detrend: bool) -> FloatArray:
+def surface_basis(cells: WindowCells, ok: NDArray[np.bool_], detrend: int) -> FloatArray:
     """Regressors removed from the cells ``ok`` before they are compared with the reference: a
-    constant, and with ``detrend`` a quadratic surface (x, y in kilometres from the centre, for
-    conditioning; the constant is the value at the centre).
+    constant; with ``detrend`` >= 1 (True) a plane, with 2 a quadratic surface (x, y in
+    kilometres from the centre, for conditioning; the constant is the value at the centre).
 
     The relative DEM of a pair whose delivered models miss a lens or a look-angle error is
     curved across the swath (simulated tiny with ``--lens``: the windows' vertical shift +80 m
@@ -156,18 +159,64 @@ def surface_basis(cells: WindowCells, ok: NDArray[np.bool_], detrend: bool) -> F
     (the GCPs' height errors followed the vertical shift, +4 to -5 m across the swath) and,
     where the terrain shares it, its horizontal shift (-6 to -14 m east at the swath's end,
     which the lens terms extrapolated to -0.45 px of check-point columns beyond the last GCP).
+    A quadratic also takes the terrain's own large-scale shape out of the comparison (the
+    window relief at relief x 0.15, 23.5 m about planes, is 19 m about quadratics), so windows
+    go quadratic only where they are curved (:func:`core.matching.surface.match_window`).
     """
     one = np.ones(int(ok.sum()))
     if not detrend:
         return one[:, None]
     x, y = cells.x_m[ok] / 1000.0, cells.y_m[ok] / 1000.0
+    if int(detrend) < 2:
+        return np.stack([one, x, y], axis=1)
     return np.stack([one, x, y, x * x, x * y, y * y], axis=1)
 
 
-def centre_inflation(cells: WindowCells, detrend: bool) -> float:
+def correlations(cells: WindowCells, reference: GeoDEM, shifts_deg: FloatArray,
+                  detrend: bool = True, chunk: int = 128) -> tuple[FloatArray, FloatArray]:
+    """Correlation coefficient (partial: about the best :func:`surface_basis` of ``detrend``,
+    of each set over the pairs valid at that shift) and valid-pair count for each (dlon, dlat)
+    shift (n, 2)."""
+    ok = np.isfinite(cells.h_m)
+    lon, lat = cells.lon_deg[ok], cells.lat_deg[ok]
+    h0 = float(np.mean(cells.h_m[ok]))  # near the reference's heights: conditioning only
+    h = cells.h_m[ok] - h0
+    b = surface_basis(cells, ok, detrend)
+    bb = b[:, :, None] * b[:, None, :]  # (n, k, k)
+    rho = np.full(len(shifts_deg), np.nan)
+    count = np.zeros(len(shifts_deg))
+    for s in range(0, len(shifts_deg), chunk):
+        sh = shifts_deg[s:s + chunk]
+        ref = reference.height_m(lon[None, :] + sh[:, :1], lat[None, :] + sh[:, 1:])
+        valid = np.isfinite(ref)
+        v = valid.astype(np.float64)
+        r = np.where(valid, ref - h0, 0.0)  # the basis holds a constant: any offset does
+        gram = (v @ bb.reshape(len(h), -1)).reshape(len(sh), *bb.shape[1:])
+        bh = v @ (b * h[:, None])
+        br = r @ b
+        with np.errstate(invalid="ignore", divide="ignore"):
+            try:
+                sol_h = np.linalg.solve(gram, bh[:, :, None])[:, :, 0]
+                sol_r = np.linalg.solve(gram, br[:, :, None])[:, :, 0]
+            except np.linalg.LinAlgError:  # a shift with too few pairs: solve one by one
+                sol_h, sol_r = _lstsq_each(gram, bh), _lstsq_each(gram, br)
+            hh = v @ (h * h) - np.sum(bh * sol_h, axis=1)
+            rr = np.sum(r * r, axis=1) - np.sum(br * sol_r, axis=1)
+            hr = r @ h - np.sum(bh * sol_r, axis=1)
+            rho[s:s + chunk] = hr / np.sqrt(hh * rr)
+        count[s:s + chunk] = v.sum(axis=1)
+    return rho, count
+
+
+def _lstsq_each(gram: FloatArray, rhs: FloatArray) -> FloatArray:
+    return np.stack([np.linalg.lstsq(g, y, rcond=None)[0] for g, y in zip(gram, rhs,
+                                                                            strict=True)])
+
+
+def centre_inflation(cells: WindowCells, detrend: int) -> float:
     """How many times the variance of the difference surface's value at the centre exceeds
-    that of a mean over the same cells (``n (B'B)^-1`` at the constant; 1 without
-    ``detrend``, about 4 for a quadratic over a disk)."""
+    that of a mean over the same cells (``n (B'B)^-1`` at the constant; 1 with a constant or
+    a plane over a disk, about 4 with a quadratic)."""
     ok = np.isfinite(cells.h_m)
     b = surface_basis(cells, ok, detrend)
     if b.shape[0] <= b.shape[1]:
@@ -175,9 +224,25 @@ def centre_inflation(cells: WindowCells, detrend: bool) -> float:
     return float(b.shape[0] * np.linalg.pinv(b.T @ b)[0, 0])
 
 
-def relief_m(cells: WindowCells, detrend: bool) -> float:
-    """Standard deviation of the window's heights (about their best-fit quadratic surface with
-    ``detrend``, :func:`surface_basis`)."""
+def curvature_m(cells: WindowCells, reference: GeoDEM, sx_arcsec: float, sy_arcsec: float,
+                height_noise_m: float, n_eff: int) -> tuple[float, float]:
+    """(RMS of the quadratic part, beyond their plane, of the height differences between the
+    reference and the window moved by (``sx_arcsec``, ``sy_arcsec``); the RMS their noise alone
+    would give it: their robust spread over the ``n_eff`` independent patches)."""
+    valid = np.isfinite(cells.h_m)
+    diff = reference.height_m(cells.lon_deg[valid] + sx_arcsec * ARCSEC,
+                              cells.lat_deg[valid] + sy_arcsec * ARCSEC) - cells.h_m[valid]
+    use = np.isfinite(diff)
+    b = surface_basis(cells, valid, 2)[use]
+    coef, spread = robust_fit(diff[use], b, mode_scale_m=height_noise_m)
+    q = b[:, 3:] @ coef[3:]
+    q = q - b[:, :3] @ np.linalg.lstsq(b[:, :3], q, rcond=None)[0]
+    return float(np.sqrt(np.mean(q**2))), float(spread * np.sqrt(3.0 / max(n_eff, 1)))
+
+
+def relief_m(cells: WindowCells, detrend: int) -> float:
+    """Standard deviation of the window's heights about their best-fit :func:`surface_basis`
+    (a constant, a plane or a quadratic with ``detrend`` 0, 1, 2)."""
     ok = np.isfinite(cells.h_m)
     if ok.sum() < 4:
         return 0.0

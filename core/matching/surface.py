@@ -48,6 +48,8 @@ from core.geodesy import ARCSEC, geodetic_to_enu, metres_per_degree
 from core.matching.lattice import (
     WindowCells,
     centre_inflation,
+    correlations,
+    curvature_m,
     despike,
     relief_m,
     surface_basis,
@@ -61,6 +63,10 @@ from core.robust import nmad, robust_fit
 
 FloatArray = NDArray[np.float64]
 
+#: a window whose height differences from the reference at its peak depart from their plane
+#: by a quadratic of this RMS (m) at least, and by 3 times its noise, is compared about
+#: quadratics (about 1.7 times this at the centre the plane would put into its GCP's height)
+CURVED_M = 1.0
 #: at the peak, a cell further from the reference than this many robust spreads is a blunder,
 #: and the peak is searched again without the blunders at most ``BLUNDER_ROUNDS`` times
 BLUNDER_K = 3.0
@@ -91,11 +97,11 @@ class SurfaceMatchConfig:
     per window) the windows' honest precisions were 10-20 m, their GCPs' errors matching them,
     and 30 of them oriented the pair to 0.3 px where a 10 m limit left 2; each GCP is weighted
     by its own precision, the limit only refuses windows too vague to help. ``detrend``:
-    compare the two surfaces about their best-fit quadratic surfaces (the relative DEM may be
-    tilted: an along-epipolar drift that tie points cannot see tilts it by metres per
-    kilometre; and curved: a lens the delivered models miss,
-    :func:`core.matching.lattice.surface_basis`), the vertical shift then being that surface's
-    height at the window's centre.
+    compare the two surfaces about their best-fit planes (the relative DEM may be tilted: an
+    along-epipolar drift that tie points cannot see tilts it by metres per kilometre), and
+    about quadratics where the window is curved (:data:`CURVED_M`: a lens the delivered models
+    miss, :func:`core.matching.lattice.surface_basis`), the vertical shift then being that
+    surface's height at the window's centre; 2: quadratics everywhere; False: constants.
     """
 
     radius_m: float = 4000.0
@@ -109,7 +115,7 @@ class SurfaceMatchConfig:
     max_precision_m: float = 20.0
     height_noise_m: float = 5.0
     error_length_m: float = 300.0
-    detrend: bool = True
+    detrend: bool | int = True
 
     def __post_init__(self) -> None:
         if not (self.radius_m > 0 and self.shift_max_arcsec > 0
@@ -185,51 +191,10 @@ class WindowMatch:
 # ------------------------------------------------------------------------- matching
 
 
-def _correlations(cells: WindowCells, reference: GeoDEM, shifts_deg: FloatArray,
-                  detrend: bool = True, chunk: int = 128) -> tuple[FloatArray, FloatArray]:
-    """Correlation coefficient (partial: about the best constant, or quadratic with ``detrend``,
-    of each set over the pairs valid at that shift) and valid-pair count for each (dlon, dlat)
-    shift (n, 2)."""
-    ok = np.isfinite(cells.h_m)
-    lon, lat = cells.lon_deg[ok], cells.lat_deg[ok]
-    h0 = float(np.mean(cells.h_m[ok]))  # near the reference's heights: conditioning only
-    h = cells.h_m[ok] - h0
-    b = surface_basis(cells, ok, detrend)
-    bb = b[:, :, None] * b[:, None, :]  # (n, k, k)
-    rho = np.full(len(shifts_deg), np.nan)
-    count = np.zeros(len(shifts_deg))
-    for s in range(0, len(shifts_deg), chunk):
-        sh = shifts_deg[s:s + chunk]
-        ref = reference.height_m(lon[None, :] + sh[:, :1], lat[None, :] + sh[:, 1:])
-        valid = np.isfinite(ref)
-        v = valid.astype(np.float64)
-        r = np.where(valid, ref - h0, 0.0)  # the basis holds a constant: any offset does
-        gram = (v @ bb.reshape(len(h), -1)).reshape(len(sh), *bb.shape[1:])
-        bh = v @ (b * h[:, None])
-        br = r @ b
-        with np.errstate(invalid="ignore", divide="ignore"):
-            try:
-                sol_h = np.linalg.solve(gram, bh[:, :, None])[:, :, 0]
-                sol_r = np.linalg.solve(gram, br[:, :, None])[:, :, 0]
-            except np.linalg.LinAlgError:  # a shift with too few pairs: solve one by one
-                sol_h, sol_r = _lstsq_each(gram, bh), _lstsq_each(gram, br)
-            hh = v @ (h * h) - np.sum(bh * sol_h, axis=1)
-            rr = np.sum(r * r, axis=1) - np.sum(br * sol_r, axis=1)
-            hr = r @ h - np.sum(bh * sol_r, axis=1)
-            rho[s:s + chunk] = hr / np.sqrt(hh * rr)
-        count[s:s + chunk] = v.sum(axis=1)
-    return rho, count
-
-
-def _lstsq_each(gram: FloatArray, rhs: FloatArray) -> FloatArray:
-    return np.stack([np.linalg.lstsq(g, y, rcond=None)[0] for g, y in zip(gram, rhs,
-                                                                            strict=True)])
-
-
 def _valid_rho(cells: WindowCells, reference: GeoDEM, sx_arcsec: FloatArray,
                sy_arcsec: FloatArray, min_cells: int, detrend: bool) -> FloatArray:
     """Correlations at shifts (arcsec), NaN where fewer than ``min_cells`` pairs are valid."""
-    rho, count = _correlations(cells, reference, np.stack([sx_arcsec, sy_arcsec], 1) * ARCSEC,
+    rho, count = correlations(cells, reference, np.stack([sx_arcsec, sy_arcsec], 1) * ARCSEC,
                                detrend)
     return np.where(count >= min_cells, rho, np.nan)
 
@@ -244,13 +209,13 @@ def predicted_precision_m(cells: WindowCells, cfg: SurfaceMatchConfig) -> tuple[
     """(precision m, relief m, RMS slope, independent patches) the window's relief promises.
 
     With ``cfg.detrend`` the relief and the slopes are those of the heights about their
-    best-fit quadratic surface (:func:`core.matching.lattice.surface_basis`): it carries no
-    information once the window's tilt and curvature are free.
+    best-fit plane (or quadratic, :func:`core.matching.lattice.surface_basis`): it carries no
+    information once the window's tilt (and curvature) are free.
     """
     h = cells.h_m.copy()
     ok = np.isfinite(h)
     if cfg.detrend and ok.sum() > 6:
-        b = surface_basis(cells, ok, True)
+        b = surface_basis(cells, ok, cfg.detrend)
         h[ok] -= b @ np.linalg.lstsq(b, h[ok], rcond=None)[0]
     gy, gx = np.gradient(h.reshape(cells.shape), cells.cell_m)
     g2 = gx**2 + gy**2
@@ -330,7 +295,7 @@ def _refined(cells: WindowCells, reference: GeoDEM, cfg: SurfaceMatchConfig,
         return peak
     fine = _grid(0.5 * cfg.shift_step_arcsec, cfg.refine_step_arcsec)
     fx, fy = np.meshgrid(peak.sx + fine, peak.sy + fine)
-    rf, _ = _correlations(cells, reference, np.stack([fx.ravel(), fy.ravel()], 1) * ARCSEC,
+    rf, _ = correlations(cells, reference, np.stack([fx.ravel(), fy.ravel()], 1) * ARCSEC,
                           cfg.detrend)
     rf = rf.reshape(fx.shape)
     if not np.isfinite(rf).all():
@@ -410,7 +375,9 @@ def match_window(lon_deg: ArrayLike, lat_deg: ArrayLike, h_m: ArrayLike,
     follows them: spikes first (:func:`despike`), then, at the peak, cells further than
     :data:`BLUNDER_K` robust spreads from the reference (at least ``cfg.height_noise_m``), and
     the peak is searched again around the first one without them (at most
-    :data:`BLUNDER_ROUNDS` times). The relief is the spread of the heights correlated."""
+    :data:`BLUNDER_ROUNDS` times). The relief is the spread of the heights correlated. A
+    window the DEM's edge cuts is matched point-symmetric about its centre
+    (:func:`core.matching.lattice.symmetric`), whole when what is left cannot make a GCP."""
     m_lon, m_lat = (float(v) for v in metres_per_degree(centre[1]))
     cell = cfg.cell_m if cfg.cell_m is not None else reference.cell_size_m()
     raw = window_cells(lon_deg, lat_deg, h_m, centre, cfg.radius_m, cell)
@@ -418,7 +385,20 @@ def match_window(lon_deg: ArrayLike, lat_deg: ArrayLike, h_m: ArrayLike,
     paired = valid.copy()  # and a reference height there
     paired[valid] = np.isfinite(reference.height_m(raw.lon_deg[valid], raw.lat_deg[valid]))
     masked = 1.0 - paired.sum() / max(raw.n_disk, 1)  # mismatched cells or reference voids
-    cells = symmetric(despike(raw))
+    whole = despike(raw)
+    cut = symmetric(whole)
+    result = _matched(cut, paired, masked, reference, cfg, prior, (m_lon, m_lat))
+    if cut is not whole and result.status != WindowStatus.OK:  # too little left symmetric
+        result = _matched(whole, paired, masked, reference, cfg, prior, (m_lon, m_lat))
+    return result
+
+
+def _matched(cells: WindowCells, paired: NDArray[np.bool_], masked: float, reference: GeoDEM,
+             cfg: SurfaceMatchConfig, prior: tuple[float, float, float] | None,
+             m_per_deg: tuple[float, float]) -> WindowMatch:
+    """:func:`match_window` on the window's ``cells`` (``paired``: the lattice cells with a
+    reference height, ``masked`` the share of the disk without)."""
+    m_lon, m_lat = m_per_deg
     valid = np.isfinite(cells.h_m)
     n_pairs = int(np.count_nonzero(paired & valid))
     pred, relief, slope, n_eff = predicted_precision_m(cells, cfg)
@@ -430,7 +410,13 @@ def match_window(lon_deg: ArrayLike, lat_deg: ArrayLike, h_m: ArrayLike,
         return WindowMatch(WindowStatus.MASKED, **base)
     if not pred <= cfg.max_precision_m:
         return WindowMatch(WindowStatus.LOW_RELIEF, **base)
+    start = cells
     cells, peak, dz, spread = _without_blunders(cells, reference, cfg, prior)
+    if cfg.detrend == 1 and peak.status == WindowStatus.OK:  # planes (True): curved?
+        q, noise = curvature_m(cells, reference, peak.sx, peak.sy, cfg.height_noise_m, n_eff)
+        if q > max(CURVED_M, 3.0 * noise):
+            cfg = replace(cfg, detrend=2)
+            cells, peak, dz, spread = _without_blunders(start, reference, cfg, prior)
     if peak.status != WindowStatus.OK:
         return WindowMatch(peak.status, correlation=peak.correlation, **base)
     relief = relief_m(cells, cfg.detrend)

@@ -181,7 +181,7 @@ def relief_figure(relief_m: np.ndarray, predicted_m: np.ndarray, statuses: Seque
     if positive.size:
         ax.set_xscale("log")
         ax.set_yscale("log")
-    ax.set_xlabel("window relief: std of heights about their quadratic (m)")
+    ax.set_xlabel("window relief: std of heights about their plane or quadratic (m)")
     ax.set_ylabel("precision predicted from the relief (m)")
     ax.grid(alpha=0.3, which="both")
     ax.legend(fontsize=8)

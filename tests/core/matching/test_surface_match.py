@@ -67,12 +67,10 @@ def test_known_shift_recovered(ref, shift):
     assert w.ok and w.correlation > 0.99
     err_e = (w.shift_lon_arcsec - shift[0]) / 3600 * M_LON
     err_n = (w.shift_lat_arcsec - shift[1]) / 3600 * M_LAT
-    # the reference's correlated noise: 4 m (errors 2.1-3.5 m here about a plane, 2.6-4.2 m
-    # about the quadratic surface, which takes the window's large-scale shape out of both)
-    assert np.hypot(err_e, err_n) < 4.5
-    # the quadratic's value at the centre has twice the standard error of a plane's: 0.74 m
-    # over 12 draws of the reference's noise, 0.34 m about a plane (errors here -1.2 to -1.5 m)
-    assert abs(w.shift_h_m - shift[2]) < 2.0
+    # the reference's correlated noise: 4 m (errors 2.1-3.5 m here; 2.1-3.1 m when the window
+    # lattice used the approximate metres per degree: another sampling of the same noise)
+    assert np.hypot(err_e, err_n) < 4.0
+    assert abs(w.shift_h_m - shift[2]) < 1.0
     assert w.shift_east_m == pytest.approx(w.shift_lon_arcsec / 3600 * M_LON, rel=2e-3)
     # the precisions are of the size of the errors, and the prediction agrees with the measure
     assert 0.5 < w.precision_m < 6.0 and 0.5 < w.predicted_precision_m < 6.0
@@ -93,7 +91,7 @@ def test_a_tilted_relative_dem_is_matched_about_its_plane(ref, detrend):
     err = np.hypot((w.shift_lon_arcsec - shift[0]) / 3600 * M_LON,
                    (w.shift_lat_arcsec - shift[1]) / 3600 * M_LAT)
     if detrend:
-        assert w.ok and err < 3.5 and abs(w.shift_h_m - shift[2]) < 2.0
+        assert w.ok and err < 3.5 and abs(w.shift_h_m - shift[2]) < 1.0
     else:
         assert err > 10.0
 
@@ -101,8 +99,9 @@ def test_a_tilted_relative_dem_is_matched_about_its_plane(ref, detrend):
 def test_a_curved_relative_dem_gives_its_height_at_the_centre(ref):
     """A relative DEM curved across the swath (the parallax a lens the delivered models lack
     leaves: simulated tiny with --lens, the windows' vertical shift +80 m at one end of the
-    swath, 0 in the middle, -68 m at the other, 5 m/km2 of curvature near the ends): compared
-    about their quadratic surfaces, the window finds the shift and the height at the centre.
+    swath, 0 in the middle, -68 m at the other, 5 m/km2 of curvature near the ends): found
+    curved, compared about their quadratic surfaces, the window finds the shift and the height
+    at the centre.
     About their planes the curvature the terrain shares moved it 16.7 m (on that scene the
     swath's end GCPs were 6-14 m off east, their heights followed the vertical shift, and the
     lens terms extrapolated that to 0.45 px of check-point columns beyond the last GCP)."""
@@ -114,6 +113,8 @@ def test_a_curved_relative_dem_gives_its_height_at_the_centre(ref):
     err = np.hypot((w.shift_lon_arcsec - shift[0]) / 3600 * M_LON,
                    (w.shift_lat_arcsec - shift[1]) / 3600 * M_LAT)
     assert w.ok and err < 3.5  # about a plane: 16.7 m (10.8 E, -12.7 N), the terrain sharing it
+    # the quadratic's value at the centre has twice the standard error of a plane's (0.74 m
+    # over 12 draws of the reference's noise, 0.34 m about a plane)
     assert abs(w.shift_h_m - shift[2]) < 2.0
 
 
