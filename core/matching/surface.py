@@ -381,23 +381,33 @@ def match_window(lon_deg: ArrayLike, lat_deg: ArrayLike, h_m: ArrayLike,
     m_lon, m_lat = (float(v) for v in metres_per_degree(centre[1]))
     cell = cfg.cell_m if cfg.cell_m is not None else reference.cell_size_m()
     raw = window_cells(lon_deg, lat_deg, h_m, centre, cfg.radius_m, cell)
+    return _match_raw(raw, reference, cfg, prior, (m_lon, m_lat))[0]
+
+
+def _match_raw(raw: WindowCells, reference: GeoDEM, cfg: SurfaceMatchConfig,
+               prior: tuple[float, float, float] | None, m_per_deg: tuple[float, float]
+               ) -> tuple[WindowMatch, WindowCells, SurfaceMatchConfig]:
+    """:func:`_matched` on the window's lattice ``raw``: despiked, cut symmetric, whole when the
+    cut cannot make a GCP."""
     valid = np.isfinite(raw.h_m)
     paired = valid.copy()  # and a reference height there
     paired[valid] = np.isfinite(reference.height_m(raw.lon_deg[valid], raw.lat_deg[valid]))
     masked = 1.0 - paired.sum() / max(raw.n_disk, 1)  # mismatched cells or reference voids
     whole = despike(raw)
     cut = symmetric(whole)
-    result = _matched(cut, paired, masked, reference, cfg, prior, (m_lon, m_lat))
-    if cut is not whole and result.status != WindowStatus.OK:  # too little left symmetric
-        result = _matched(whole, paired, masked, reference, cfg, prior, (m_lon, m_lat))
-    return result
+    out = _matched(cut, paired, masked, reference, cfg, prior, m_per_deg)
+    if cut is not whole and out[0].status != WindowStatus.OK:  # too little left symmetric
+        out = _matched(whole, paired, masked, reference, cfg, prior, m_per_deg)
+    return out
 
 
 def _matched(cells: WindowCells, paired: NDArray[np.bool_], masked: float, reference: GeoDEM,
              cfg: SurfaceMatchConfig, prior: tuple[float, float, float] | None,
-             m_per_deg: tuple[float, float]) -> WindowMatch:
+             m_per_deg: tuple[float, float]
+             ) -> tuple[WindowMatch, WindowCells, SurfaceMatchConfig]:
     """:func:`match_window` on the window's ``cells`` (``paired``: the lattice cells with a
-    reference height, ``masked`` the share of the disk without)."""
+    reference height, ``masked`` the share of the disk without), with the cells it correlated
+    last and the configuration it used (its ``detrend``: plane or quadratic)."""
     m_lon, m_lat = m_per_deg
     valid = np.isfinite(cells.h_m)
     n_pairs = int(np.count_nonzero(paired & valid))
@@ -405,11 +415,11 @@ def _matched(cells: WindowCells, paired: NDArray[np.bool_], masked: float, refer
     base = dict(relief_m=relief, rms_slope=slope, n_cells=n_pairs, masked_share=masked,
                 predicted_precision_m=pred, n_dem_cells=int(valid.sum()))
     if n_pairs < cfg.min_cells:
-        return WindowMatch(WindowStatus.TOO_FEW_CELLS, **base)
+        return WindowMatch(WindowStatus.TOO_FEW_CELLS, **base), cells, cfg
     if masked > cfg.max_masked_share:
-        return WindowMatch(WindowStatus.MASKED, **base)
+        return WindowMatch(WindowStatus.MASKED, **base), cells, cfg
     if not pred <= cfg.max_precision_m:
-        return WindowMatch(WindowStatus.LOW_RELIEF, **base)
+        return WindowMatch(WindowStatus.LOW_RELIEF, **base), cells, cfg
     start = cells
     cells, peak, dz, spread = _without_blunders(cells, reference, cfg, prior)
     if cfg.detrend == 1 and peak.status == WindowStatus.OK:  # planes (True): curved?
@@ -418,7 +428,7 @@ def _matched(cells: WindowCells, paired: NDArray[np.bool_], masked: float, refer
             cfg = replace(cfg, detrend=2)
             cells, peak, dz, spread = _without_blunders(start, reference, cfg, prior)
     if peak.status != WindowStatus.OK:
-        return WindowMatch(peak.status, correlation=peak.correlation, **base)
+        return WindowMatch(peak.status, correlation=peak.correlation, **base), cells, cfg
     relief = relief_m(cells, cfg.detrend)
     # precision: near its peak rho(s) ~ 1 - k s^2 / 2 with k = slope^2 / relief^2 along the
     # flattest direction (the peak's curvature, per m^2); least squares then knows the shift to
@@ -435,10 +445,10 @@ def _matched(cells: WindowCells, paired: NDArray[np.bool_], masked: float, refer
             cells, cfg.detrend) / max(n_eff, 1))),
         spread_m=float(spread), **{**base, "relief_m": relief})
     if peak.correlation < cfg.min_correlation:
-        return WindowMatch(**{**vars(result), "status": WindowStatus.LOW_CORRELATION})
-    if not precision <= cfg.max_precision_m:
-        return WindowMatch(**{**vars(result), "status": WindowStatus.IMPRECISE})
-    return result
+        result = WindowMatch(**{**vars(result), "status": WindowStatus.LOW_CORRELATION})
+    elif not precision <= cfg.max_precision_m:
+        result = WindowMatch(**{**vars(result), "status": WindowStatus.IMPRECISE})
+    return result, cells, cfg
 
 
 # ------------------------------------------------------------------------- search prior
@@ -567,19 +577,21 @@ def correlation_surface(lon_deg: ArrayLike, lat_deg: ArrayLike, h_m: ArrayLike,
                         ) -> tuple[FloatArray, FloatArray]:
     """The correlation of one window over the whole grid of shifts (Goncalves's Fig. 5).
 
-    Same inputs as :func:`match_window`, and the same cells: despiked, without the blunders
-    found at the peak (searched over the whole range). Returns the shifts ``(n,)`` in
+    Same inputs as :func:`match_window`, and the same cells and comparison: despiked, cut
+    symmetric or whole, without the blunders found at the peak (searched over the whole range),
+    about planes or quadratics as the window was. Returns the shifts ``(n,)`` in
     arcseconds (the same for dlon and dlat: ``-cfg.shift_max_arcsec ..
     +cfg.shift_max_arcsec`` every ``cfg.shift_step_arcsec``) and the correlation ``(n, n)``
     indexed ``[dlat, dlon]``, NaN where fewer than ``cfg.min_cells`` pairs are valid (all NaN
     for an empty window).
     """
     cell = cfg.cell_m if cfg.cell_m is not None else reference.cell_size_m()
-    cells = despike(window_cells(lon_deg, lat_deg, h_m, centre, cfg.radius_m, cell))
+    raw = window_cells(lon_deg, lat_deg, h_m, centre, cfg.radius_m, cell)
     grid = _grid(cfg.shift_max_arcsec, cfg.shift_step_arcsec)
-    if np.count_nonzero(np.isfinite(cells.h_m)) < cfg.min_cells:
+    if np.count_nonzero(np.isfinite(raw.h_m)) < cfg.min_cells:
         return grid, np.full((grid.size, grid.size), np.nan)
-    cells = _without_blunders(cells, reference, cfg, None)[0]
+    m_lon, m_lat = (float(v) for v in metres_per_degree(centre[1]))
+    _, cells, cfg = _match_raw(raw, reference, cfg, None, (m_lon, m_lat))
     gx, gy = np.meshgrid(grid, grid)
     rho = _valid_rho(cells, reference, gx.ravel(), gy.ravel(), cfg.min_cells, cfg.detrend)
     return grid, rho.reshape(gx.shape)
