@@ -173,7 +173,7 @@ def surface_basis(cells: WindowCells, ok: NDArray[np.bool_], detrend: int) -> Fl
 
 
 def correlations(cells: WindowCells, reference: GeoDEM, shifts_deg: FloatArray,
-                  detrend: bool = True, chunk: int = 128) -> tuple[FloatArray, FloatArray]:
+                 detrend: bool | int = True, chunk: int = 128) -> tuple[FloatArray, FloatArray]:
     """Correlation coefficient (partial: about the best :func:`surface_basis` of ``detrend``,
     of each set over the pairs valid at that shift) and valid-pair count for each (dlon, dlat)
     shift (n, 2)."""
@@ -224,17 +224,26 @@ def centre_inflation(cells: WindowCells, detrend: int) -> float:
     return float(b.shape[0] * np.linalg.pinv(b.T @ b)[0, 0])
 
 
-def curvature_m(cells: WindowCells, reference: GeoDEM, sx_arcsec: float, sy_arcsec: float,
-                height_noise_m: float, n_eff: int) -> tuple[float, float]:
-    """(RMS of the quadratic part, beyond their plane, of the height differences between the
-    reference and the window moved by (``sx_arcsec``, ``sy_arcsec``); the RMS their noise alone
-    would give it: their robust spread over the ``n_eff`` independent patches)."""
+def differences(cells: WindowCells, reference: GeoDEM, sx_arcsec: float, sy_arcsec: float
+                ) -> tuple[NDArray[np.bool_], FloatArray]:
+    """The reference's heights less the window's, the window moved by (``sx_arcsec``,
+    ``sy_arcsec``): the lattice cells where both have a height, and the differences there."""
     valid = np.isfinite(cells.h_m)
     diff = reference.height_m(cells.lon_deg[valid] + sx_arcsec * ARCSEC,
                               cells.lat_deg[valid] + sy_arcsec * ARCSEC) - cells.h_m[valid]
-    use = np.isfinite(diff)
-    b = surface_basis(cells, valid, 2)[use]
-    coef, spread = robust_fit(diff[use], b, mode_scale_m=height_noise_m)
+    both = valid.copy()
+    both[valid] = np.isfinite(diff)
+    return both, diff[np.isfinite(diff)]
+
+
+def curvature_m(cells: WindowCells, reference: GeoDEM, sx_arcsec: float, sy_arcsec: float,
+                height_noise_m: float, n_eff: int) -> tuple[float, float]:
+    """(RMS of the quadratic part, beyond their plane, of the height :func:`differences` at
+    (``sx_arcsec``, ``sy_arcsec``); the RMS their noise alone would give it: their robust spread
+    over the ``n_eff`` independent patches)."""
+    both, diff = differences(cells, reference, sx_arcsec, sy_arcsec)
+    b = surface_basis(cells, both, 2)
+    coef, spread = robust_fit(diff, b, mode_scale_m=height_noise_m)
     q = b[:, 3:] @ coef[3:]
     q = q - b[:, :3] @ np.linalg.lstsq(b[:, :3], q, rcond=None)[0]
     return float(np.sqrt(np.mean(q**2))), float(spread * np.sqrt(3.0 / max(n_eff, 1)))

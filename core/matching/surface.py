@@ -51,6 +51,7 @@ from core.matching.lattice import (
     correlations,
     curvature_m,
     despike,
+    differences,
     relief_m,
     surface_basis,
     symmetric,
@@ -192,7 +193,7 @@ class WindowMatch:
 
 
 def _valid_rho(cells: WindowCells, reference: GeoDEM, sx_arcsec: FloatArray,
-               sy_arcsec: FloatArray, min_cells: int, detrend: bool) -> FloatArray:
+               sy_arcsec: FloatArray, min_cells: int, detrend: bool | int) -> FloatArray:
     """Correlations at shifts (arcsec), NaN where fewer than ``min_cells`` pairs are valid."""
     rho, count = correlations(cells, reference, np.stack([sx_arcsec, sy_arcsec], 1) * ARCSEC,
                                detrend)
@@ -311,19 +312,15 @@ def _refined(cells: WindowCells, reference: GeoDEM, cfg: SurfaceMatchConfig,
 def _vertical(cells: WindowCells, reference: GeoDEM, peak: _Peak, cfg: SurfaceMatchConfig
               ) -> tuple[float, float, NDArray[np.bool_]]:
     """(vertical shift at the centre, robust spread, blunders) of the height differences at the
-    peak's shift: the robust plane (or constant) of reference minus relative heights moved to
-    their dominant mode (:func:`core.robust.robust_fit`), and the lattice cells further than
+    peak's shift (:func:`core.matching.lattice.differences`): their robust
+    :func:`core.matching.lattice.surface_basis` (plane, quadratic or constant) moved to their
+    dominant mode (:func:`core.robust.robust_fit`), and the lattice cells further than
     :data:`BLUNDER_K` spreads from it."""
-    valid = np.isfinite(cells.h_m)
-    ref = reference.height_m(cells.lon_deg[valid] + peak.sx * ARCSEC,
-                             cells.lat_deg[valid] + peak.sy * ARCSEC)
-    diff = ref - cells.h_m[valid]
-    use = np.isfinite(diff)
-    basis = surface_basis(cells, valid, cfg.detrend)[use]
-    coef, spread = robust_fit(diff[use], basis, mode_scale_m=cfg.height_noise_m)
+    both, diff = differences(cells, reference, peak.sx, peak.sy)
+    basis = surface_basis(cells, both, cfg.detrend)
+    coef, spread = robust_fit(diff, basis, mode_scale_m=cfg.height_noise_m)
     far = np.zeros(cells.h_m.size, dtype=bool)
-    far[np.flatnonzero(valid)[use]] = (np.abs(diff[use] - basis @ coef)
-                                       > BLUNDER_K * max(spread, cfg.height_noise_m))
+    far[both] = np.abs(diff - basis @ coef) > BLUNDER_K * max(spread, cfg.height_noise_m)
     return float(coef[0]), float(spread), far  # coef[0]: at the centre, x = y = 0 there
 
 
