@@ -20,6 +20,7 @@ from __future__ import annotations
 import json
 import sys
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
@@ -109,6 +110,21 @@ def beyond_shift(scene: Path, out: Path) -> dict[str, dict[str, float]]:
     return res
 
 
+def line(name: str, r: dict[str, Any]) -> str:
+    """One image's figures of :func:`beyond_shift` (col / row, px), as printed."""
+    return (f"{name:5s} measured {r['rms_col_px']:.2f} / {r['rms_row_px']:.2f}, the shift "
+            f"{r['shift_col_px']:.2f} / {r['shift_row_px']:.2f}, beyond it "
+            f"{r['beyond_col_px']:.2f} / {r['beyond_row_px']:.2f} (mean "
+            f"{r['beyond_mean_col_px']:+.2f} / {r['beyond_mean_row_px']:+.2f}), beyond the "
+            f"GCPs' common error ({', '.join(f'{x:+.1f}' for x in r['gcp_common_error_m'])} "
+            f"m) {r['beyond_common_col_px']:.2f} / {r['beyond_common_row_px']:.2f}; predicted "
+            f"{r['predicted_col_px']:.2f} / {r['predicted_row_px']:.2f}, without the "
+            f"reference {r['predicted_beyond_col_px']:.2f} / "
+            f"{r['predicted_beyond_row_px']:.2f}; ratio beyond the common error "
+            f"{r['beyond_common_col_px'] / r['predicted_beyond_col_px']:.2f} / "
+            f"{r['beyond_common_row_px'] / r['predicted_beyond_row_px']:.2f}")
+
+
 def main() -> None:
     if len(sys.argv) != 3:
         sys.exit("usage: beyond_shift.py SCENE_DIR ORIENT_DIR")
@@ -116,17 +132,7 @@ def main() -> None:
     err = json.loads((scene / "truth" / "reference_errors.json").read_text())
     print(f"reference shift E {err['shift_east_m']:+.1f} N {err['shift_north_m']:+.1f} m")
     for name, r in beyond_shift(scene, out).items():
-        print(f"{name:5s} measured {r['rms_col_px']:.2f} / {r['rms_row_px']:.2f}, the shift "
-              f"{r['shift_col_px']:.2f} / {r['shift_row_px']:.2f}, beyond it "
-              f"{r['beyond_col_px']:.2f} / {r['beyond_row_px']:.2f} (mean "
-              f"{r['beyond_mean_col_px']:+.2f} / {r['beyond_mean_row_px']:+.2f}), beyond the "
-              f"GCPs' common error ({', '.join(f'{x:+.1f}' for x in r['gcp_common_error_m'])} "
-              f"m) {r['beyond_common_col_px']:.2f} / {r['beyond_common_row_px']:.2f}; predicted "
-              f"{r['predicted_col_px']:.2f} / {r['predicted_row_px']:.2f}, without the "
-              f"reference {r['predicted_beyond_col_px']:.2f} / "
-              f"{r['predicted_beyond_row_px']:.2f}; ratio beyond the common error "
-              f"{r['beyond_common_col_px'] / r['predicted_beyond_col_px']:.2f} / "
-              f"{r['beyond_common_row_px'] / r['predicted_beyond_row_px']:.2f}")
+        print(line(name, r))
 
 
 if __name__ == "__main__":

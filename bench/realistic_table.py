@@ -19,7 +19,7 @@ import tempfile
 import time
 from pathlib import Path
 
-from beyond_shift import beyond_shift
+from beyond_shift import beyond_shift, line
 from relief_sweep import cli
 
 DEFAULT = ("spot:2:simple,spot:2:realistic,spot:2:realistic:jitter,hrs:1:simple,"
@@ -74,14 +74,8 @@ def main() -> None:
                 continue
             e, n = row["reference_shift_m"]
             for name, c in row["images"].items():
-                print(f"{row['case']} (shift E {e:+.1f} N {n:+.1f} m) {name:5s}: measured "
-                      f"{c['rms_col_px']:.2f}/{c['rms_row_px']:.2f}, beyond the shift "
-                      f"{c['beyond_col_px']:.2f}/{c['beyond_row_px']:.2f}, beyond the GCPs' "
-                      f"common error {c['beyond_common_col_px']:.2f}/"
-                      f"{c['beyond_common_row_px']:.2f}; predicted "
-                      f"{c['predicted_col_px']:.2f}/{c['predicted_row_px']:.2f}, without the "
-                      f"reference {c['predicted_beyond_col_px']:.2f}/"
-                      f"{c['predicted_beyond_row_px']:.2f}", flush=True)
+                print(f"{row['case']} (shift E {e:+.1f} N {n:+.1f} m) {line(name, c)}",
+                      flush=True)
     (dest / "realistic_table.json").write_text(json.dumps(rows, indent=1))
 
 
