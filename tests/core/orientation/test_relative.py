@@ -122,6 +122,34 @@ def test_along_track_pair_cannot_see_pitch():
     assert res.parallax_rms_after_px < 0.12
 
 
+def test_a_lens_the_models_miss_is_kept_where_blunders_are_not():
+    """Along track, a lens the delivered right model lacks puts its cubic in the columns, across
+    the epipolar lines: over 1 px of y-parallax at the swath's ends, which the neighbours share.
+    Those points are kept (the parallax alone would have rejected them all: hrs seed 1 lost the
+    outer 600-1000 columns on both sides that way), blunders among them still go."""
+    from dataclasses import replace
+
+    from core.sensors.linear_array import LensDistortion
+
+    left, right = pair((0.0, 0.0), (20.0, -20.0))
+    truth = right.with_params(np.array([-2e-5, 3e-5, 1e-5, 0.0, 0.0, 0.0]))
+    unit = replace(truth, distortion=LensDistortion(k3=1.0))
+    lon, lat = truth.localize(np.array([0.0, 0.5 * N_PX]), np.array([0.0, 0.0]), 900.0)
+    edge = abs(np.diff(unit.project(lon, lat, 900.0)[0] - truth.project(lon, lat, 900.0)[0]))
+    truth = replace(truth, distortion=LensDistortion(k3=2.0 / float(edge[0])))  # 2 px at ends
+    lc, lr, rc, rr, _ = tie_points(left, truth, n=600, seed=7)
+    rng = np.random.default_rng(8)
+    bad = rng.choice(lc.size, 30, replace=False)
+    rc[bad] += rng.choice([-1.0, 1.0], bad.size) * rng.uniform(3.0, 10.0, bad.size)
+    res = relative_orientation(left, right, lc, lr, rc, rr, 900.0)
+    ends = np.setdiff1d(np.flatnonzero((lc < 0.1 * N_PX) | (lc > 0.9 * N_PX)), bad)
+    sigma = 1.4826 * np.median(np.abs(res.parallax_px[res.inlier]))
+    assert np.mean(np.abs(res.parallax_px[ends]) > res.sigma_px * 3.0) > 0.5  # the old test
+    assert res.inlier[ends].mean() > 0.95
+    assert not res.inlier[bad].any()
+    assert sigma < 0.5
+
+
 @pytest.mark.parametrize("corrections", ["offset", "linear"])
 def test_rpc_bias_compensation(across, corrections):
     """RPCs fitted to the synthetic models; the right one's truth carries a shift (offset) or
