@@ -345,9 +345,6 @@ class CorrelatedGroundError:
 
 
 NO_CORRELATION = CorrelatedGroundError((0.0, 0.0, 0.0), 1.0, 0)
-#: the drop of the products' misfit (in units of their sampling variance) a component of the
-#: correlated ground error must bring to be kept: 3 sigma
-SIGNIFICANT = 9.0
 
 
 def _distances(east_m: ArrayLike, north_m: ArrayLike) -> FloatArray:
@@ -368,30 +365,22 @@ def correlated_ground_error(ground_jac: ArrayLike, v: ArrayLike, east_m: ArrayLi
     pair distances up to half the largest; the pair with itself left out, so independent
     noise adds nothing), fitted by the variances ``c_k >= 0`` of a field correlated as
     ``exp(-d / L)`` (one length for the three components, chosen on a logarithmic grid up to
-    the GCPs' largest distance). Each component is kept only where it lowers the products'
-    misfit by :data:`SIGNIFICANT` times their sampling variance under independent errors
-    (products of distinct pairs are uncorrelated, so ``mean(e^2)^2 / count``): the estimate of
-    a component under its noise is dropped, not stated. Not under ``4 n_bins`` GCPs, whose
-    few pairs test nothing: there a field missed under-predicts far more than a spurious one
-    over-predicts (the relief x 0.15 scene below).
+    four times the GCPs' largest distance).
 
-    Lengths stop at the GCPs' largest distance: beyond it a field is a constant over the scene,
-    which the residuals have lost whole (the reference's shift, stated by its own term), so its
-    fitted variance is free. A few GCPs (a flat scene where few windows qualify) share such a
-    field as much as many do, so under ``4 n_bins`` GCPs there are fewer classes (none under 8
-    GCPs). Measured: simulated tiny at relief x 0.15, 11 GCPs, 183 m over 87 km against 61 m
-    RMS of GCP error east with lengths up to 4 times the extent; simulated spot (simple errors,
-    195 GCPs) 6.5 m east over 296 km, 0.62 px of check-point columns predicted without the
-    reference term against 0.14 px measured beyond the shift.
+    A few GCPs (a flat scene where few windows qualify) share such a field as much as many
+    do, so under ``4 n_bins`` GCPs there are fewer classes (none under 8 GCPs), and lengths
+    only up to the GCPs' largest distance: two classes cannot tell a longer length from a
+    constant, which the residuals have lost almost whole, so its fitted variance would grow
+    without bound (simulated tiny at relief x 0.15, 11 GCPs: 183 m over 87 km, against 61 m
+    RMS of GCP error east; no field at all before, and 0.34 px predicted against 1.84).
 
     The residuals of an adjustment have lost the part of the error its parameters follow (a
     shift, a rate: the long wavelengths), and a check point shows that part whole. With
     ``absorbed`` = (``param_jac`` (n, m, 2, u), ``sigma_px`` (n, m, 2), ``covariance`` (u, u))
     of that adjustment, the fit compares the products with what the field leaves in the
     residuals, ``P R G K G' R' P'`` (``R = I - A C A' W`` the residuals' projector, ``P`` the
-    ``G_i^+``), so the field found is the one before the adjustment, and the products
-    independent noise leaves in the residuals (``-P A C A' P'``) are taken out first; without
-    it, the raw ``c_k exp(-d / L)`` with ``c_k`` at most ``mean(e_k^2)`` (a lower bound)."""
+    ``G_i^+``), so the field found is the one before the adjustment; without it, the raw
+    ``c_k exp(-d / L)`` with ``c_k`` at most ``mean(e_k^2)`` (a lower bound)."""
     from scipy.optimize import nnls
 
     g = np.asarray(ground_jac, dtype=np.float64)
@@ -400,7 +389,7 @@ def correlated_ground_error(ground_jac: ArrayLike, v: ArrayLike, east_m: ArrayLi
     if g.ndim != 4 or g.shape[1:] != (v.shape[1], 2, 3) or v.shape[1] < 2:
         raise InputError(f"ground Jacobian {g.shape} and residuals {v.shape} must be "
                          "(n, m, 2, 3) and (n, m, 2) with m >= 2 images")
-    tested = n >= 4 * n_bins  # enough pairs for the significance gate
+    few = n < 4 * n_bins  # fewer classes, and lengths only up to the GCPs' extent
     n_bins = min(n_bins, n // 4)
     if n_bins < 2:
         return NO_CORRELATION
@@ -433,42 +422,26 @@ def correlated_ground_error(ground_jac: ArrayLike, v: ArrayLike, east_m: ArrayLi
         for k in range(3):
             z[:, k] = -np.einsum("nlu,uv,pv->lnp", pa, c_, awg[:, :, k])
             z[k, k] += np.eye(n)
-        # independent noise leaves the residuals correlated too (cov(v) = S - A C A', S their
-        # variances): those products are the noise's, not a field's
-        q = np.einsum("plu,uv,plv->pl", pa[pi], c_, pa[pj])  # (pairs, 3)
-        emp = emp + np.stack([binned(q[:, ll]) for ll in range(3)], axis=1)
-    best: tuple[float, float, FloatArray, FloatArray] | None = None
+    best = (np.inf, NO_CORRELATION)
     total = np.mean(e**2, axis=0)
-    for length in np.geomspace(0.25 * max(edges[1], 1.0), dd.max(), 30):
+    longest = (1.0 if few else 4.0) * dd.max()
+    for length in np.geomspace(0.25 * max(edges[1], 1.0), longest, 30):
         corr = np.exp(-d / length)
         if z is None:
             f = binned(np.exp(-dd[inside] / length))
             c = np.clip((w[:, 0] ** 2 * f) @ emp / np.sum(w[:, 0] ** 2 * f * f), 0.0, total)
-            basis = f[:, None, None] * np.eye(3)  # (bins, l, k)
+            model = f[:, None] * c
         else:
             basis = np.stack([np.stack([binned((z[ll, k] @ corr @ z[ll, k].T)[pi, pj])
                                         for ll in range(3)], axis=1)
                               for k in range(3)], axis=2)  # (bins, l, k)
             c, _ = nnls((w[:, :, None] * basis).reshape(-1, 3), (w * emp).reshape(-1))
-        cost = float(np.sum((w * (emp - np.einsum("blk,k->bl", basis, c))) ** 2))
-        if best is None or cost < best[0]:
-            best = (cost, float(length), c, basis)
-    assert best is not None
-    _, length, c, basis = best
-    # each component only where it explains the products beyond their sampling error under
-    # independent errors (distinct pairs' products are uncorrelated: SE^2 = mean(e^2)^2 / count)
-    se2 = np.maximum(total, 1e-300)[None, :] ** 2 / cnt[ok][:, None]
-
-    def misfit(cc: FloatArray) -> float:
-        return float(np.sum((emp - np.einsum("blk,k->bl", basis, cc)) ** 2 / se2))
-
-    c = np.array(c, dtype=np.float64)
-    for k in range(3 if tested else 0):
-        if c[k] > 0 and misfit(np.where(np.arange(3) == k, 0.0, c)) - misfit(c) < SIGNIFICANT:
-            c[k] = 0.0
-    if not c.any():
-        return NO_CORRELATION
-    return CorrelatedGroundError((float(c[0]), float(c[1]), float(c[2])), length, int(ok.sum()))
+            model = np.einsum("blk,k->bl", basis, c)
+        cost = float(np.sum((w * (emp - model)) ** 2))
+        if cost < best[0]:
+            best = (cost, CorrelatedGroundError((float(c[0]), float(c[1]), float(c[2])),
+                                                float(length), int(ok.sum())))
+    return best[1]
 
 
 def correlated_covariance(covariance: ArrayLike, param_jac: ArrayLike, sigma_px: ArrayLike,

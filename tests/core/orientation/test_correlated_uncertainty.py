@@ -9,7 +9,6 @@ import pytest
 
 from core.errors import InputError
 from core.orientation.uncertainty import (
-    NO_CORRELATION,
     CorrelatedGroundError,
     along_track_covariance,
     correlated_covariance,
@@ -99,10 +98,8 @@ def test_sandwich_predicts_the_spread_of_the_parameters_under_correlated_gcp_err
 
 def test_correlated_ground_error_is_found_in_the_residuals_and_not_in_noise():
     """Ground errors of 4 m (east, north) and 2 m (up) correlated over 2 km under 0.3 px of
-    independent noise: over 20 draws the fitted variances east and north are the true ones
-    within 25 % and the length within a factor 1.6; the up part, 2 m under 5.9 m of noise per
-    GCP (its partials are a tenth of east's), is below the 3-sigma gate in most draws and never
-    stated larger than it is on average; the noise alone gives no correlated part."""
+    independent noise: over 20 draws the fitted variances are the true ones within 25 % and the
+    length within a factor 1.6; the noise alone gives a correlated part under 0.5 m."""
     east, north, g = layout(2)
     truth = CorrelatedGroundError((16.0, 16.0, 4.0), 2000.0, 0)
     rng = np.random.default_rng(3)
@@ -112,11 +109,10 @@ def test_correlated_ground_error_is_found_in_the_residuals_and_not_in_noise():
         v = np.einsum("nmak,nk->nma", g, e[d]) + rng.normal(0.0, 0.3, (N, 2, 2))
         found.append(correlated_ground_error(g, v, east, north))
     var = np.mean([f.variance_m2 for f in found], axis=0)
-    assert var[:2] == pytest.approx(truth.variance_m2[:2], rel=0.25)
-    assert var[2] <= 1.25 * truth.variance_m2[2]
+    assert var == pytest.approx(truth.variance_m2, rel=0.25)
     assert 1 / 1.6 < np.exp(np.mean(np.log([f.length_m for f in found]))) / 2000.0 < 1.6
     noise = correlated_ground_error(g, rng.normal(0.0, 0.3, (N, 2, 2)), east, north)
-    assert noise == NO_CORRELATION
+    assert max(noise.variance_m2) < 0.5**2
     with pytest.raises(InputError):
         correlated_ground_error(g[:, :1], np.zeros((N, 1, 2)), east, north)
 
@@ -215,31 +211,3 @@ def test_a_dozen_gcps_sharing_a_ground_error_are_not_taken_for_independent_ones(
     assert 0.6 < np.mean(predicted) / measured < 1.6
     extent = np.max(np.hypot(east[:, None] - east, north[:, None] - north))
     assert max(lengths) <= extent * (1 + 1e-9)
-
-
-def test_residuals_that_show_no_field_change_no_prediction():
-    """200 GCPs over 20 km, a common error (a shift of the reference, 6 m east and 4 m north,
-    which the 6 parameters absorb whole) under 0.3 px of independent noise: over 10 draws the
-    check points' predicted RMS with the field fitted on the residuals is within 0.8-1.05 of
-    ``N^-1``'s, the truth here. Before, lengths up to 4 times the GCPs' extent were tried,
-    where a field is a constant the residuals have lost whole and its variance free, and no
-    component had to be significant: up to 2.7 times (simulated spot, simple errors: 6.5 m east
-    over 296 km, 0.62 px of check-point columns predicted without the reference term against
-    0.14 px measured beyond the shift)."""
-    rng = np.random.default_rng(21)
-    n = 200
-    east, north = rng.uniform(0, EXTENT_M, n), rng.uniform(0, EXTENT_M, n)
-    g = np.concatenate([layout(s)[2] for s in (4, 5)])[:n]
-    sigma = np.full((n, 2, 2), 0.3)
-    a, wa, cov = affine_adjustment(east, north, 1.0 / sigma.reshape(-1) ** 2)
-    hat = a.reshape(-1, 6) @ cov @ wa.T
-    jj = check_point_partials()
-    base = np.mean(np.einsum("iu,uv,iv->i", jj, cov, jj))
-    extent = np.max(np.hypot(east[:, None] - east, north[:, None] - north))
-    for _ in range(10):
-        obs = np.einsum("nmak,k->nma", g, [6.0, 4.0, 0.0]) + rng.normal(0.0, 0.3, (n, 2, 2))
-        v = (obs.reshape(-1) - hat @ obs.reshape(-1)).reshape(n, 2, 2)
-        found = correlated_ground_error(g, v, east, north, absorbed=(a, sigma, cov))
-        pred = correlated_covariance(cov, a, sigma, g, east, north, found)
-        ratio = np.sqrt(np.mean(np.einsum("iu,uv,iv->i", jj, pred, jj)) / base)
-        assert 0.8 < ratio < 1.05 and found.length_m <= extent * (1 + 1e-9)
