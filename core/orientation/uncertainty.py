@@ -364,15 +364,21 @@ def correlated_ground_error(ground_jac: ArrayLike, v: ArrayLike, east_m: ArrayLi
     ``e_i e_j`` per component over the pairs in ``n_bins`` distance classes (quantiles of the
     pair distances up to half the largest; the pair with itself left out, so independent
     noise adds nothing), fitted by the variances ``c_k >= 0`` of a field correlated as
-    ``exp(-d / L)`` (one length for the three components, chosen on a logarithmic grid up to
-    four times the GCPs' largest distance).
+    ``exp(-d / L)`` (one length for the three components, chosen on a logarithmic grid of up
+    to four times the GCPs' largest distance, of which only the lengths up to it are tried:
+    longer, a field is a constant over the scene, which the residuals have lost whole, so its
+    fitted variance is free, and which the reference's own term states. Measured: simulated
+    spot with simple errors, 195 GCPs, got 6.5 m east over 296 km and predicted 0.62 px of
+    check-point columns without the reference term against 0.14 px measured beyond the
+    shift; now 0.29 px. Pure noise under a shift the adjustment absorbs still feigns fields
+    within the extent, where the residuals keep little of them: up to 5 times ``N^-1`` at
+    check points in 4 draws of 30, 11 times before).
 
     A few GCPs (a flat scene where few windows qualify) share such a field as much as many
-    do, so under ``4 n_bins`` GCPs there are fewer classes (none under 8 GCPs), and lengths
-    only up to the GCPs' largest distance: two classes cannot tell a longer length from a
-    constant, which the residuals have lost almost whole, so its fitted variance would grow
-    without bound (simulated tiny at relief x 0.15, 11 GCPs: 183 m over 87 km, against 61 m
-    RMS of GCP error east; no field at all before, and 0.34 px predicted against 1.84).
+    do, so under ``4 n_bins`` GCPs there are fewer classes (none under 8 GCPs), and the grid
+    itself stops at the GCPs' largest distance: two classes cannot tell a longer length from a
+    constant (simulated tiny at relief x 0.15, 11 GCPs: 183 m over 87 km, against 61 m RMS of
+    GCP error east; no field at all before, and 0.34 px predicted against 1.84).
 
     The residuals of an adjustment have lost the part of the error its parameters follow (a
     shift, a rate: the long wavelengths), and a check point shows that part whole. With
@@ -424,8 +430,8 @@ def correlated_ground_error(ground_jac: ArrayLike, v: ArrayLike, east_m: ArrayLi
             z[k, k] += np.eye(n)
     best = (np.inf, NO_CORRELATION)
     total = np.mean(e**2, axis=0)
-    longest = (1.0 if few else 4.0) * dd.max()
-    for length in np.geomspace(0.25 * max(edges[1], 1.0), longest, 30):
+    grid = np.geomspace(0.25 * max(edges[1], 1.0), (1.0 if few else 4.0) * dd.max(), 30)
+    for length in grid[grid <= dd.max() * (1.0 + 1e-9)]:  # longer: a constant (see above)
         corr = np.exp(-d / length)
         if z is None:
             f = binned(np.exp(-dd[inside] / length))
