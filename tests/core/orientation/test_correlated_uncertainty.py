@@ -98,21 +98,30 @@ def test_sandwich_predicts_the_spread_of_the_parameters_under_correlated_gcp_err
 
 def test_correlated_ground_error_is_found_in_the_residuals_and_not_in_noise():
     """Ground errors of 4 m (east, north) and 2 m (up) correlated over 2 km under 0.3 px of
-    independent noise: over 20 draws the fitted variances are the true ones within 25 % and the
-    length within a factor 1.6; the noise alone gives a correlated part under 0.5 m."""
+    independent noise: over 100 draws the fitted variances are the true ones within 25 % and
+    the length within a factor 1.6; noise alone gives a correlated part of under a tenth of
+    its variance in the median of 100 draws (one draw under 0.5 m, as this test asked before,
+    is luck: 76 of 100 draws exceed it with quantile classes, 90 with today's). (Up
+    shows only in the parallax, 0.036 px per m here: its variance is fitted as 0 in a fifth
+    of the draws and its mean over 20 draws has a standard error of 30 %, over 100 of 12 %.)"""
     east, north, g = layout(2)
     truth = CorrelatedGroundError((16.0, 16.0, 4.0), 2000.0, 0)
     rng = np.random.default_rng(3)
-    e = correlated_field(east, north, truth, rng, 20)
+    e = correlated_field(east, north, truth, rng, 100)
     found = []
-    for d in range(20):
+    for d in range(100):
         v = np.einsum("nmak,nk->nma", g, e[d]) + rng.normal(0.0, 0.3, (N, 2, 2))
         found.append(correlated_ground_error(g, v, east, north))
     var = np.mean([f.variance_m2 for f in found], axis=0)
     assert var == pytest.approx(truth.variance_m2, rel=0.25)
     assert 1 / 1.6 < np.exp(np.mean(np.log([f.length_m for f in found]))) / 2000.0 < 1.6
-    noise = correlated_ground_error(g, rng.normal(0.0, 0.3, (N, 2, 2)), east, north)
-    assert max(noise.variance_m2) < 0.5**2
+    shares = []
+    for _ in range(100):
+        v = rng.normal(0.0, 0.3, (N, 2, 2))
+        noise = correlated_ground_error(g, v, east, north)
+        e = np.einsum("nij,nj->ni", np.linalg.pinv(g.reshape(N, -1, 3)), v.reshape(N, -1))
+        shares.append(np.array(noise.variance_m2) / np.mean(e**2, axis=0))
+    assert np.all(np.median(shares, axis=0) < 0.1)
     with pytest.raises(InputError):
         correlated_ground_error(g[:, :1], np.zeros((N, 1, 2)), east, north)
 
@@ -232,9 +241,9 @@ def test_a_field_longer_than_the_scene_is_not_stated():
     extent were tried, where a field is a constant the residuals have lost and its variance
     free: up to 11 times (simulated spot with simple errors: 6.5 m east over 296 km, 0.62 px
     of check-point columns predicted without the reference term against 0.14 px measured
-    beyond the shift). Fields the noise feigns within the extent remain (up to 5 times in 4
-    draws of 30; left for a significance test that does not drop the real fields of scenes
-    with 30-40 GCPs)."""
+    beyond the shift). Fields the noise feigns within the extent remain (over 2 times in 1
+    draw of 30, 5.1 times; left for a significance test that does not drop the real fields
+    of scenes with 30-40 GCPs)."""
     east, north, g, sigma, a, _, cov, hat = scene_200()
     rng = np.random.default_rng(21)
     jj = check_point_partials()
@@ -249,3 +258,39 @@ def test_a_field_longer_than_the_scene_is_not_stated():
         pred = correlated_covariance(cov, a, sigma, g, east, north, found)
         ratios.append(np.sqrt(np.mean(np.einsum("iu,uv,iv->i", jj, pred, jj)) / base))
     assert abs(np.median(ratios) - 1.0) < 0.1 and max(ratios) < 6.0
+
+
+def test_a_field_of_a_few_kilometres_is_found_over_a_wide_scene():
+    """200 GCPs over 75 km (a SPOT scene) whose ground errors share a field of 2 m east and
+    north and 1 m up correlated over 3 km (the GCPs' true errors on simulated spot and hrs:
+    2-4 km), under 0.3 px of noise, adjusted by 6 parameters weighted by each observation's
+    variance. Over 40 draws the field fitted to the residuals is shorter than 20 km in 39 and
+    the check-point spread it predicts is within 1.6 of the Monte-Carlo spread in 9 of 10
+    draws (1.29 at the 90th percentile). Before, the first of eight quantile distance
+    classes reached 10 km and the far classes, thousands of pairs sharing their GCPs, decided:
+    9 of 40 draws got lengths of 20-93 km, and the 90th percentile was 2.6 times the spread
+    (simulated spot with simple errors: 3.2 m over 68 km, 0.29 px predicted beyond the GCPs'
+    common error against 0.05 px measured)."""
+    n, extent = 200, 75_000.0
+    rng = np.random.default_rng(5)
+    east, north = rng.uniform(0, extent, n), rng.uniform(0, extent, n)
+    g = np.concatenate([layout(s)[2] for s in (4, 5)])[:n]
+    truth = CorrelatedGroundError((4.0, 4.0, 1.0), 3000.0, 0)
+    sigma = np.sqrt(0.3**2 + np.einsum("nmak,k->nma", g**2, truth.variance_m2))
+    a, wa, cov = affine_adjustment(east / (extent / EXTENT_M), north / (extent / EXTENT_M),
+                                   1.0 / sigma.reshape(-1) ** 2)
+    hat = a.reshape(-1, 6) @ cov @ wa.T
+    draws = 2000
+    e = correlated_field(east, north, truth, rng, draws)
+    obs = np.einsum("nmak,dnk->dnma", g, e) + rng.normal(0.0, 0.3, (draws, n, 2, 2))
+    jj = check_point_partials()
+    measured = float(np.mean(np.var(fitted(cov, wa, obs) @ jj.T, axis=0)))
+    ratios, lengths = [], []
+    for d in range(40):
+        v = (obs[d].reshape(-1) - hat @ obs[d].reshape(-1)).reshape(n, 2, 2)
+        found = correlated_ground_error(g, v, east, north, absorbed=(a, sigma, cov))
+        lengths.append(found.length_m)
+        pred = correlated_covariance(cov, a, sigma, g, east, north, found)
+        ratios.append(np.sqrt(np.mean(np.einsum("iu,uv,iv->i", jj, pred, jj)) / measured))
+    assert np.sum(np.array(lengths) > 20_000.0) <= 4
+    assert np.percentile(ratios, 90) < 1.6 and 0.75 < np.median(ratios) < 1.3
