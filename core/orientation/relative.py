@@ -239,7 +239,8 @@ def _robust_sigma(y: FloatArray, floor: float) -> float:
 
 
 def local_value(col: ArrayLike, row: ArrayLike, y: ArrayLike, use: ArrayLike,
-                k: int = NEIGHBOURS, floor: float = 0.05) -> FloatArray:
+                k: int = NEIGHBOURS, floor: float = RelativeConfig.sigma_floor_px
+                ) -> FloatArray:
     """Per point, what ``y`` is there by its ``k`` nearest other points among ``use`` (image
     position ``col``, ``row``): a plane fitted to their values, less those beyond 3 robust
     sigmas (at least ``floor``) of their median, taken at the point, so a point at the image's
