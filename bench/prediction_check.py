@@ -1,0 +1,229 @@
+"""How true the predicted check-point RMS is on a simulated scene, and why not (issue 19).
+
+``report.json``'s prediction beyond the reference term (the parameters' covariance, with the
+GCPs' ground error correlated over kilometres, and the model's own error) is compared with the
+check points beyond the GCPs' common error (``bench/beyond_shift.py``), with what the GCPs'
+true errors say, and with what chance allows:
+
+- ``measured``: the check points beyond the GCPs' common error;
+- ``realised``: the GCPs' true errors (triangulated with the scene's true models) propagated
+  through the adjustment to the check points, their mean taken out (should equal measured);
+- ``true stats``: the RMS expected from the statistics of those true errors: each GCP's own
+  error (in both images) plus a field fitted to their pair products, mean taken out;
+- ``model``: ``report.json``'s adjustment term (parameters' covariance), no unmodelled term;
+- ``jackknife``: a spatial block jackknife of the GCPs (k-means blocks, one left out at a time,
+  linearised), which assumes no field shape, plus the unmodelled term;
+- ``perfect``: measured / predicted if the prediction were right (both images' parameter
+  errors drawn from the predicted covariance, the unmodelled term as independent noise):
+  5 / 50 / 95 % per ratio and the share of draws with all four within 0.7-1.5.
+
+Run: ``.venv/bin/python bench/prediction_check.py SCENE_DIR ORIENT_DIR [SCENE_DIR ORIENT_DIR
+...]`` (the simulator's output and ``gcpfree orient --self-calibrate --checkpoints
+SCENE_DIR/truth/checkpoints.json``'s). The adjustment is run again from ``ORIENT_DIR``'s GCPs
+and tie points with the settings in its ``report.json`` (deterministic: the same models).
+Prints figures, asserts nothing.
+"""
+
+from __future__ import annotations
+
+import json
+import sys
+import tempfile
+from dataclasses import replace
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
+
+import core.orientation.absolute as absolute  # noqa: E402
+import tasks.absolute.orientation as orientation  # noqa: E402
+from beyond_shift import beyond_shift  # noqa: E402
+from core.geodesy import metres_per_degree  # noqa: E402
+from core.intersection import triangulate  # noqa: E402
+from core.orientation.absolute import AbsoluteConfig  # noqa: E402
+from core.orientation.uncertainty import (  # noqa: E402
+    _distances,
+    correlated_ground_error,
+    ground_jacobian,
+)
+from core.points import control_points_from_dict  # noqa: E402
+from core.sensors.pushbroom import PushbroomModel  # noqa: E402
+from tasks.absolute.surface_match import TieGround  # noqa: E402
+from tasks.io.sensors import load_model, read_model_file  # noqa: E402
+
+NAMES = orientation.NAMES
+BLOCKS = 16
+DRAWS = 4000
+
+
+def adjusted(scene: Path, out: Path) -> dict[str, Any]:
+    """The orientation of ``out`` run again, with what its uncertainty step worked on."""
+    rep = json.loads((out / "report.json").read_text())
+    s = rep["settings"]
+    a = {k: tuple(v) if isinstance(v, list) else v for k, v in s["absolute"].items()}
+    config = AbsoluteConfig(**a)
+    left = load_model(scene / "left.tif")
+    rel = json.loads((out / "relative" / "rel.json").read_text())
+    right = replace(load_model(scene / "right.tif"),
+                    model=PushbroomModel.from_dict(rel["right_model"]))
+    gcps = control_points_from_dict(json.loads((out / "gcps.json").read_text()))
+    ties = TieGround.from_tiepoints_json(out / "relative" / "rel.tiepoints.json")
+    seen: dict[str, Any] = {}
+    inner, cov = orientation.with_gcp_errors_as_they_are, absolute.correlated_covariance
+
+    def uncertainty(*args: Any, **kw: Any) -> Any:
+        seen.update(adj=args[0], obs=args[1], kept=args[2])
+        res = inner(*args, **kw)
+        seen.update(final=res[0], error=res[1])
+        return res
+
+    def covariance(c, a_, s_, g, e, n, err):  # type: ignore[no-untyped-def]
+        seen.update(c=c, a=a_, s=s_, g=g, east=e, north=n)
+        return cov(c, a_, s_, g, e, n, err)
+
+    orientation.with_gcp_errors_as_they_are = uncertainty
+    absolute.correlated_covariance = covariance
+    try:
+        with tempfile.TemporaryDirectory() as tmp:
+            orientation.orient_absolute.fn(left, right, gcps, Path(tmp), s["corrections"],
+                                           s["self_calibrate"], config, ties, s["along_track"])
+    finally:
+        orientation.with_gcp_errors_as_they_are, absolute.correlated_covariance = inner, cov
+    return seen
+
+
+def true_errors(scene: Path, seen: dict[str, Any]) -> np.ndarray:
+    """(n, 3) east, north, up error of each GCP the uncertainty step used (m)."""
+    obs, kept = seen["obs"], np.asarray(seen["kept"], dtype=bool)
+    use = kept & np.isfinite(obs.col).all(axis=1) & np.isfinite(obs.row).all(axis=1)
+    col, row = np.asarray(obs.col)[use], np.asarray(obs.row)[use]
+    lon, lat, h = obs.lon_deg[use], obs.lat_deg[use], obs.h_m[use]
+    truths = [read_model_file(scene / "truth" / f"{n}_truth.json").model for n in NAMES]
+    t = triangulate(truths, [col[:, 0], col[:, 1]], [row[:, 0], row[:, 1]],
+                    (float(h.min()) - 500.0, float(h.max()) + 500.0))
+    m_lon, m_lat = metres_per_degree(lat)
+    return np.stack([(lon - t.lon_deg) * m_lon, (lat - t.lat_deg) * m_lat, h - t.h_m], axis=1)
+
+
+def check_maps(scene: Path, seen: dict[str, Any], n: int) -> list[dict[str, np.ndarray]]:
+    """Per image at its check points: ``J`` (p, 2, u total), ``T`` (p, 2, 3 n) the linear map
+    from the GCPs' errors to the check points' error beyond their mean."""
+    final, c, a, s, g = (seen[k] for k in ("final", "c", "a", "s", "g"))
+    wa = a / s[..., None] ** 2
+    m = -c @ np.einsum("nmau,nmak->unk", wa, g).reshape(c.shape[0], -1)  # params <- errors
+    pts = orientation.read_checkpoints(scene / "truth" / "checkpoints.json").points
+    maps, start = [], 0
+    for k, name in enumerate(NAMES):
+        u = len(final.param_names[k])
+        p = [q for q in pts if name in q.image_points]
+        lon, lat, h = (np.array(v) for v in zip(*[(q.lon_deg, q.lat_deg, q.h_m) for q in p]))
+        j = np.zeros((len(p), 2, c.shape[0]))
+        j[:, :, start:start + u] = final.models[k].jacobian(lon, lat, h)
+        start += u
+        gc = ground_jacobian(final.models[k], lon, lat, h)
+        t = -np.einsum("pau,uq->paq", j, m) - np.repeat(gc[:, :, None, :] / n, n, axis=2
+                                                         ).reshape(len(p), 2, 3 * n)
+        maps.append({"J": j, "T": t, "mu": final.residuals[k].unmodelled_col_px})
+    return maps
+
+
+def rms(t: np.ndarray, cov: np.ndarray) -> np.ndarray:
+    return np.sqrt(np.mean(np.einsum("paq,qr,par->pa", t, cov, t), axis=0))
+
+
+def jackknife(seen: dict[str, Any]) -> np.ndarray:
+    """Covariance of the parameters from leaving out each of ``BLOCKS`` spatial blocks of GCPs
+    (linearised about the solution: the step ``-(N - N_k)^-1 b_k``)."""
+    from scipy.cluster.vq import kmeans2
+
+    c, a, s, final, obs = (seen[k] for k in ("c", "a", "s", "final", "obs"))
+    kept = np.asarray(seen["kept"], dtype=bool)
+    use = kept & np.isfinite(obs.col).all(axis=1) & np.isfinite(obs.row).all(axis=1)
+    lon, lat, h = obs.lon_deg[use], obs.lat_deg[use], obs.h_m[use]
+    v = np.empty(np.asarray(obs.col)[use].shape + (2,))
+    for k, model in enumerate(seen["adj"].models):
+        pc, pr = model.project(lon, lat, h)
+        v[:, k, 0] = np.asarray(obs.col)[use][:, k] - pc
+        v[:, k, 1] = np.asarray(obs.row)[use][:, k] - pr
+    wa = a / s[..., None] ** 2
+    normal = np.linalg.inv(c)
+    _, label = kmeans2(np.column_stack([seen["east"], seen["north"]]), BLOCKS, seed=1,
+                       minit="++")
+    steps = np.array([np.linalg.solve(normal - np.einsum("nmau,nmav->uv", wa[b], a[b]),
+                                      -np.einsum("nmau,nma->u", wa[b], v[b]))
+                      for b in (label == i for i in range(BLOCKS)) if b.any()])
+    d = steps - steps.mean(axis=0)
+    return (len(d) - 1) / len(d) * d.T @ d
+
+
+def perfect(seen: dict[str, Any], maps: list[dict[str, np.ndarray]]) -> np.ndarray:
+    """(draws, 4) measured / predicted of a right prediction."""
+    rng = np.random.default_rng(0)
+    cov = seen["final"].covariance
+    w, vec = np.linalg.eigh(cov)
+    d = (vec * np.sqrt(np.clip(w, 0.0, None))) @ rng.normal(size=(len(w), DRAWS))
+    out = []
+    for mp in maps:
+        e = np.einsum("pau,ud->dpa", mp["J"], d) + rng.normal(0.0, mp["mu"], (DRAWS,) +
+                                                               mp["J"].shape[:2])
+        pred = np.sqrt(rms(mp["J"], cov) ** 2 + mp["mu"] ** 2)
+        out.append(np.sqrt(np.mean(e**2, axis=1)) / pred)
+    return np.concatenate(out, axis=1)
+
+
+def fmt(x: np.ndarray) -> str:
+    return " / ".join(f"{v:.3f}" for v in x)
+
+
+def one(scene: Path, out: Path) -> None:
+    seen = adjusted(scene, out)
+    e = true_errors(scene, seen)
+    n = len(e)
+    e0 = e - e.mean(axis=0)
+    vtrue = np.einsum("nmak,nk->nma", seen["g"], e0)
+    field = correlated_ground_error(seen["g"], vtrue, seen["east"], seen["north"])
+    r = field.correlation(_distances(seen["east"], seen["north"]))
+    np.fill_diagonal(r, 0.0)
+    stats = np.zeros((n, 3, n, 3))
+    stats[np.arange(n), :, np.arange(n), :] = e0[:, :, None] * e0[:, None, :]
+    for k, var in enumerate(field.variance_m2):
+        stats[:, k, :, k] += var * r
+    stats = stats.reshape(3 * n, 3 * n)
+    maps = check_maps(scene, seen, n)
+    jack = jackknife(seen)
+    ratios = perfect(seen, maps)
+    measured = beyond_shift(scene, out)
+    err = seen["error"]
+    print(f"{scene.name}: {n} GCPs; fitted field {err.length_m / 1000:.1f} km "
+          f"{np.round(np.sqrt(err.variance_m2), 1)} m, on the true errors "
+          f"{field.length_m / 1000:.1f} km {np.round(np.sqrt(field.variance_m2), 1)} m")
+    for name, mp in zip(NAMES, maps, strict=True):
+        mu = mp["mu"]
+        meas = np.array([measured[name]["beyond_common_col_px"],
+                         measured[name]["beyond_common_row_px"]])
+        real = np.sqrt(np.mean(np.einsum("paq,q->pa", mp["T"], e0.ravel()) ** 2, axis=0))
+        model = rms(mp["J"], seen["final"].covariance)
+        jk = np.sqrt(rms(mp["J"], jack) ** 2 + mu**2)
+        print(f"  {name:5s} columns / rows: measured {fmt(meas)}; realised {fmt(real)}; "
+              f"true stats {fmt(rms(mp['T'], stats))}; model {fmt(model)}; jackknife "
+              f"{fmt(jk)}; unmodelled {mu:.3f}; ratio {fmt(meas / np.hypot(model, mu))}")
+    q = np.percentile(ratios, [5, 50, 95], axis=0)
+    inside = (ratios >= 0.7) & (ratios <= 1.5)
+    print("  perfect prediction, measured / predicted 5/50/95 %: " + ", ".join(
+        f"{q[0, i]:.2f}/{q[1, i]:.2f}/{q[2, i]:.2f}" for i in range(4))
+          + f"; all four within 0.7-1.5 in {inside.all(axis=1).mean():.0%} of draws, "
+          f"{inside.sum(axis=1).mean():.1f} of 4 on average")
+
+
+def main() -> None:
+    args = sys.argv[1:]
+    if not args or len(args) % 2:
+        sys.exit("usage: prediction_check.py SCENE_DIR ORIENT_DIR [SCENE_DIR ORIENT_DIR ...]")
+    for scene, out in zip(args[::2], args[1::2], strict=True):
+        one(Path(scene), Path(out))
+
+
+if __name__ == "__main__":
+    main()
