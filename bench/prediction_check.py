@@ -10,6 +10,9 @@ true errors say, and with what chance allows:
   through the adjustment to the check points, their mean taken out (should equal measured);
 - ``true stats``: the RMS expected from the statistics of those true errors: each GCP's own
   error (in both images) plus a field fitted to their pair products, mean taken out;
+- ``ties``: the tie points' true errors (their measurements against the true models, the
+  ground unknowns removed as the adjustment removes them) propagated the same way; their
+  mean (a y-parallax common to all, e.g. from two dates' illumination) printed beside;
 - ``model``: ``report.json``'s adjustment term (parameters' covariance), no unmodelled term;
 - ``jackknife``: a spatial block jackknife of the GCPs (k-means blocks, one left out at a time,
   linearised), which assumes no field shape, plus the unmodelled term;
@@ -48,6 +51,7 @@ from core.orientation.uncertainty import (  # noqa: E402
     correlated_ground_error,
     ground_jacobian,
 )
+from core.orientation.ties import TieObservations, tie_residuals, tie_rows  # noqa: E402
 from core.points import control_points_from_dict  # noqa: E402
 from core.sensors.pushbroom import PushbroomModel  # noqa: E402
 from tasks.absolute.surface_match import TieGround  # noqa: E402
@@ -74,7 +78,8 @@ def adjusted(scene: Path, out: Path) -> dict[str, Any]:
     inner, cov = orientation.with_gcp_errors_as_they_are, absolute.correlated_covariance
 
     def uncertainty(*args: Any, **kw: Any) -> Any:
-        seen.update(adj=args[0], obs=args[1], kept=args[2])
+        seen.update(adj=args[0], obs=args[1], kept=args[2], ties=args[4] if len(args) > 4
+                    else kw.get("ties"))
         res = inner(*args, **kw)
         seen.update(final=res[0], error=res[1])
         return res
@@ -127,6 +132,35 @@ def check_maps(scene: Path, seen: dict[str, Any], n: int) -> list[dict[str, np.n
                                                          ).reshape(len(p), 2, 3 * n)
         maps.append({"J": j, "T": t, "mu": final.residuals[k].unmodelled_col_px})
     return maps
+
+
+def tie_errors(scene: Path, seen: dict[str, Any]) -> tuple[np.ndarray, float]:
+    """The parameters' error the tie points' true errors make (their reduced equations at the
+    adjusted models, weighted by their variance component), and the mean reduced error (px)."""
+    ties, adj = seen["ties"], seen["adj"]
+    if ties is None or not ties.n:
+        return np.zeros(adj.covariance.shape[0]), float("nan")
+    sizes = [len(p) for p in adj.param_names]
+    offsets = np.concatenate([[0], np.cumsum(sizes)])
+    rows = tie_rows(adj.models, ties, ties.ground(), offsets)
+    truths = [read_model_file(scene / "truth" / f"{n}_truth.json").model for n in NAMES]
+    true_rows = tie_rows(truths, ties, ties.ground(), np.array([0, len(truths[0].params),
+                                                                 len(truths[0].params)
+                                                                 + len(truths[1].params)]),
+                         jacobian=False)  # whitened: in units of ties.sigma_px
+    factor = adj.components.factor_of("tie") if adj.components is not None else 1.0
+    step = adj.covariance @ (rows.a.T @ true_rows.r) / factor
+    return step, mean_y_parallax(truths, ties)
+
+
+def mean_y_parallax(models: list[Any], ties: TieObservations) -> float:
+    """The tie points' mean y-parallax under ``models`` (px): each point's residuals along the
+    null vector of its ground design (what no ground position can absorb), turned so that its
+    right-image row component is positive."""
+    design, v = tie_residuals(models, ties)
+    null = np.linalg.svd(design.reshape(ties.n, -1, 3), full_matrices=True)[0][:, :, -1]
+    null *= np.where(null[:, 3] < 0, -1.0, 1.0)[:, None]
+    return float(np.mean(np.einsum("nc,nc->n", null, v.reshape(ties.n, -1))))
 
 
 def rms(t: np.ndarray, cov: np.ndarray) -> np.ndarray:
@@ -193,21 +227,26 @@ def one(scene: Path, out: Path) -> None:
     stats = stats.reshape(3 * n, 3 * n)
     maps = check_maps(scene, seen, n)
     jack = jackknife(seen)
+    tie_step, tie_mean = tie_errors(scene, seen)
     ratios = perfect(seen, maps)
     measured = beyond_shift(scene, out)
     err = seen["error"]
     print(f"{scene.name}: {n} GCPs; fitted field {err.length_m / 1000:.1f} km "
           f"{np.round(np.sqrt(err.variance_m2), 1)} m, on the true errors "
-          f"{field.length_m / 1000:.1f} km {np.round(np.sqrt(field.variance_m2), 1)} m")
+          f"{field.length_m / 1000:.1f} km {np.round(np.sqrt(field.variance_m2), 1)} m; the "
+          f"tie points' mean y-parallax against the true models {tie_mean:+.3f} px")
     for name, mp in zip(NAMES, maps, strict=True):
         mu = mp["mu"]
         meas = np.array([measured[name]["beyond_common_col_px"],
                          measured[name]["beyond_common_row_px"]])
-        real = np.sqrt(np.mean(np.einsum("paq,q->pa", mp["T"], e0.ravel()) ** 2, axis=0))
+        gcp = np.einsum("paq,q->pa", mp["T"], e0.ravel())
+        tie = -np.einsum("pau,u->pa", mp["J"], tie_step)
+        real = np.sqrt(np.mean(gcp**2, axis=0))
         model = rms(mp["J"], seen["final"].covariance)
         jk = np.sqrt(rms(mp["J"], jack) ** 2 + mu**2)
-        print(f"  {name:5s} columns / rows: measured {fmt(meas)}; realised {fmt(real)}; "
-              f"true stats {fmt(rms(mp['T'], stats))}; model {fmt(model)}; jackknife "
+        print(f"  {name:5s} columns / rows: measured {fmt(meas)}; realised {fmt(real)}, ties "
+              f"{fmt(np.sqrt(np.mean(tie**2, axis=0)))}, both "
+              f"{fmt(np.sqrt(np.mean((gcp + tie)**2, axis=0)))}; true stats {fmt(rms(mp['T'], stats))}; model {fmt(model)}; jackknife "
               f"{fmt(jk)}; unmodelled {mu:.3f}; ratio {fmt(meas / np.hypot(model, mu))}")
     q = np.percentile(ratios, [5, 50, 95], axis=0)
     inside = (ratios >= 0.7) & (ratios <= 1.5)
