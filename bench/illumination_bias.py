@@ -31,6 +31,7 @@ HERE = Path(__file__).resolve().parent
 sys.path[:0] = [str(HERE), str(HERE.parent)]
 
 import core.simulation.scene as scenes  # noqa: E402
+from core.matching.peaks import integer_peak, quadratic_peak  # noqa: E402
 from core.matching.tiepoints import predict_search  # noqa: E402
 from core.orientation.ties import TieObservations  # noqa: E402
 from flows.cli import main as cli  # noqa: E402
@@ -52,16 +53,6 @@ def bias(scene: Path, out: Path) -> tuple[int, float]:
 
 
 HALF, SEARCH, GRID = 7, 4, 40  # template half size, search half extent (px), points per side
-
-
-def _peak(s: np.ndarray) -> tuple[float, float] | None:
-    """Sub-pixel peak (col, row offsets from the centre) by parabolas through the maximum."""
-    iy, ix = np.unravel_index(int(np.argmax(s)), s.shape)
-    if not (0 < iy < s.shape[0] - 1 and 0 < ix < s.shape[1] - 1):
-        return None
-    dx = 0.5 * (s[iy, ix - 1] - s[iy, ix + 1]) / (s[iy, ix - 1] - 2 * s[iy, ix] + s[iy, ix + 1])
-    dy = 0.5 * (s[iy - 1, ix] - s[iy + 1, ix]) / (s[iy - 1, ix] - 2 * s[iy, ix] + s[iy + 1, ix])
-    return ix - SEARCH + dx, iy - SEARCH + dy
 
 
 def _directions(a: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -111,11 +102,14 @@ def measures(scene: Path) -> dict[str, np.ndarray]:
         ncc = cv2.matchTemplate(search[1:-1, 1:-1], tpl[1:-1, 1:-1], cv2.TM_CCOEFF_NORMED)
         (sx, sy), (tx, ty) = _directions(search), _directions(tpl)
         oc = (cv2.matchTemplate(sx[1:-1, 1:-1], tx[1:-1, 1:-1], cv2.TM_CCORR)
-              + cv2.matchTemplate(sy[1:-1, 1:-1], ty[1:-1, 1:-1], cv2.TM_CCORR))
+              + cv2.matchTemplate(sy[1:-1, 1:-1], ty[1:-1, 1:-1], cv2.TM_CCORR)
+              ) / (2 * HALF + 1) ** 2  # the mean cosine of the direction differences
         for name, surf in (("cross-correlation", ncc), ("orientation correlation", oc)):
-            p = _peak(surf)
-            if p is not None:
-                out[name].append(j[1, 0] * p[0] + j[1, 1] * p[1])  # right rows
+            ix, iy, _, nb = integer_peak(surf)  # the matcher's own peak
+            if nb is not None:
+                dx, dy = quadratic_peak(nb)
+                pc, pr = ix - SEARCH + dx[0], iy - SEARCH + dy[0]
+                out[name].append(j[1, 0] * pc + j[1, 1] * pr)  # right rows
     return {k: np.asarray(v) for k, v in out.items()}
 
 

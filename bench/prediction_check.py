@@ -99,13 +99,18 @@ def adjusted(scene: Path, out: Path) -> dict[str, Any]:
     return seen
 
 
-def true_errors(scene: Path, seen: dict[str, Any]) -> np.ndarray:
-    """(n, 3) east, north, up error of each GCP the uncertainty step used (m)."""
+def used(seen: dict[str, Any]) -> tuple[np.ndarray, ...]:
+    """col, row (n, 2) and lon, lat, h of the GCPs the uncertainty step used (kept, measured
+    in both images: its own selection)."""
     obs, kept = seen["obs"], np.asarray(seen["kept"], dtype=bool)
     use = kept & np.isfinite(obs.col).all(axis=1) & np.isfinite(obs.row).all(axis=1)
-    col, row = np.asarray(obs.col)[use], np.asarray(obs.row)[use]
-    lon, lat, h = obs.lon_deg[use], obs.lat_deg[use], obs.h_m[use]
-    truths = [read_model_file(scene / "truth" / f"{n}_truth.json").model for n in NAMES]
+    return (np.asarray(obs.col)[use], np.asarray(obs.row)[use], obs.lon_deg[use],
+            obs.lat_deg[use], obs.h_m[use])
+
+
+def true_errors(truths: list[Any], seen: dict[str, Any]) -> np.ndarray:
+    """(n, 3) east, north, up error of each GCP the uncertainty step used (m)."""
+    col, row, lon, lat, h = used(seen)
     t = triangulate(truths, [col[:, 0], col[:, 1]], [row[:, 0], row[:, 1]],
                     (float(h.min()) - 500.0, float(h.max()) + 500.0))
     m_lon, m_lat = metres_per_degree(lat)
@@ -134,7 +139,7 @@ def check_maps(scene: Path, seen: dict[str, Any], n: int) -> list[dict[str, np.n
     return maps
 
 
-def tie_errors(scene: Path, seen: dict[str, Any]) -> tuple[np.ndarray, float]:
+def tie_errors(truths: list[Any], seen: dict[str, Any]) -> tuple[np.ndarray, float]:
     """The parameters' error the tie points' true errors make (their reduced equations at the
     adjusted models, weighted by their variance component), and the mean reduced error (px)."""
     ties, adj = seen["ties"], seen["adj"]
@@ -143,7 +148,6 @@ def tie_errors(scene: Path, seen: dict[str, Any]) -> tuple[np.ndarray, float]:
     sizes = [len(p) for p in adj.param_names]
     offsets = np.concatenate([[0], np.cumsum(sizes)])
     rows = tie_rows(adj.models, ties, ties.ground(), offsets)
-    truths = [read_model_file(scene / "truth" / f"{n}_truth.json").model for n in NAMES]
     true_rows = tie_rows(truths, ties, ties.ground(), np.array([0, len(truths[0].params),
                                                                  len(truths[0].params)
                                                                  + len(truths[1].params)]),
@@ -172,15 +176,12 @@ def jackknife(seen: dict[str, Any]) -> np.ndarray:
     (linearised about the solution: the step ``-(N - N_k)^-1 b_k``)."""
     from scipy.cluster.vq import kmeans2
 
-    c, a, s, final, obs = (seen[k] for k in ("c", "a", "s", "final", "obs"))
-    kept = np.asarray(seen["kept"], dtype=bool)
-    use = kept & np.isfinite(obs.col).all(axis=1) & np.isfinite(obs.row).all(axis=1)
-    lon, lat, h = obs.lon_deg[use], obs.lat_deg[use], obs.h_m[use]
-    v = np.empty(np.asarray(obs.col)[use].shape + (2,))
+    c, a, s = (seen[k] for k in ("c", "a", "s"))
+    col, row, lon, lat, h = used(seen)
+    v = np.empty(col.shape + (2,))
     for k, model in enumerate(seen["adj"].models):
         pc, pr = model.project(lon, lat, h)
-        v[:, k, 0] = np.asarray(obs.col)[use][:, k] - pc
-        v[:, k, 1] = np.asarray(obs.row)[use][:, k] - pr
+        v[:, k, 0], v[:, k, 1] = col[:, k] - pc, row[:, k] - pr
     wa = a / s[..., None] ** 2
     normal = np.linalg.inv(c)
     _, label = kmeans2(np.column_stack([seen["east"], seen["north"]]), BLOCKS, seed=1,
@@ -213,7 +214,8 @@ def fmt(x: np.ndarray) -> str:
 
 def one(scene: Path, out: Path) -> None:
     seen = adjusted(scene, out)
-    e = true_errors(scene, seen)
+    truths = [read_model_file(scene / "truth" / f"{n}_truth.json").model for n in NAMES]
+    e = true_errors(truths, seen)
     n = len(e)
     e0 = e - e.mean(axis=0)
     vtrue = np.einsum("nmak,nk->nma", seen["g"], e0)
@@ -227,7 +229,7 @@ def one(scene: Path, out: Path) -> None:
     stats = stats.reshape(3 * n, 3 * n)
     maps = check_maps(scene, seen, n)
     jack = jackknife(seen)
-    tie_step, tie_mean = tie_errors(scene, seen)
+    tie_step, tie_mean = tie_errors(truths, seen)
     ratios = perfect(seen, maps)
     measured = beyond_shift(scene, out)
     err = seen["error"]
@@ -246,8 +248,9 @@ def one(scene: Path, out: Path) -> None:
         jk = np.sqrt(rms(mp["J"], jack) ** 2 + mu**2)
         print(f"  {name:5s} columns / rows: measured {fmt(meas)}; realised {fmt(real)}, ties "
               f"{fmt(np.sqrt(np.mean(tie**2, axis=0)))}, both "
-              f"{fmt(np.sqrt(np.mean((gcp + tie)**2, axis=0)))}; true stats {fmt(rms(mp['T'], stats))}; model {fmt(model)}; jackknife "
-              f"{fmt(jk)}; unmodelled {mu:.3f}; ratio {fmt(meas / np.hypot(model, mu))}")
+              f"{fmt(np.sqrt(np.mean((gcp + tie)**2, axis=0)))}; true stats "
+              f"{fmt(rms(mp['T'], stats))}; model {fmt(model)}; jackknife {fmt(jk)}; "
+              f"unmodelled {mu:.3f}; ratio {fmt(meas / np.hypot(model, mu))}")
     q = np.percentile(ratios, [5, 50, 95], axis=0)
     inside = (ratios >= 0.7) & (ratios <= 1.5)
     print("  perfect prediction, measured / predicted 5/50/95 %: " + ", ".join(
