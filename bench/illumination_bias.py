@@ -5,13 +5,14 @@ deg and 158 / 50 deg azimuth / elevation). Matching shaded relief under two suns
 matches off the true epipolar geometry by a common y-parallax, which the adjustment, weighting
 hundreds of tie points, puts into the images' rows. This simulates the tiny pair twice, as the
 preset has it and with the right image lit by the left's sun, finds the tie points of each
-(``gcpfree relative``) and prints their mean y-parallax under the true models
-(``prediction_check.mean_y_parallax``). Then, at true correspondences (left pixels on a grid,
-their ground on the truth DSM, the right position through the true models), it compares the
-production measure, normalised cross-correlation of 15 px templates, with orientation
-correlation (the correlation of unit gradient directions, Fitch et al. 2002, which Heid & Kaab
-2012 found robust to illumination): the mean right-row error (the bias) and its spread. About
-2 minutes on 2 cores; asserts nothing.
+(``gcpfree relative``, with each ``--tie-measure``) and prints their mean y-parallax under the
+true models (``prediction_check.mean_y_parallax``). Then, at true correspondences (left pixels
+on a grid,
+their ground on the truth DSM, the right position through the true models), it compares
+normalised cross-correlation of 15 px templates with orientation correlation (the correlation
+of unit gradient directions, Fitch et al. 2002, which Heid & Kaab 2012 found robust to
+illumination; ``--tie-measure auto`` takes it for pairs whose suns differ): the mean right-row
+error (the bias) and its spread. About 3 minutes on 2 cores; asserts nothing.
 """
 
 from __future__ import annotations
@@ -31,7 +32,11 @@ HERE = Path(__file__).resolve().parent
 sys.path[:0] = [str(HERE), str(HERE.parent)]
 
 import core.simulation.scene as scenes  # noqa: E402
-from core.matching.peaks import integer_peak, quadratic_peak  # noqa: E402
+from core.matching.peaks import (  # noqa: E402
+    correlation_surface,
+    integer_peak,
+    quadratic_peak,
+)
 from core.matching.tiepoints import predict_search  # noqa: E402
 from core.orientation.ties import TieObservations  # noqa: E402
 from flows.cli import main as cli  # noqa: E402
@@ -44,6 +49,7 @@ ARGS = ["--preset", "tiny", "--seed", "1", "--center", "5.75", "44.75", "--lens"
 
 
 def bias(scene: Path, out: Path) -> tuple[int, float]:
+    """The tie points of ``out`` (rel.json): their number and mean y-parallax (px)."""
     t = TieGround.from_tiepoints_json(out.with_suffix(".tiepoints.json"))
     ties = TieObservations(np.stack([t.left_col, t.right_col], 1),
                            np.stack([t.left_row, t.right_row], 1), t.lon_deg, t.lat_deg, t.h_m)
@@ -53,13 +59,6 @@ def bias(scene: Path, out: Path) -> tuple[int, float]:
 
 
 HALF, SEARCH, GRID = 7, 4, 40  # template half size, search half extent (px), points per side
-
-
-def _directions(a: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    gx = cv2.Sobel(a, cv2.CV_32F, 1, 0, ksize=3)
-    gy = cv2.Sobel(a, cv2.CV_32F, 0, 1, ksize=3)
-    m = np.hypot(gx, gy) + 1e-6
-    return gx / m, gy / m
 
 
 def measures(scene: Path) -> dict[str, np.ndarray]:
@@ -99,11 +98,9 @@ def measures(scene: Path) -> dict[str, np.ndarray]:
         tpl = left[r - HALF - 1:r + HALF + 2, c - HALF - 1:c + HALF + 2]
         if search.min() <= 0 or tpl.min() <= 0:
             continue
-        ncc = cv2.matchTemplate(search[1:-1, 1:-1], tpl[1:-1, 1:-1], cv2.TM_CCOEFF_NORMED)
-        (sx, sy), (tx, ty) = _directions(search), _directions(tpl)
-        oc = (cv2.matchTemplate(sx[1:-1, 1:-1], tx[1:-1, 1:-1], cv2.TM_CCORR)
-              + cv2.matchTemplate(sy[1:-1, 1:-1], ty[1:-1, 1:-1], cv2.TM_CCORR)
-              ) / (2 * HALF + 1) ** 2  # the mean cosine of the direction differences
+        # the matcher's own measures (orientation correlation's inputs keep their border)
+        ncc = correlation_surface("ncc", search[1:-1, 1:-1], tpl[1:-1, 1:-1])
+        oc = correlation_surface("orientation", search, tpl)
         for name, surf in (("cross-correlation", ncc), ("orientation correlation", oc)):
             ix, iy, _, nb = integer_peak(surf)  # the matcher's own peak
             if nb is not None:
@@ -121,19 +118,22 @@ def main() -> None:
     with tempfile.TemporaryDirectory() as tmp:
         for label, p in (("two suns (the preset)", preset), ("one sun", one_sun)):
             scenes.PRESETS["tiny"] = p
-            scene, out = Path(tmp) / label.split()[0], Path(tmp) / f"{label.split()[0]}.json"
+            scene = Path(tmp) / label.split()[0]
             try:
-                rc = cli(["simulate", *ARGS, "--out", str(scene)]) or cli([
-                    "relative", "--left", str(scene / "left.tif"), "--right",
-                    str(scene / "right.tif"), "--reference", str(scene / "reference.tif"),
-                    "--out", str(out)])
+                rc = cli(["simulate", *ARGS, "--out", str(scene)])
+                for measure in ("ncc", "orientation"):
+                    out = Path(tmp) / f"{label.split()[0]}_{measure}.json"
+                    rc = rc or cli([
+                        "relative", "--left", str(scene / "left.tif"), "--right",
+                        str(scene / "right.tif"), "--reference", str(scene / "reference.tif"),
+                        "--tie-measure", measure, "--out", str(out)])
+                    if rc:
+                        raise SystemExit(f"{label}: gcpfree failed ({rc})")
+                    n, y = bias(scene, out)
+                    print(f"tiny, {label}, --tie-measure {measure}: {n} tie points, mean "
+                          f"y-parallax against the true models {y:+.3f} px")
             finally:
                 scenes.PRESETS["tiny"] = preset
-            if rc:
-                raise SystemExit(f"{label}: gcpfree failed ({rc})")
-            n, y = bias(scene, out)
-            print(f"tiny, {label}: {n} tie points, mean y-parallax against the true models "
-                  f"{y:+.3f} px")
             for name, e in measures(scene).items():
                 e = e[np.abs(e) < 2.0]  # wrong peaks out
                 print(f"  {name}, {2 * HALF + 1} px templates at {e.size} true "

@@ -2,7 +2,8 @@
 points and the relative orientation of a pair.
 
 models of both images -> reference DEM (given, or prepared from SRTM tiles) -> tie points ->
-right model adjusted to the left -> rel.json, <rel>.tiepoints.json.
+right model adjusted to the left -> rel.json, <rel>.tiepoints.json. The tie points' correlation
+measure is the pair's ``tie_measure`` (``auto``: chosen from the two suns).
 """
 
 from __future__ import annotations
@@ -31,7 +32,7 @@ class RelativeParams:
     cell_m: float = 2000.0
     search_radius_m: float | None = None  # default: from the GSD (default_search_radius_m)
     reference_sigma_m: float = 5.0
-    tie_points: TiePointConfig = field(default_factory=TiePointConfig)
+    tie_points: TiePointConfig = field(default_factory=TiePointConfig)  # measure: the pair's
     workers: int | None = None  # threads matching the tie-point cells (default one per core)
 
 
@@ -66,7 +67,8 @@ def relative_flow(params: RelativeParams) -> RelativeOutcome:
         reference_box_heights,
         scene_height_m,
     )
-    from tasks.relative.tiepoints import find_tie_points
+    from core.matching.peaks import MEASURE_NAMES
+    from tasks.relative.tiepoints import find_tie_points, tie_measure
 
     out, pair = Path(params.out), params.pair
     left, right = load_pair(pair)
@@ -93,7 +95,11 @@ def relative_flow(params: RelativeParams) -> RelativeOutcome:
         c, r = 0.5 * (left.size[0] - 1), 0.5 * (left.size[1] - 1)
         radius = default_search_radius_m(ground_sampling_m(left.model, c, r, 0.5 * (h_range[0]
                                                                                + h_range[1])))
-    cfg = replace(params.tie_points, cell_m=params.cell_m, search_radius_m=radius)
+    measure, why = tie_measure(pair.tie_measure, left.spot, right.spot)
+    measure_line = f"tie-point measure     {MEASURE_NAMES[measure]} ({why})"
+    print(measure_line)
+    cfg = replace(params.tie_points, cell_m=params.cell_m, search_radius_m=radius,
+                  measure=measure)
     ties = find_tie_points(left.image or left.source, right.image or right.source, left.model,
                            right.model, dem, cfg, h_range_m=h_range,
                            num_workers=params.workers)
@@ -103,7 +109,7 @@ def relative_flow(params: RelativeParams) -> RelativeOutcome:
     for line in products.lines():
         print(line)
     return RelativeOutcome(left, replace(right, model=products.right_model), reference_path,
-                           products.rel_json, tuple(products.lines()))
+                           products.rel_json, (measure_line, *products.lines()))
 
 
 @flow(name="relative-models")

@@ -1,7 +1,8 @@
 """Step 3 of the tie-point search (:mod:`core.matching.tiepoints` holds the others): each left
 point matched in the right image within its epipolar prior.
 
-The left template is correlated (NCC, :mod:`core.matching.peaks`) over the right image
+The left template is correlated (``cfg.measure``: NCC or orientation correlation,
+:mod:`core.matching.peaks`) over the right image
 resampled into left geometry through the prior's Jacobian; the integer peak is refined by
 re-centred 2-D quadratic fits (the right image resampled around the current estimate at
 shrinking steps, so the fit's pixel-locking bias vanishes); then a right -> left back-match
@@ -21,7 +22,14 @@ from numpy.typing import ArrayLike, NDArray
 
 from core.dem import sample_bilinear
 from core.errors import InputError
-from core.matching.peaks import INVALID, integer_peak, ncc, ncc_surface, quadratic_peak
+from core.matching.peaks import (
+    INVALID,
+    border_px,
+    correlation_surface,
+    integer_peak,
+    patch_correlation,
+    quadratic_peak,
+)
 from core.matching.tiepoint_results import Matches, TiePointStatus
 from core.matching.tiepoints import SearchPrior, TiePointConfig, valid_pixels
 
@@ -78,22 +86,23 @@ def _right_patches(right: _Raster, pc: FloatArray, pr: FloatArray, jac: FloatArr
 
 def _refine(right: _Raster, prior_c: FloatArray, prior_r: FloatArray, jac: FloatArray,
             du: FloatArray, dv: FloatArray, templates: FloatArray, iterations: int,
-            ) -> tuple[FloatArray, FloatArray, FloatArray, FloatArray]:
+            measure: str) -> tuple[FloatArray, FloatArray, FloatArray, FloatArray]:
     """Re-centred sub-pixel fits: resample the right image around the current offsets at 3x3
     shifts of 1, 1/2, 1/4... px, correlate, move to the quadratic peak. Once the shifts are
     small the quadratic is a good model of the peak and the fit's pixel-locking bias is gone
     (0.037 -> 0.0095 px RMS on synthetic images). Returns the offsets, the correlation there and
-    the right patches there (the back-match templates)."""
+    the right patches there (the back-match templates; templates and patches carry the
+    measure's border)."""
     t = templates.shape[1] // 2
     for k in range(iterations):
         step = 0.5**k
-        z = np.stack([ncc(_right_patches(right, prior_c, prior_r, jac, du + step * sx,
-                                          dv + step * sy, t), templates)
+        z = np.stack([patch_correlation(measure, _right_patches(
+            right, prior_c, prior_r, jac, du + step * sx, dv + step * sy, t), templates)
                       for sy in (-1, 0, 1) for sx in (-1, 0, 1)], axis=1).reshape(-1, 3, 3)
         dx, dy = quadratic_peak(np.nan_to_num(z, nan=INVALID))
         du, dv = du + step * dx, dv + step * dy
     p = _right_patches(right, prior_c, prior_r, jac, du, dv, t)
-    return du, dv, ncc(p, templates), p
+    return du, dv, patch_correlation(measure, p, templates), p
 
 
 def match_points(
@@ -113,7 +122,7 @@ def match_points(
     ``left``/``right`` are windows of the two images whose top-left pixels are the full-image
     pixels ``left_origin``/``right_origin`` (col0, row0); ``left_col``/``left_row`` are
     full-image pixel centres (rounded to integers: templates are not resampled). For each
-    point: the left ``(2 t + 1)``-square template is correlated (``TM_CCOEFF_NORMED``) over the
+    point: the left ``(2 t + 1)``-square template is correlated (``cfg.measure``) over the
     right image resampled into left geometry through the prior's Jacobian over the search box;
     the integer peak is refined by re-centred quadratic fits (``cfg.refine_iterations``); then
     the right patch at the match is searched back over the same box in the left image and must
@@ -128,7 +137,7 @@ def match_points(
                          f"{prior.h_m.size} points; give one prior per point")
     L = _Raster.of(left, left_origin, nodata)
     R = _Raster.of(right, right_origin, nodata)
-    t = cfg.template_half_px
+    t = cfg.template_half_px + border_px(cfg.measure)  # with the measure's border
     status = np.full(n, TiePointStatus.NO_PRIOR, np.uint8)
     du, dv = np.zeros(n), np.zeros(n)
     corr, back = np.full(n, np.nan), np.full(n, np.nan)
@@ -154,7 +163,7 @@ def match_points(
                       borderValue=0)
         sinv = cv2.remap(R.invalid, mx, my, cv2.INTER_LINEAR, borderMode=cv2.BORDER_CONSTANT,
                          borderValue=1)
-        ix, iy, val, nb = integer_peak(ncc_surface(s, tpl, sinv))
+        ix, iy, val, nb = integer_peak(correlation_surface(cfg.measure, s, tpl, sinv))
         if val < -1.5:
             status[i] = TiePointStatus.OUTSIDE
             continue
@@ -170,19 +179,19 @@ def match_points(
     if idx.size:
         d_u, d_v, c, g = _refine(R, prior.right_col[idx], prior.right_row[idx],
                                  prior.jacobian[idx], du[idx], dv[idx], templates[idx],
-                                 cfg.refine_iterations)
+                                 cfg.refine_iterations, cfg.measure)
         jac = prior.jacobian[idx]
         rc[idx] = prior.right_col[idx] + jac[:, 0, 0] * d_u + jac[:, 0, 1] * d_v
         rr[idx] = prior.right_row[idx] + jac[:, 1, 0] * d_u + jac[:, 1, 1] * d_v
         corr[idx] = c
         bad = ~np.isfinite(c)
         status[idx[bad]] = TiePointStatus.OUTSIDE
-        low = ~bad & (c < cfg.min_correlation)
+        low = ~bad & (c < cfg.correlation_floor)
         status[idx[low]] = TiePointStatus.LOW_CORRELATION
         for k in np.flatnonzero(~bad & ~low):
             i = idx[k]
             back[i] = _back_match(L, int(lc[i]), int(lr[i]), prior.half_col_px[i],
-                                  prior.half_row_px[i], g[k].astype(np.float32))
+                                  prior.half_row_px[i], g[k].astype(np.float32), cfg.measure)
             if not back[i] <= cfg.back_match_tol_px:
                 status[i] = TiePointStatus.BACK_MATCH
     return Matches(lc, lr, rc, rr, corr, back, status, prior.h_m.copy(), prior.right_col.copy(),
@@ -191,14 +200,14 @@ def match_points(
 
 
 def _back_match(left: _Raster, col: int, row: int, half_col: float, half_row: float,
-                template: NDArray[np.float32]) -> float:
+                template: NDArray[np.float32], measure: str) -> float:
     """Distance (left px) from (col, row) to the best match of a right template searched in
     the left image over the search box; inf when the peak is on the box's border."""
     t = template.shape[0] // 2
     ex, ey = math.ceil(half_col), math.ceil(half_row)
     ci, ri = col - left.col0, row - left.row0
     s, sinv = left.crop(ci - ex - t, ri - ey - t, ci + ex + t + 1, ri + ey + t + 1)
-    ix, iy, val, nb = integer_peak(ncc_surface(s, template, sinv))
+    ix, iy, val, nb = integer_peak(correlation_surface(measure, s, template, sinv))
     if nb is None or val < -1.5:
         return math.inf
     dx, dy = quadratic_peak(nb)

@@ -13,6 +13,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from core.errors import InputError
+from core.matching.peaks import MEASURE_NAMES
 
 FloatArray = NDArray[np.float64]
 
@@ -161,8 +162,9 @@ class TiePointReport:
     passed correlation and back-match, ``n_points`` were kept (one per cell). Of the
     ``n_cells`` ground cells of the overlap, ``n_cells_textured`` held an interest point and
     ``n_cells_with_point`` a tie point: ``coverage`` and ``coverage_textured`` are the shares.
-    Correlation percentiles (5, 25, 50, 75, 95) are of the kept points; ``rejected`` counts
-    the candidates per rejection status name."""
+    Correlation percentiles (5, 25, 50, 75, 95) are of the kept points, in the ``measure``
+    they were matched with (``ncc`` or ``orientation``; a report written before the measure
+    was recorded was NCC's); ``rejected`` counts the candidates per rejection status name."""
 
     n_points: int
     n_candidates: int
@@ -179,6 +181,7 @@ class TiePointReport:
     correlation_p75: float
     correlation_p95: float
     rejected: dict[str, int] = field(default_factory=dict)
+    measure: str = "ncc"
 
     def to_dict(self) -> dict[str, Any]:
         return {k: (dict(v) if isinstance(v, dict) else v) for k, v in self.__dict__.items()}
@@ -186,7 +189,8 @@ class TiePointReport:
     @classmethod
     def from_dict(cls, d: Mapping[str, Any]) -> TiePointReport:
         try:
-            return cls(**{k: d[k] for k in cls.__dataclass_fields__})
+            return cls(**{k: d[k] for k in cls.__dataclass_fields__ if k != "measure"},
+                       measure=d.get("measure", "ncc"))
         except (KeyError, TypeError) as exc:
             raise InputError(f"tie-point report lacks {exc}; give the JSON written by "
                              "TiePointReport.to_dict") from exc
@@ -199,16 +203,17 @@ class TiePointReport:
             (f"coverage       {100 * self.coverage:.1f} % of {self.n_cells} overlap cells, "
              f"{100 * self.coverage_textured:.1f} % of the {self.n_cells_textured} textured"),
             (f"correlation    p5 {self.correlation_p05:.3f}  median {self.correlation_p50:.3f}"
-             f"  p95 {self.correlation_p95:.3f}"),
+             f"  p95 {self.correlation_p95:.3f} "
+             f"({MEASURE_NAMES.get(self.measure, self.measure)})"),
             f"rejected       {rejected}",
         ]
 
 
 def tiepoint_report(tie_points: TiePoints, candidate_status: ArrayLike,
-                    candidate_cells: ArrayLike, overlap: ArrayLike, cell_m: float
-                    ) -> TiePointReport:
+                    candidate_cells: ArrayLike, overlap: ArrayLike, cell_m: float,
+                    measure: str = "ncc") -> TiePointReport:
     """The report of a search: kept points, the status and cell id of every candidate searched
-    (-1 for none), the ids of the overlap cells."""
+    (-1 for none), the ids of the overlap cells, the correlation measure."""
     st = np.asarray(candidate_status, dtype=np.uint8)
     overlap_ids = np.unique(np.asarray(overlap, dtype=np.int64))
     cand = np.asarray(candidate_cells, dtype=np.int64)
@@ -227,6 +232,7 @@ def tiepoint_report(tie_points: TiePoints, candidate_status: ArrayLike,
         coverage_textured=float(with_point.size / max(textured.size, 1)),
         correlation_p05=float(q[0]), correlation_p25=float(q[1]), correlation_p50=float(q[2]),
         correlation_p75=float(q[3]), correlation_p95=float(q[4]), rejected=rejected,
+        measure=measure,
     )
 
 

@@ -7,6 +7,7 @@ from pathlib import Path
 
 VERTICALS = ("auto", "ellipsoidal", "egm96")  # core.heights.VERTICAL_CHOICES (not imported:
 # the parser is built without numpy, so --help answers at once)
+TIE_MEASURES = ("auto", "ncc", "orientation")  # tasks.io.pair.TIE_MEASURES, likewise
 VERTICAL_HELP = ("heights of REF: auto (default) reads its vertical_datum tag, then its CRS's "
                  "vertical part, then an SRTM name (.hgt, N44E005.tif: EGM96); a DEM none of "
                  "these describe is refused: say egm96 or ellipsoidal")
@@ -34,7 +35,7 @@ class OneLineParser(argparse.ArgumentParser):
 
 
 def add_pair_arguments(p: argparse.ArgumentParser, *, right_help: str = "right image") -> None:
-    """``--left --right --left-model --right-model --band``."""
+    """``--left --right --left-model --right-model --band --tie-measure``."""
     p.add_argument("--left", type=Path, required=True, help="left image (its model stays fixed)")
     p.add_argument("--right", type=Path, required=True, help=right_help)
     p.add_argument("--left-model", type=Path, default=None,
@@ -43,6 +44,11 @@ def add_pair_arguments(p: argparse.ArgumentParser, *, right_help: str = "right i
     p.add_argument("--right-model", type=Path, default=None, help="model of the right image")
     p.add_argument("--band", type=int, default=None,
                    help="SPOT multispectral band whose look angles to use (default the first)")
+    p.add_argument("--tie-measure", choices=TIE_MEASURES, default="auto",
+                   help="correlation of the tie points: auto (default) takes orientation "
+                        "correlation, robust to illumination, when the metadata's suns differ "
+                        "by more than a degree (a two-date pair), else normalised "
+                        "cross-correlation, the more precise on one date")
 
 
 def add_reference_arguments(p: argparse.ArgumentParser, *, use: str) -> None:

@@ -14,7 +14,10 @@ from typing import Any
 
 from core.errors import InputError
 from core.heights import VERTICAL_CHOICES
+from core.matching.peaks import MEASURES
 
+#: ``--tie-measure`` choices: auto, then the measures of core.matching.peaks
+TIE_MEASURES = ("auto", *MEASURES)
 PATHS = ("left", "right", "left_model", "right_model", "reference", "srtm_dir")
 
 
@@ -27,6 +30,9 @@ class PairInputs:
     SPOT band whose look angles to use (default the first). The ground: ``reference``, a DEM
     in EPSG:4326 whose heights ``reference_vertical`` says (``auto``: decided by the one datum
     rule), or ``srtm_dir``, SRTM tiles a reference is prepared from; at most one of them.
+    ``tie_measure``: how the tie points are correlated, ``auto`` (orientation correlation when
+    the two images' suns differ, :func:`core.matching.tiepoints.choose_measure`), ``ncc`` or
+    ``orientation``.
     """
 
     left: Path
@@ -37,6 +43,7 @@ class PairInputs:
     reference: Path | None = None
     reference_vertical: str = "auto"
     srtm_dir: Path | None = None
+    tie_measure: str = "auto"
 
     def __post_init__(self) -> None:
         for name in PATHS:
@@ -49,14 +56,19 @@ class PairInputs:
         if self.reference_vertical not in VERTICAL_CHOICES:
             raise InputError(f"--reference-vertical {self.reference_vertical!r} unknown; use "
                              f"one of {', '.join(VERTICAL_CHOICES)}")
+        if self.tie_measure not in TIE_MEASURES:
+            raise InputError(f"--tie-measure {self.tie_measure!r} unknown; use one of "
+                             f"{', '.join(TIE_MEASURES)}")
 
     @classmethod
     def from_args(cls, args: Any) -> PairInputs:
         """From a command's options (``--left --right --left-model --right-model --band
-        --reference --reference-vertical --srtm-dir``; those a command lacks stay unset)."""
+        --reference --reference-vertical --srtm-dir --tie-measure``; those a command lacks stay
+        unset)."""
         return cls(**{k: getattr(args, k) for k in
                       ("left", "right", "left_model", "right_model", "band", "reference",
-                       "reference_vertical", "srtm_dir") if getattr(args, k, None) is not None})
+                       "reference_vertical", "srtm_dir", "tie_measure")
+                      if getattr(args, k, None) is not None})
 
     @property
     def has_ground(self) -> bool:

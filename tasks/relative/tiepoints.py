@@ -24,6 +24,7 @@ from core.matching.overlap import overlap_cell_m, overlap_cells
 from core.matching.tiepoint_match import match_points
 from core.matching.tiepoint_results import Matches, TiePointResult, tiepoint_report
 from core.matching.tiepoints import (
+    choose_measure,
     HeightPrior,
     TiePointConfig,
     cell_ids,
@@ -38,6 +39,7 @@ from core.matching.tiepoints import (
 )
 from core.sensors.base import SensorModel
 from core.sensors.footprint import footprint_box, scene_height_range_m
+from core.sensors.spot import SpotScene
 from tasks.io.dem import dem_datum, read_reference
 from tasks.io.rasters import atomic_write_json, open_raster, read_window
 from tasks.scheduling import compute
@@ -142,6 +144,23 @@ def block_matches(block: Block, left_path: str, right_path: str, left_model: Sen
 # ---------------------------------------------------------------------------- task
 
 
+def tie_measure(requested: str, left_spot: SpotScene | None, right_spot: SpotScene | None
+                ) -> tuple[str, str]:
+    """The tie points' measure for ``--tie-measure`` and the pair's SPOT metadata (None for
+    other models), and why: ``auto`` asks :func:`core.matching.tiepoints.choose_measure` with
+    the suns the metadata state; a measure given is used as it is."""
+    if requested != "auto":
+        return requested, "as asked"
+
+    def sun(s: SpotScene | None) -> tuple[float, float] | None:
+        if s is None or s.sun_azimuth_deg is None or s.sun_elevation_deg is None:
+            return None
+        return s.sun_azimuth_deg, s.sun_elevation_deg
+
+    return choose_measure(sun(left_spot), sun(right_spot))
+
+
+
 @task(name="find-tie-points")
 def find_tie_points(
     left_image: str | Path,
@@ -200,7 +219,7 @@ def find_tie_points(
     matches = check_consistency(matches, x, y, cfg, heights_known=reference is not None)
     tie_points = select_tie_points(matches, x, y, cfg.cell_m)
     report = tiepoint_report(tie_points, matches.status,
-                             cell_ids(x, y, cfg.cell_m), overlap, cfg.cell_m)
+                             cell_ids(x, y, cfg.cell_m), overlap, cfg.cell_m, cfg.measure)
     result = TiePointResult(tie_points, report)
     if out is not None:
         atomic_write_json(out, result.to_dict(), indent=None)

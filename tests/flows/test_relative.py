@@ -84,6 +84,19 @@ def test_simulated_pair_is_relatively_oriented(clean_runs, family):
     assert len(ties["relative_ground"]["h_m"]) == doc["tie_points"] + doc["tie_points_rejected"]
 
 
+def test_the_tie_measure_follows_the_suns(clean_runs):
+    """The tiny pair's DIMAP files state two suns (140 / 63 and 158 / 50 deg): orientation
+    correlation; its RPC tags state none: NCC. Said in the output and recorded in rel.json."""
+    _, runs = clean_runs
+    for family, measure, why in (("pushbroom", "orientation", "16.2 deg apart"),
+                                 ("rpc", "ncc", "not in both images' metadata")):
+        outcome = runs[family]
+        doc = json.loads(outcome.rel_json.read_text())
+        assert doc["tie_point_search"]["measure"] == measure
+        line = next(x for x in outcome.lines if x.startswith("tie-point measure"))
+        assert why in line, line
+
+
 def test_without_reference_the_along_epipolar_part_is_held(prefect_harness, tiny_clean_scene,
                                                              tmp_path):
     scene_dir, _ = tiny_clean_scene
@@ -180,6 +193,9 @@ def test_bad_input_is_one_line(tiny_clean_scene, tmp_path):
     r = cli("--left", str(left), "--right", str(tmp_path / "none.tif"), "--out",
             str(tmp_path / "r.json"))
     assert r.returncode == 2 and "does not exist" in r.stderr and "Traceback" not in r.stderr
+    r = cli("--left", str(left), "--right", str(right), "--tie-measure", "census", "--out",
+            str(tmp_path / "r.json"))
+    assert r.returncode == 2 and "--tie-measure" in r.stderr and len(r.stderr.splitlines()) == 1
     # a model that does not belong to the image: the footprints are far apart
     r = cli("--left", str(left), "--right", str(right), "--right-model",
             str(DATA / "pleiades_gizeh" / "img1.geom"), "--reference", str(SRTM),

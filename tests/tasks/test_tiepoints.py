@@ -29,7 +29,7 @@ from core.simulation.landcover import LandCover
 from tasks.io.geoid import BUNDLED_SRTM_DIR
 from tasks.io.reference import build_reference, locate_tiles
 from tasks.io.sensors import load_model
-from tasks.relative.tiepoints import find_tie_points
+from tasks.relative.tiepoints import find_tie_points, tie_measure
 
 DATA = Path(__file__).resolve().parents[1] / "data"
 SHARED = Path(os.environ.get("GCPFREE_SHARED_DATA", "/work/shared/data"))
@@ -119,7 +119,7 @@ def test_tiny_tie_points_cover_the_textured_cells(clean):
     rep, tp = result.report, result.tie_points
     assert rep.n_cells > 450 and rep.coverage >= 0.8 and rep.coverage_textured >= 0.8
     assert len(tp) == rep.n_points >= rep.n_cells_with_point  # a few in border slivers
-    assert np.all(tp.ok) and np.all(tp.correlation >= TINY_CFG.min_correlation)
+    assert np.all(tp.ok) and np.all(tp.correlation >= TINY_CFG.correlation_floor)
     assert len(np.unique(tp.cell_id)) == len(tp)
     assert rep.correlation_p50 > 0.9
     saved = TiePointResult.from_dict(json.loads((scene / "tiepoints.json").read_text()))
@@ -238,6 +238,22 @@ def test_gizeh_pair_with_the_rpc_height_range():
                              h_range_m=_rpc_height_range(left.model, right.model))
     assert len(res.tie_points) >= 50 and res.report.coverage >= 0.8
     assert res.report.correlation_p50 > 0.8
+
+
+def test_the_tie_measure_is_read_from_the_metadata_suns():
+    """``auto`` takes the suns of the SPOT metadata (real SPOT 2 DIMAP files state them);
+    without them, or when the user names a measure, no guess is made."""
+    from types import SimpleNamespace
+
+    def spot(az, el):
+        return SimpleNamespace(sun_azimuth_deg=az, sun_elevation_deg=el)
+
+    assert tie_measure("auto", spot(140.0, 63.0), spot(158.0, 50.0))[0] == "orientation"
+    assert tie_measure("auto", spot(140.0, 63.0), spot(140.2, 63.1))[0] == "ncc"
+    assert tie_measure("auto", spot(140.0, None), spot(158.0, 50.0))[0] == "ncc"
+    assert tie_measure("auto", None, None) == ("ncc", "the suns are not in both images' metadata")
+    assert tie_measure("orientation", None, None) == ("orientation", "as asked")
+    assert tie_measure("ncc", spot(140.0, 63.0), spot(158.0, 50.0)) == ("ncc", "as asked")
 
 
 # ---------------------------------------------------------------------------- bad input
