@@ -123,6 +123,8 @@ def main() -> None:
         build_reference.fn(locate_tiles.fn(BUNDLED_SRTM_DIR, box), box, ref)
         out = tmp_path / "tiepoints.json"
         env = dict(os.environ, PREFECT_HOME=str(tmp_path / "prefect"))
+        from core.matching.tiepoint_results import TiePointResult
+
         for asked in ("auto", "ncc"):  # auto: orientation correlation on a two-sun pair
             before = resource.getrusage(resource.RUSAGE_CHILDREN)
             r = subprocess.run([sys.executable, "-c", CHILD, str(scene), str(ref), str(out),
@@ -135,8 +137,6 @@ def main() -> None:
             after = resource.getrusage(resource.RUSAGE_CHILDREN)
             cpu_s = (after.ru_utime + after.ru_stime) - (before.ru_utime + before.ru_stime)
             peak_mb = after.ru_maxrss / 1024
-            from core.matching.tiepoint_results import TiePointResult
-
             report = TiePointResult.from_dict(json.loads(out.read_text())).report
             print(f"tie points on the spot pair, {done['measure']}: {done['seconds']:.1f} s on "
                   f"{os.cpu_count()} cores (Dask threads; the child process used {cpu_s:.0f} s "

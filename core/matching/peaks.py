@@ -50,13 +50,21 @@ def ncc_surface(search: NDArray[np.float32], template: NDArray[np.float32],
     correlation is undefined."""
     ncc = cv2.matchTemplate(np.asarray(search, np.float32), np.asarray(template, np.float32),
                             cv2.TM_CCOEFF_NORMED)
+    return _mark_invalid(ncc, template.shape, invalid)
+
+
+def _mark_invalid(surface: NDArray[np.float32], template_shape: tuple[int, ...],
+                  invalid: NDArray[np.float32] | NDArray[np.uint8] | None
+                  ) -> NDArray[np.float32]:
+    """``surface`` with :data:`INVALID` where a window of ``template_shape`` touches a pixel
+    flagged in ``invalid`` (the search area's shape) or where it is not finite."""
     if invalid is not None and np.any(invalid):
-        th, tw = template.shape
+        th, tw = template_shape
         counts = cv2.boxFilter(np.asarray(invalid, np.float32), -1, (tw, th), normalize=False,
                                anchor=(0, 0), borderType=cv2.BORDER_CONSTANT)
-        ncc[counts[:ncc.shape[0], :ncc.shape[1]] > 1e-3] = INVALID
-    ncc[~np.isfinite(ncc)] = INVALID
-    return ncc
+        surface[counts[:surface.shape[0], :surface.shape[1]] > 1e-3] = INVALID
+    surface[~np.isfinite(surface)] = INVALID
+    return surface
 
 
 def unit_gradients(a: ArrayLike) -> FloatArray:
@@ -88,13 +96,7 @@ def orientation_surface(search: NDArray[np.float32], template: NDArray[np.float3
     t = unit_gradients(template).astype(np.float32)
     oc = (cv2.matchTemplate(s[0], t[0], cv2.TM_CCORR)
           + cv2.matchTemplate(s[1], t[1], cv2.TM_CCORR)) / np.float32(t[0].size)
-    if invalid is not None and np.any(invalid):
-        th, tw = template.shape
-        counts = cv2.boxFilter(np.asarray(invalid, np.float32), -1, (tw, th), normalize=False,
-                               anchor=(0, 0), borderType=cv2.BORDER_CONSTANT)
-        oc[counts[:oc.shape[0], :oc.shape[1]] > 1e-3] = INVALID
-    oc[~np.isfinite(oc)] = INVALID
-    return oc
+    return _mark_invalid(oc, template.shape, invalid)
 
 
 def orientation_correlation(a: ArrayLike, b: ArrayLike) -> FloatArray:

@@ -24,11 +24,11 @@ from core.matching.overlap import overlap_cell_m, overlap_cells
 from core.matching.tiepoint_match import match_points
 from core.matching.tiepoint_results import Matches, TiePointResult, tiepoint_report
 from core.matching.tiepoints import (
-    choose_measure,
     HeightPrior,
     TiePointConfig,
     cell_ids,
     check_consistency,
+    choose_measure,
     detect_points,
     ground_sampling_m,
     ground_xy_m,
@@ -158,7 +158,6 @@ def tie_measure(requested: str, left_spot: SpotScene | None, right_spot: SpotSce
         return s.sun_azimuth_deg, s.sun_elevation_deg
 
     return choose_measure(sun(left_spot), sun(right_spot))
-
 
 
 @task(name="find-tie-points")
