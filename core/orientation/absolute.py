@@ -544,7 +544,7 @@ def with_gcp_errors_as_they_are(adj: AbsoluteOrientation, obs: Observations,
     mu2 = parallax_covariance(ground, v, col[:, 0], row[:, 0])
     if ties is not None and ties.n >= 3 and ties.n_images == len(models):
         tie_ground, tie_v = tie_residuals(models, ties)
-        mu2 += along_track_covariance(tie_ground, tie_v, ties.row[:, 0])
+        mu2 += along_track_covariance(tie_ground, tie_v, ties.row)
     mu = float(np.sqrt(mu2))
     residuals = tuple(replace(r, unmodelled_col_px=mu, unmodelled_row_px=mu)
                       for r in adj.residuals)

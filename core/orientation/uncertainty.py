@@ -286,6 +286,14 @@ def parallax_covariance(ground_jac: ArrayLike, v: ArrayLike, col: ArrayLike, row
     see). Returned: ``mean((Q_i v_i)'(Q_j v_j)) / mean(tr(Q_i Q_j))`` over the nearest-
     neighbour pairs (in (``col``, ``row``) of one image), 0 unless above ``t_min`` standard
     errors (independent noise averages out of it), and with fewer than 3 points."""
+    return _neighbour_parallax(ground_jac, v, np.column_stack(
+        [np.asarray(col, dtype=np.float64), np.asarray(row, dtype=np.float64)]), t_min)
+
+
+def _neighbour_parallax(ground_jac: ArrayLike, v: ArrayLike, pts: ArrayLike,
+                        t_min: float) -> float:
+    """:func:`parallax_covariance` over the nearest-neighbour pairs in the coordinates ``pts``
+    (n, k)."""
     from scipy.spatial import cKDTree
 
     g = np.asarray(ground_jac, dtype=np.float64)
@@ -300,7 +308,7 @@ def parallax_covariance(ground_jac: ArrayLike, v: ArrayLike, col: ArrayLike, row
     gf = g.reshape(n, -1, 3)
     q = np.eye(gf.shape[1]) - gf @ np.linalg.pinv(gf)  # (n, 2m, 2m) onto the parallax
     w = np.einsum("nij,nj->ni", q, v.reshape(n, -1))
-    pts = np.column_stack([np.asarray(col, dtype=np.float64), np.asarray(row, dtype=np.float64)])
+    pts = np.asarray(pts, dtype=np.float64).reshape(n, -1)
     _, j = cKDTree(pts).query(pts, k=2)
     pairs = np.unique(np.sort(np.column_stack([np.arange(n), j[:, 1]]), axis=1), axis=0)
     a, b = pairs[:, 0], pairs[:, 1]
@@ -314,14 +322,22 @@ def parallax_covariance(ground_jac: ArrayLike, v: ArrayLike, col: ArrayLike, row
 def along_track_covariance(ground_jac: ArrayLike, v: ArrayLike, row: ArrayLike,
                            t_min: float = 2.0) -> float:
     """The model's own error per pixel axis (px^2) that follows the time of imaging: the
-    covariance of the parallax (as :func:`parallax_covariance`) at points nearest in ``row``
+    covariance of the parallax (as :func:`parallax_covariance`) at points nearest in time
     whatever their columns. An attitude error is the same for every detector of a line, so
     points a few lines apart share it wherever they are across the image, while their matching
     noise is independent: jitter faster than the GCPs' spacing, which the 2-D neighbours of
     :func:`parallax_covariance` see as noise, shows here when the points are dense in time
-    (the tie points: hundreds per image)."""
+    (the tie points: hundreds per image).
+
+    ``row`` is (n,) or (n, m): each point's row in each image. The parallax holds every
+    image's error, each at its own time; two points share all of it only when they are near
+    in time in every image, so the neighbours are sought in the m-D space of rows. Two images
+    turned against each other (two orbits, two dates: the same ground line 250 rows apart at
+    the two ends of a 6000-column spot line) put points of one left row at right rows far
+    apart, so neighbours in one image's row alone share only that image's error: half the
+    variance of the two images' jitter."""
     r = np.asarray(row, dtype=np.float64)
-    return parallax_covariance(ground_jac, v, np.zeros_like(r), r, t_min)
+    return _neighbour_parallax(ground_jac, v, r.reshape(r.shape[0], -1), t_min)
 
 
 @dataclass(frozen=True)

@@ -202,6 +202,37 @@ def test_jitter_shows_in_the_tie_points_nearest_in_time():
     assert spurious <= 2
 
 
+def test_jitter_of_two_images_turned_against_each_other_is_found_whole():
+    """Two dates' images turned by 2.4 degrees (spot's two orbits: the same ground line 250
+    rows apart at the two ends of a 6000-column line), each with its own jitter of 0.3 px per
+    axis at its own rows, 0.1 px of matching noise: the tie points' neighbours in the rows of
+    both images find the jitter within 20 % (over 20 draws); neighbours in the left image's
+    rows alone share only the left image's jitter and find 1/sqrt(2) of it (0.21 px)."""
+    rng = np.random.default_rng(9)
+    n, lines = 900, 6000.0
+    _, _, g = layout(6)
+    g = np.concatenate([g] * 8)[:n]
+    col = rng.uniform(0, 6000, n)
+    row_l = rng.uniform(0, lines, n)
+    row_r = row_l + (col - 3000.0) * np.tan(np.radians(2.4))
+
+    def jitter(rows: np.ndarray) -> np.ndarray:
+        out = np.zeros((rows.size, 2))
+        for axis in range(2):
+            for _ in range(2):
+                period = rng.uniform(30.0, 600.0)
+                out[:, axis] += 0.3 * np.sin(2 * np.pi * rows / period + rng.uniform(0, 6.3))
+        return out
+
+    both, left = [], []
+    for _ in range(20):
+        v = np.stack([jitter(row_l), jitter(row_r)], axis=1) + rng.normal(0.0, 0.1, (n, 2, 2))
+        both.append(along_track_covariance(g, v, np.column_stack([row_l, row_r])))
+        left.append(along_track_covariance(g, v, row_l))
+    assert np.sqrt(np.mean(both)) == pytest.approx(0.3, rel=0.2)
+    assert np.sqrt(np.mean(left)) == pytest.approx(0.3 / np.sqrt(2), rel=0.15)
+
+
 def test_a_dozen_gcps_sharing_a_ground_error_are_not_taken_for_independent_ones():
     """Twelve GCPs (a flat scene: few windows qualify) whose ground errors share a field of
     25 m east, 10 m north and 5 m up correlated over 15 km, under 0.2 px of noise: an
