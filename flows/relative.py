@@ -95,7 +95,7 @@ def relative_flow(params: RelativeParams) -> RelativeOutcome:
         c, r = 0.5 * (left.size[0] - 1), 0.5 * (left.size[1] - 1)
         radius = default_search_radius_m(ground_sampling_m(left.model, c, r, 0.5 * (h_range[0]
                                                                                + h_range[1])))
-    measure, why = tie_measure(pair.tie_measure, left.spot, right.spot)
+    measure, why = tie_measure(pair.tie_measure, left.sun, right.sun)
     measure_line = f"tie-point measure     {MEASURE_NAMES[measure]} ({why})"
     print(measure_line)
     cfg = replace(params.tie_points, cell_m=params.cell_m, search_radius_m=radius,

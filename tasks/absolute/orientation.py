@@ -42,7 +42,7 @@ from core.sensors.base import SensorModel
 from core.sensors.pushbroom import PushbroomModel
 from tasks.absolute.surface_match import TieGround
 from tasks.io.rasters import atomic_write_json
-from tasks.io.sensors import LoadedModel
+from tasks.io.sensors import LoadedModel, sun_to_dict
 
 NAMES = ("left", "right")
 CSV_COLUMNS = ("id", "lon_deg", "lat_deg", "h_m", "left_col", "left_row", "right_col",
@@ -167,7 +167,8 @@ def orient_absolute(left: LoadedModel, right: LoadedModel, gcps: tuple[ControlPo
     with ``ties`` (the relative orientation's tie points), to the images' relative geometry
     too; ``along_track``: then the attitude's along-track profile, harmonics in time as many
     as the data choose (:mod:`core.orientation.along_track`); written as
-    ``out_dir/left.json`` and ``out_dir/right.json`` (gcpfree model files)."""
+    ``out_dir/left.json`` and ``out_dir/right.json`` (gcpfree model files, with the sun the
+    metadata stated: what later chooses the tie points' measure)."""
     config = config or AbsoluteConfig()
     models = (left.model.with_corrections(corrections),
               right.model.with_corrections(corrections))
@@ -199,9 +200,9 @@ def orient_absolute(left: LoadedModel, right: LoadedModel, gcps: tuple[ControlPo
         reasons.update({int(idx[i]): r for i, r in adj.reasons.items()})
     adj, ground_error = with_gcp_errors_as_they_are(adj, obs, kept, config, tie_obs)
     paths = []
-    for name, model in zip(NAMES, adj.models, strict=True):
-        paths.append(atomic_write_json(Path(out_dir) / f"{name}.json",
-                                       model.to_dict()))  # type: ignore[attr-defined]
+    for name, model, given in zip(NAMES, adj.models, (left, right), strict=True):
+        paths.append(atomic_write_json(Path(out_dir) / f"{name}.json", {
+            **model.to_dict(), **sun_to_dict(given.sun)}))  # type: ignore[attr-defined]
     return AbsoluteProducts(tuple(adj.models), adj, calib, tuple(paths),
                             predicted_over_images(adj, (left.size, right.size),
                                                   np.asarray(obs.h_m)[kept], config,

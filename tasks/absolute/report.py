@@ -64,6 +64,7 @@ from typing import Any
 
 from core.errors import InputError
 from core.jsonio import parse_json
+from core.matching.peaks import MEASURE_NAMES
 from core.orientation.absolute import CheckPointStats
 from tasks.absolute.report_sections import (  # noqa: F401 (the sections, importable from here)
     NUMBER,
@@ -204,7 +205,9 @@ class OrientReport:
                        f"L {a.rms_row_px:.3f} px RMS")
         ties = self.absolute.tie_points
         if ties is not None:
-            out.append(f"tie points            {ties['n']} in the adjustment, parallax "
+            measure = self.relative.get("tie_point_search", {}).get("measure")
+            by = f" ({MEASURE_NAMES.get(measure, measure)})" if measure else ""
+            out.append(f"tie points            {ties['n']} in the adjustment{by}, parallax "
                        f"{ties['rms_px']:.3f} px RMS")
         lens = self.absolute.self_calibration
         if lens is not None:

@@ -24,6 +24,7 @@ raster's own pixels (0-based, pixel centres at integers), whichever way the mode
 
 from __future__ import annotations
 
+import math
 import re
 from collections.abc import Callable
 from dataclasses import dataclass
@@ -137,7 +138,9 @@ class LoadedModel:
     model describes; ``spot`` the SPOT metadata when the model came from a ``METADATA.DIM``;
     ``band`` the band whose look angles were used; ``crop`` the pixel (col, row) of the model
     file's image at the raster's pixel (0, 0) (``(0, 0)`` when the file describes the raster
-    itself); ``sar`` the Sentinel-1 annotation (model and geolocation grid) of a SAR model.
+    itself); ``sar`` the Sentinel-1 annotation (model and geolocation grid) of a SAR model;
+    ``sun_deg`` the sun (azimuth, elevation; degrees) a gcpfree model file carries from the
+    metadata it was made from (``gcpfree orient``'s ``left.json``), see :attr:`sun`.
     """
 
     model: SensorModel
@@ -149,6 +152,16 @@ class LoadedModel:
     band: int | None = None
     crop: tuple[float, float] = (0.0, 0.0)
     sar: Annotation | None = None
+    sun_deg: tuple[float, float] | None = None
+
+    @property
+    def sun(self) -> tuple[float, float] | None:
+        """The sun at imaging (azimuth, elevation; degrees) the metadata state: a SPOT
+        ``.DIM``'s, or the one a gcpfree model file carries; None for other models."""
+        s = self.spot
+        if s is not None and s.sun_azimuth_deg is not None and s.sun_elevation_deg is not None:
+            return s.sun_azimuth_deg, s.sun_elevation_deg
+        return self.sun_deg
 
 
 @dataclass(frozen=True, eq=False)
@@ -159,7 +172,8 @@ class FileModel:
     image: ``.geom``, DIMAP v2 RPC XML, SPOT ``.DIM``, a Sentinel-1 annotation, a pushbroom or
     SAR ``.json``, which knows its image's size) or ``"raster"`` (the raster the file was written for: GeoTIFF RPC tags, a
     gcpfree RPC ``.json``); ``size`` the image size the file states (None for an RPC file);
-    ``raster_offset`` a GeoTIFF model's own crop offset.
+    ``raster_offset`` a GeoTIFF model's own crop offset; ``sun_deg`` a gcpfree model file's
+    ``sun`` (:data:`SUN_KEY`).
     """
 
     model: SensorModel
@@ -171,6 +185,35 @@ class FileModel:
     band: int | None = None
     raster_offset: tuple[float, float] = (0.0, 0.0)
     sar: Annotation | None = None
+    sun_deg: tuple[float, float] | None = None
+
+
+#: the key of a gcpfree model file that carries the sun of the metadata it was made from:
+#: ``{"azimuth_deg": ..., "elevation_deg": ...}`` (what chooses the tie points' measure)
+SUN_KEY = "sun"
+
+
+def sun_to_dict(sun: tuple[float, float] | None) -> dict[str, dict[str, float]]:
+    """``{SUN_KEY: ...}`` to add to a model file's dict, or nothing when there is no sun."""
+    if sun is None:
+        return {}
+    return {SUN_KEY: {"azimuth_deg": float(sun[0]), "elevation_deg": float(sun[1])}}
+
+
+def _sun_from_dict(d: object, path: Path) -> tuple[float, float] | None:
+    sun = d.get(SUN_KEY) if isinstance(d, dict) else None
+    if sun is None:
+        return None
+    try:
+        az, el = float(sun["azimuth_deg"]), float(sun["elevation_deg"])
+    except (KeyError, TypeError, ValueError):
+        raise InputError(f"{path}: key '{SUN_KEY}' must hold numbers 'azimuth_deg' and "
+                         f"'elevation_deg', got {sun!r:.80}; remove it or give the file "
+                         "gcpfree wrote") from None
+    if not (math.isfinite(az) and -90.0 <= el <= 90.0):
+        raise InputError(f"{path}: key '{SUN_KEY}' has azimuth {az} and elevation {el} deg "
+                         "(need a finite azimuth and an elevation within -90..90)")
+    return az, el
 
 
 def _from_dimap(path: Path, band: int | None) -> FileModel:
@@ -188,7 +231,8 @@ def _from_json(path: Path) -> FileModel:
         if rpc:
             return FileModel(RPCModel.from_dict(d), "rpc", path, "raster")
         model = SarModel.from_dict(d) if family == "sar" else PushbroomModel.from_dict(d)
-        return FileModel(model, family, path, "product", (model.n_cols, model.n_rows))
+        return FileModel(model, family, path, "product", (model.n_cols, model.n_rows),
+                         sun_deg=_sun_from_dict(d, path))
     except InputError as exc:
         raise InputError(f"{path}: {exc}") from None
     except (KeyError, IndexError, TypeError, ValueError, AttributeError, OverflowError) as exc:
@@ -335,7 +379,8 @@ def load_model(path: str | Path, *, model: str | Path | None = None,
         fm = read_model_file(path, band)
         size = fm.size or (_open_raster(path)[0] if fm.path.suffix.lower() in TIFF_SUFFIXES
                            else _rpc_size(fm.model))  # type: ignore[arg-type]
-        return LoadedModel(fm.model, fm.family, path, None, size, fm.spot, fm.band, sar=fm.sar)
+        return LoadedModel(fm.model, fm.family, path, None, size, fm.spot, fm.band, sar=fm.sar,
+                           sun_deg=fm.sun_deg)
     image = path
     size, transform, has_crs, tags = _open_raster(image)
     source = Path(model) if model is not None else model_beside(image)
@@ -347,4 +392,4 @@ def load_model(path: str | Path, *, model: str | Path | None = None,
     fm = read_model_file(source, band)
     placed, crop = _place(fm, image, size, transform, has_crs)
     return LoadedModel(placed, fm.family, source, image, size, fm.spot, fm.band, crop,
-                       sar=fm.sar if crop == (0.0, 0.0) else None)
+                       sar=fm.sar if crop == (0.0, 0.0) else None, sun_deg=fm.sun_deg)

@@ -39,7 +39,6 @@ from core.matching.tiepoints import (
 )
 from core.sensors.base import SensorModel
 from core.sensors.footprint import footprint_box, scene_height_range_m
-from core.sensors.spot import SpotScene
 from tasks.io.dem import dem_datum, read_reference
 from tasks.io.rasters import atomic_write_json, open_raster, read_window
 from tasks.scheduling import compute
@@ -144,20 +143,15 @@ def block_matches(block: Block, left_path: str, right_path: str, left_model: Sen
 # ---------------------------------------------------------------------------- task
 
 
-def tie_measure(requested: str, left_spot: SpotScene | None, right_spot: SpotScene | None
-                ) -> tuple[str, str]:
-    """The tie points' measure for ``--tie-measure`` and the pair's SPOT metadata (None for
-    other models), and why: ``auto`` asks :func:`core.matching.tiepoints.choose_measure` with
-    the suns the metadata state; a measure given is used as it is."""
+def tie_measure(requested: str, left_sun: tuple[float, float] | None,
+                right_sun: tuple[float, float] | None) -> tuple[str, str]:
+    """The tie points' measure for ``--tie-measure`` and the suns (azimuth, elevation; deg)
+    the pair's metadata state (``LoadedModel.sun``: None for models that carry none), and
+    why: ``auto`` asks :func:`core.matching.tiepoints.choose_measure`; a measure given is used
+    as it is."""
     if requested != "auto":
         return requested, "as asked"
-
-    def sun(s: SpotScene | None) -> tuple[float, float] | None:
-        if s is None or s.sun_azimuth_deg is None or s.sun_elevation_deg is None:
-            return None
-        return s.sun_azimuth_deg, s.sun_elevation_deg
-
-    return choose_measure(sun(left_spot), sun(right_spot))
+    return choose_measure(left_sun, right_sun)
 
 
 @task(name="find-tie-points")

@@ -70,7 +70,12 @@ def test_products_are_what_the_report_says(oriented):
     scene, out, outcome = oriented
     cps = read_checkpoints(scene / "truth" / "checkpoints.json")
     for name in ("left", "right"):
-        model = load_model(out / f"{name}.json").model  # a gcpfree model file, reloadable
+        given = load_model(scene / f"{name}.tif")
+        oriented_model = load_model(out / f"{name}.json")  # a gcpfree model file, reloadable
+        # with the sun of the metadata it came from: a later `gcpfree dsm` on it chooses the
+        # tie points' measure as the first run did
+        assert given.sun is not None and oriented_model.sun == pytest.approx(given.sun)
+        model = oriented_model.model
         pts = [p for p in cps.points if name in p.image_points]
         lon, lat, h = (np.array([getattr(p, k) for p in pts]) for k in ("lon_deg", "lat_deg",
                                                                         "h_m"))

@@ -551,6 +551,23 @@ def test_the_schema_keeps_every_key_its_records_write():
     assert LensCalibration.from_dict(old).decision is None
 
 
+def test_the_printed_lines_say_how_the_tie_points_were_matched():
+    """``gcpfree orient`` prints the tie points in the adjustment with the measure they were
+    matched with (``relative.tie_point_search.measure``); a report without it (rel.json
+    before the measure was recorded) prints the line without it."""
+    doc = finished_report(12, {"left": (0.25, 0.5)})
+    doc["absolute"]["tie_points"] = {"n": 850, "rms_px": 0.125}
+    doc["relative"]["tie_point_search"] = {"measure": "orientation"}
+    line = "tie points            850 in the adjustment (orientation correlation), parallax " \
+           "0.125 px RMS"
+    assert line in OrientReport.from_dict(doc).lines()
+    doc["relative"]["tie_point_search"] = {"measure": "ncc"}
+    assert "(normalised cross-correlation)" in "\n".join(OrientReport.from_dict(doc).lines())
+    del doc["relative"]["tie_point_search"]
+    assert "tie points            850 in the adjustment, parallax 0.125 px RMS" in \
+        OrientReport.from_dict(doc).lines()
+
+
 def test_report_json_carries_the_predicted_accuracy_beside_the_measured():
     """The keys of the true uncertainties: ``check_points.<image>.predicted_rms_col_px`` and
     ``predicted_rms_row_px`` beside the measured RMS, ``absolute.variance_components`` and

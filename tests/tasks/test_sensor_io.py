@@ -212,3 +212,25 @@ def test_same_name_dim_json_then_rpc_and_errors(spot_scene_files, tmp_path):
     (tmp_path / "m.txt").write_text("x")
     with pytest.raises(InputError, match="unknown model format"):
         load_model(small, model=tmp_path / "m.txt")
+
+
+def test_a_model_file_carries_the_sun_of_its_metadata(spot_scene_files, tmp_path):
+    """A gcpfree model file may carry the sun its metadata stated (``gcpfree orient`` writes
+    it): read back as ``LoadedModel.sun``, as a ``.DIM``'s is (the orient flow's test: the
+    tiny pair's); none without the key; a damaged one refused in one line naming the key."""
+    import json
+
+    from tasks.io.sensors import SUN_KEY, load_model, sun_to_dict
+
+    d, m = spot_scene_files
+    assert load_model(d / "scene" / "METADATA.DIM").sun is None  # this .DIM states none
+    path = tmp_path / "left.json"
+    path.write_text(json.dumps({**m.to_dict(), **sun_to_dict((140.25, 63.5))}))
+    assert load_model(path).sun == (140.25, 63.5)
+    path.write_text(m.to_json())
+    assert load_model(path).sun is None and sun_to_dict(None) == {}
+    for bad in ({"azimuth_deg": 140.0}, {"azimuth_deg": 1.0, "elevation_deg": 95.0}, "east"):
+        path.write_text(json.dumps({**m.to_dict(), SUN_KEY: bad}))
+        with pytest.raises(InputError, match=f"{path}: key 'sun'") as err:
+            load_model(path)
+        assert "\n" not in str(err.value)

@@ -241,19 +241,30 @@ def test_gizeh_pair_with_the_rpc_height_range():
 
 
 def test_the_tie_measure_is_read_from_the_metadata_suns():
-    """``auto`` takes the suns of the SPOT metadata (real SPOT 2 DIMAP files state them);
-    without them, or when the user names a measure, no guess is made."""
+    """``auto`` takes the suns the metadata state (``LoadedModel.sun``: a SPOT ``.DIM``'s,
+    as real SPOT 2 DIMAP files give them, or the one a gcpfree model file carries); without
+    them, or when the user names a measure, no guess is made."""
     from types import SimpleNamespace
 
-    def spot(az, el):
-        return SimpleNamespace(sun_azimuth_deg=az, sun_elevation_deg=el)
+    from tasks.io.sensors import LoadedModel
 
-    assert tie_measure("auto", spot(140.0, 63.0), spot(158.0, 50.0))[0] == "orientation"
-    assert tie_measure("auto", spot(140.0, 63.0), spot(140.2, 63.1))[0] == "ncc"
-    assert tie_measure("auto", spot(140.0, None), spot(158.0, 50.0))[0] == "ncc"
-    assert tie_measure("auto", None, None) == ("ncc", "the suns are not in both images' metadata")
+    def loaded(az, el, sun_deg=None):
+        spot = None if az is None else SimpleNamespace(sun_azimuth_deg=az, sun_elevation_deg=el)
+        return LoadedModel(None, "pushbroom", Path("x.DIM"), None, (1, 1), spot,
+                           sun_deg=sun_deg)  # type: ignore[arg-type]
+
+    def auto(a, b):
+        return tie_measure("auto", a.sun, b.sun)
+
+    assert auto(loaded(140.0, 63.0), loaded(158.0, 50.0))[0] == "orientation"
+    assert auto(loaded(140.0, 63.0), loaded(140.2, 63.1))[0] == "ncc"
+    assert auto(loaded(140.0, None), loaded(158.0, 50.0))[0] == "ncc"
+    assert auto(loaded(None, None, (140.0, 63.0)), loaded(None, None, (158.0, 50.0)))[0] \
+        == "orientation"
+    assert auto(loaded(None, None), loaded(None, None)) == (
+        "ncc", "the suns are not in both images' metadata")
     assert tie_measure("orientation", None, None) == ("orientation", "as asked")
-    assert tie_measure("ncc", spot(140.0, 63.0), spot(158.0, 50.0)) == ("ncc", "as asked")
+    assert tie_measure("ncc", (140.0, 63.0), (158.0, 50.0)) == ("ncc", "as asked")
 
 
 # ---------------------------------------------------------------------------- bad input
