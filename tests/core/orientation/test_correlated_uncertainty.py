@@ -166,6 +166,17 @@ def test_parallax_tells_a_model_error_from_a_ground_error():
     assert np.sqrt(np.mean(found)) == pytest.approx(0.3, rel=0.25)
 
 
+def jitter(rows: np.ndarray, rng: np.random.Generator) -> np.ndarray:
+    """(n, 2): col and row displacement at ``rows``, two tones per axis each of amplitude
+    0.3 px (0.3 px RMS per axis), periods of 30-600 lines (the simulator's)."""
+    out = np.zeros((rows.size, 2))
+    for axis in range(2):
+        for _ in range(2):
+            period = rng.uniform(30.0, 600.0)
+            out[:, axis] += 0.3 * np.sin(2 * np.pi * rows / period + rng.uniform(0, 6.3))
+    return out
+
+
 def test_jitter_shows_in_the_tie_points_nearest_in_time():
     """Attitude jitter of 0.3 px per image axis (two tones per axis, periods of 30-600 lines,
     independent in the two images) under 0.1 px of matching noise and a 5 m smooth ground
@@ -179,21 +190,11 @@ def test_jitter_shows_in_the_tie_points_nearest_in_time():
     col, row = rng.uniform(0, 6000, n), rng.uniform(0, lines, n)
     east, north = col * 10.0, row * 10.0
     field = CorrelatedGroundError((25.0, 25.0, 25.0), 4000.0, 0)
-
-    def jitter(rows: np.ndarray) -> np.ndarray:
-        """(n, 2): col and row displacement, two tones each of amplitude 0.3 px."""
-        out = np.zeros((rows.size, 2))
-        for axis in range(2):
-            for _ in range(2):
-                period = rng.uniform(30.0, 600.0)
-                out[:, axis] += 0.3 * np.sin(2 * np.pi * rows / period + rng.uniform(0, 6.3))
-        return out
-
     found, sparse, spurious = [], [], 0
     for _ in range(20):
         ground = correlated_field(east, north, field, rng, 1)[0]
         common = np.einsum("nmak,nk->nma", g, ground) + rng.normal(0.0, 0.1, (n, 2, 2))
-        v = common + np.stack([jitter(row), jitter(row)], axis=1)
+        v = common + np.stack([jitter(row, rng), jitter(row, rng)], axis=1)
         found.append(along_track_covariance(g, v, row))
         sparse.append(parallax_covariance(g[:200], v[:200], col[:200], row[:200]))
         spurious += along_track_covariance(g, common, row) > 0
@@ -215,18 +216,10 @@ def test_jitter_of_two_images_turned_against_each_other_is_found_whole():
     col = rng.uniform(0, 6000, n)
     row_l = rng.uniform(0, lines, n)
     row_r = row_l + (col - 3000.0) * np.tan(np.radians(2.4))
-
-    def jitter(rows: np.ndarray) -> np.ndarray:
-        out = np.zeros((rows.size, 2))
-        for axis in range(2):
-            for _ in range(2):
-                period = rng.uniform(30.0, 600.0)
-                out[:, axis] += 0.3 * np.sin(2 * np.pi * rows / period + rng.uniform(0, 6.3))
-        return out
-
     both, left = [], []
     for _ in range(20):
-        v = np.stack([jitter(row_l), jitter(row_r)], axis=1) + rng.normal(0.0, 0.1, (n, 2, 2))
+        v = np.stack([jitter(row_l, rng), jitter(row_r, rng)], axis=1) \
+            + rng.normal(0.0, 0.1, (n, 2, 2))
         both.append(along_track_covariance(g, v, np.column_stack([row_l, row_r])))
         left.append(along_track_covariance(g, v, row_l))
     assert np.sqrt(np.mean(both)) == pytest.approx(0.3, rel=0.2)
