@@ -31,7 +31,7 @@ from tasks.io.sensors import load_model
 from tasks.relative.tiepoints import find_tie_points, tie_measure
 scene, ref, out = (Path(a) for a in sys.argv[1:4])
 left, right = load_model(scene / "left.tif"), load_model(scene / "right.tif")
-measure = tie_measure(sys.argv[4], left.spot, right.spot)[0]
+measure = tie_measure(sys.argv[4], left.sun, right.sun)[0]
 t0 = time.perf_counter()
 res = find_tie_points.fn(scene / "left.tif", scene / "right.tif", left.model, right.model, ref,
                          TiePointConfig(measure=measure), out=out)
