@@ -322,9 +322,9 @@ def _neighbour_parallax(ground_jac: ArrayLike, v: ArrayLike, pts: ArrayLike,
 def along_track_covariance(ground_jac: ArrayLike, v: ArrayLike, row: ArrayLike,
                            t_min: float = 2.0) -> float:
     """The model's own error per pixel axis (px^2) that follows the time of imaging: the
-    covariance of the parallax (as :func:`parallax_covariance`) at points nearest in time
-    whatever their columns. An attitude error is the same for every detector of a line, so
-    points a few lines apart share it wherever they are across the image, while their matching
+    covariance of the parallax (as :func:`parallax_covariance`) at points nearest in time in
+    every image. An attitude error is the same for every detector of a line, so points a few
+    lines apart share it wherever they are across the image, while their matching
     noise is independent: jitter faster than the GCPs' spacing, which the 2-D neighbours of
     :func:`parallax_covariance` see as noise, shows here when the points are dense in time
     (the tie points: hundreds per image).
