@@ -200,18 +200,20 @@ def sun_to_dict(sun: tuple[float, float] | None) -> dict[str, dict[str, float]]:
     return {SUN_KEY: {"azimuth_deg": float(sun[0]), "elevation_deg": float(sun[1])}}
 
 
-def _sun_from_dict(d: object, path: Path) -> tuple[float, float] | None:
+def _sun_from_dict(d: object) -> tuple[float, float] | None:
+    """A model file's sun, None without the key; InputError (without the file's name, which
+    :func:`_from_json` puts before it) when the key holds something else."""
     sun = d.get(SUN_KEY) if isinstance(d, dict) else None
     if sun is None:
         return None
     try:
         az, el = float(sun["azimuth_deg"]), float(sun["elevation_deg"])
     except (KeyError, TypeError, ValueError):
-        raise InputError(f"{path}: key '{SUN_KEY}' must hold numbers 'azimuth_deg' and "
+        raise InputError(f"key '{SUN_KEY}' must hold numbers 'azimuth_deg' and "
                          f"'elevation_deg', got {sun!r:.80}; remove it or give the file "
                          "gcpfree wrote") from None
     if not (math.isfinite(az) and -90.0 <= el <= 90.0):
-        raise InputError(f"{path}: key '{SUN_KEY}' has azimuth {az} and elevation {el} deg "
+        raise InputError(f"key '{SUN_KEY}' has azimuth {az} and elevation {el} deg "
                          "(need a finite azimuth and an elevation within -90..90)")
     return az, el
 
@@ -232,7 +234,7 @@ def _from_json(path: Path) -> FileModel:
             return FileModel(RPCModel.from_dict(d), "rpc", path, "raster")
         model = SarModel.from_dict(d) if family == "sar" else PushbroomModel.from_dict(d)
         return FileModel(model, family, path, "product", (model.n_cols, model.n_rows),
-                         sun_deg=_sun_from_dict(d, path))
+                         sun_deg=_sun_from_dict(d))
     except InputError as exc:
         raise InputError(f"{path}: {exc}") from None
     except (KeyError, IndexError, TypeError, ValueError, AttributeError, OverflowError) as exc:

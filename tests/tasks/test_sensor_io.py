@@ -233,4 +233,4 @@ def test_a_model_file_carries_the_sun_of_its_metadata(spot_scene_files, tmp_path
         path.write_text(json.dumps({**m.to_dict(), SUN_KEY: bad}))
         with pytest.raises(InputError, match=f"{path}: key 'sun'") as err:
             load_model(path)
-        assert "\n" not in str(err.value)
+        assert "\n" not in str(err.value) and str(err.value).count(str(path)) == 1
