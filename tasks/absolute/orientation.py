@@ -30,7 +30,11 @@ from core.orientation.absolute import (
 from core.orientation.along_track import AlongTrack, estimate_along_track
 from core.orientation.selfcal import SelfCalibration, self_calibrate
 from core.orientation.ties import TieObservations
-from core.orientation.uncertainty import NO_CORRELATION, CorrelatedGroundError
+from core.orientation.uncertainty import (
+    NO_CORRELATION,
+    CorrelatedGroundError,
+    with_correlated_error,
+)
 from core.points import (
     CheckPoint,
     CheckPointSet,
@@ -178,6 +182,38 @@ def orient_absolute(left: LoadedModel, right: LoadedModel, gcps: tuple[ControlPo
         tie_obs = TieObservations(np.stack([ties.left_col, ties.right_col], axis=1),
                                   np.stack([ties.left_row, ties.right_row], axis=1),
                                   ties.lon_deg, ties.lat_deg, ties.h_m, config.matching_sigma_px)
+    run = _adjusted(models, obs, config, tie_obs, lens, along_track)
+    if any(run.ground_error.variance_m2):  # again, each GCP weighted with its own share of it
+        xy, h = with_correlated_error(obs.sigma_xy_m, obs.sigma_h_m, run.ground_error)
+        run = _adjusted(models, replace(obs, sigma_xy_m=xy, sigma_h_m=h), config, tie_obs,
+                        lens, along_track)
+    adj, calib, at, kept, reasons, ground_error = (run.adj, run.calib, run.at, run.kept,
+                                                   run.reasons, run.ground_error)
+    paths = []
+    for name, model, given in zip(NAMES, adj.models, (left, right), strict=True):
+        paths.append(atomic_write_json(Path(out_dir) / f"{name}.json", {
+            **model.to_dict(), **sun_to_dict(given.sun)}))  # type: ignore[attr-defined]
+    return AbsoluteProducts(tuple(adj.models), adj, calib, tuple(paths),
+                            predicted_over_images(adj, (left.size, right.size),
+                                                  np.asarray(obs.h_m)[kept], config,
+                                                  ground_error),
+                            at, kept, reasons)
+
+
+@dataclass(frozen=True, eq=False)
+class _Run:
+    adj: AbsoluteOrientation
+    calib: SelfCalibration | None
+    at: AlongTrack | None
+    kept: np.ndarray
+    reasons: dict[int, str]
+    ground_error: CorrelatedGroundError
+
+
+def _adjusted(models: tuple[SensorModel, ...], obs: Observations, config: AbsoluteConfig,
+              tie_obs: TieObservations | None, lens: bool, along_track: bool) -> _Run:
+    """One run of :func:`orient_absolute`'s adjustment with the GCPs weighted as ``obs``
+    says: self-calibration or not, the along-track profile, the uncertainties."""
     calib = None
     if lens:
         calib = self_calibrate(models, obs, NAMES, config, ties=tie_obs)
@@ -199,15 +235,7 @@ def orient_absolute(left: LoadedModel, right: LoadedModel, gcps: tuple[ControlPo
         kept[idx[adj.inlier]] = True
         reasons.update({int(idx[i]): r for i, r in adj.reasons.items()})
     adj, ground_error = with_gcp_errors_as_they_are(adj, obs, kept, config, tie_obs)
-    paths = []
-    for name, model, given in zip(NAMES, adj.models, (left, right), strict=True):
-        paths.append(atomic_write_json(Path(out_dir) / f"{name}.json", {
-            **model.to_dict(), **sun_to_dict(given.sun)}))  # type: ignore[attr-defined]
-    return AbsoluteProducts(tuple(adj.models), adj, calib, tuple(paths),
-                            predicted_over_images(adj, (left.size, right.size),
-                                                  np.asarray(obs.h_m)[kept], config,
-                                                  ground_error),
-                            at, kept, reasons)
+    return _Run(adj, calib, at, kept, reasons, ground_error)
 
 
 GRID_SIDE = 9
