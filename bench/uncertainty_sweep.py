@@ -14,8 +14,8 @@ image and axis the measured RMS, the predicted RMS and their ratio, the pooled r
 sqrt(sum measured^2 / sum predicted^2) and how many ratios fall within 0.7-1.5; then the same
 beyond the one draw: the measured once the used GCPs' mean error against the truth is carried
 out of every residual, the predicted less its reference term (``beyond_shift.py``).
-GCPFREE_UNCERTAINTY_KEEP=DIR keeps the scenes and products there. About two
-minutes per scene on 2 cores. Writes uncertainty_sweep.json into GCPFREE_UNCERTAINTY_OUT
+GCPFREE_UNCERTAINTY_KEEP=DIR keeps the scenes and products there (a scene already there is
+not simulated again; its orientation is always run). About two minutes per scene on 2 cores. Writes uncertainty_sweep.json into GCPFREE_UNCERTAINTY_OUT
 (default the current folder). Prints figures, asserts nothing.
 """
 
@@ -40,10 +40,11 @@ ERRORS = os.environ.get("GCPFREE_UNCERTAINTY_ERRORS", "realistic")
 
 def one(seed: str, lon: str, lat: str, tmp: Path, env: dict[str, str]) -> dict:
     scene = tmp / f"tiny_{seed}"
-    r = cli(["simulate", "--preset", "tiny", "--seed", seed, "--center", lon, lat, "--lens",
-             "--errors", ERRORS, "--no-lidar", "--out", str(scene)], env)
-    if r.returncode:
-        return {"seed": seed, "refused": (r.stderr.strip().splitlines() or ["?"])[-1]}
+    if not (scene / "truth" / "checkpoints.json").is_file():  # a kept scene is reused
+        r = cli(["simulate", "--preset", "tiny", "--seed", seed, "--center", lon, lat,
+                 "--lens", "--errors", ERRORS, "--no-lidar", "--out", str(scene)], env)
+        if r.returncode:
+            return {"seed": seed, "refused": (r.stderr.strip().splitlines() or ["?"])[-1]}
     out = tmp / f"orient_{seed}"
     t0 = time.perf_counter()
     r = cli(["orient", "--left", str(scene / "left.tif"), "--right", str(scene / "right.tif"),
