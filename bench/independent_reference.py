@@ -27,14 +27,14 @@ from __future__ import annotations
 import json
 import os
 import tempfile
-import time
 import zlib
 from pathlib import Path
 
 import numpy as np
 import rasterio
-from beyond_shift import beyond_shift, line
+from beyond_shift import line
 from pyproj import Transformer
+from realistic_table import oriented
 from relief_sweep import cli
 from scipy.ndimage import gaussian_filter, map_coordinates, uniform_filter
 
@@ -99,22 +99,11 @@ def independent_scene(scene: Path, dest: Path, seed: int) -> Path:
 
 
 def orient(scene: Path, out: Path, env: dict[str, str]) -> dict:
-    row: dict = {}
-    if not (out / "report.json").is_file():
-        t0 = time.perf_counter()
-        r = cli(["orient", "--left", str(scene / "left.tif"), "--right",
-                 str(scene / "right.tif"), "--reference", str(scene / "reference.tif"),
-                 "--checkpoints", str(scene / "truth" / "checkpoints.json"),
-                 "--self-calibrate", "--no-progress", "--out", str(out)], env)
-        row["seconds"] = time.perf_counter() - t0
-        if r.returncode:
-            row["refused"] = (r.stderr.strip().splitlines() or ["?"])[-1]
-            return row
-    rep = json.loads((out / "report.json").read_text())
-    row["lens"] = (rep["absolute"].get("self_calibration") or {}).get("decision")
-    shift = json.loads((scene / "truth" / "reference_errors.json").read_text())
-    row["reference_shift_m"] = [shift["shift_east_m"], shift["shift_north_m"]]
-    row["images"] = beyond_shift(scene, out)
+    """:func:`realistic_table.oriented`, with the lens decision of the report."""
+    row = oriented(scene, out, env)
+    if "images" in row:
+        rep = json.loads((out / "report.json").read_text())
+        row["lens"] = (rep["absolute"].get("self_calibration") or {}).get("decision")
     return row
 
 

@@ -41,14 +41,21 @@ def one(case: list[str], tmp: Path, env: dict[str, str]) -> dict:
         if r.returncode:
             row["refused"] = (r.stderr.strip().splitlines() or ["?"])[-1]
             return row
+    return {**row, **oriented(scene, out, env, *([] if ALONG_TRACK else ["--no-along-track"]))}
+
+
+def oriented(scene: Path, out: Path, env: dict[str, str], *options: str) -> dict:
+    """``gcpfree orient --self-calibrate`` of the simulated ``scene`` into ``out`` (not run
+    again when ``out`` holds a report) with ``options``, and its check points as
+    ``beyond_shift`` measures them: ``seconds`` (when run), ``refused`` (the error's last
+    line) or ``reference_shift_m`` and ``images``."""
+    row: dict = {}
     if not (out / "report.json").is_file():
         t0 = time.perf_counter()
         r = cli(["orient", "--left", str(scene / "left.tif"), "--right",
                  str(scene / "right.tif"), "--reference", str(scene / "reference.tif"),
                  "--checkpoints", str(scene / "truth" / "checkpoints.json"),
-                 "--self-calibrate", "--no-progress", *([] if ALONG_TRACK else
-                                                        ["--no-along-track"]),
-                 "--out", str(out)], env)
+                 "--self-calibrate", "--no-progress", *options, "--out", str(out)], env)
         row["seconds"] = time.perf_counter() - t0
         if r.returncode:
             row["refused"] = (r.stderr.strip().splitlines() or ["?"])[-1]

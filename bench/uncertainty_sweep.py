@@ -15,8 +15,9 @@ sqrt(sum measured^2 / sum predicted^2) and how many ratios fall within 0.7-1.5; 
 beyond the one draw: the measured once the used GCPs' mean error against the truth is carried
 out of every residual, the predicted less its reference term (``beyond_shift.py``).
 GCPFREE_UNCERTAINTY_KEEP=DIR keeps the scenes and products there (a scene already there is
-not simulated again; its orientation is always run). About two minutes per scene on 2 cores. Writes uncertainty_sweep.json into GCPFREE_UNCERTAINTY_OUT
-(default the current folder). Prints figures, asserts nothing.
+not simulated again; its orientation is always run). About two minutes per scene on 2 cores.
+Writes uncertainty_sweep.json into GCPFREE_UNCERTAINTY_OUT (default the current folder).
+Prints figures, asserts nothing.
 """
 
 from __future__ import annotations

@@ -9,6 +9,7 @@ import pytest
 
 from core.errors import InputError
 from core.orientation.uncertainty import (
+    NO_CORRELATION,
     CorrelatedGroundError,
     along_track_covariance,
     correlated_covariance,
@@ -338,7 +339,7 @@ def test_gcps_weighted_with_the_correlated_error_they_share_fit_better():
     xy, h = with_correlated_error(stated, np.full(N, 0.5), field)
     assert xy == pytest.approx(np.hypot(stated, 3.0))
     assert h == pytest.approx(np.full(N, np.hypot(0.5, 1.0)))
-    none = with_correlated_error(stated, np.full(N, 0.5), CorrelatedGroundError((0.0,) * 3, 1.0, 0))
+    none = with_correlated_error(stated, np.full(N, 0.5), NO_CORRELATION)
     assert np.array_equal(none[0], stated) and np.array_equal(none[1], np.full(N, 0.5))
     rng = np.random.default_rng(9)
     e = correlated_field(east, north, field, rng, 4000) \
