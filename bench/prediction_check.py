@@ -51,11 +51,8 @@ from beyond_shift import beyond_shift  # noqa: E402
 from core.geodesy import metres_per_degree  # noqa: E402
 from core.intersection import triangulate  # noqa: E402
 from core.orientation.absolute import AbsoluteConfig  # noqa: E402
-from core.orientation.uncertainty import (  # noqa: E402
-    _distances,
-    correlated_ground_error,
-    ground_jacobian,
-)
+from core.orientation.ground_field import _distances, correlated_ground_error  # noqa: E402
+from core.orientation.uncertainty import ground_jacobian  # noqa: E402
 from core.orientation.ties import TieObservations, tie_residuals, tie_rows  # noqa: E402
 from core.points import control_points_from_dict  # noqa: E402
 from core.sensors.pushbroom import PushbroomModel  # noqa: E402

@@ -25,15 +25,17 @@ from core.errors import ConvergenceError, GeometryError, InputError, Insufficien
 from core.geodesy import geodetic_to_ecef, metres_per_degree
 from core.orientation.equations import GROUPS, Equations, prior_rows
 from core.orientation.ties import TieObservations, tie_residuals
-from core.orientation.uncertainty import (
+from core.orientation.ground_field import (
     NO_CORRELATION,
     CorrelatedGroundError,
+    correlated_covariance,
+    correlated_ground_error,
+)
+from core.orientation.uncertainty import (
     PredictedAccuracy,
     VarianceComponents,
     along_track_covariance,
     components_differ,
-    correlated_covariance,
-    correlated_ground_error,
     ground_jacobian,
     image_grid,
     neighbour_covariance,

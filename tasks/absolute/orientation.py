@@ -30,7 +30,7 @@ from core.orientation.absolute import (
 from core.orientation.along_track import AlongTrack, estimate_along_track
 from core.orientation.selfcal import SelfCalibration, self_calibrate
 from core.orientation.ties import TieObservations
-from core.orientation.uncertainty import (
+from core.orientation.ground_field import (
     NO_CORRELATION,
     CorrelatedGroundError,
     with_correlated_error,

@@ -23,7 +23,7 @@ Its keys (format ``gcpfree.orient``, version 1), as the README lists them:
   registration error assumed, east, north, up; ``--reference-sigma``),
   ``correlated_ground_error`` (the GCPs' ground error correlated over kilometres, fitted on
   their residuals and propagated into the parameters' covariance: sigma per axis and length;
-  :class:`core.orientation.uncertainty.CorrelatedGroundError`) and per image (``images.<image>``)
+  :class:`core.orientation.ground_field.CorrelatedGroundError`) and per image (``images.<image>``)
   ``predicted_rms_col_px``/``predicted_rms_row_px`` over that grid of pixels spanning the
   image at those heights, with their terms ``adjustment_rms_*`` (the parameters' covariance),
   ``reference_rms_*`` (the reference's registration), ``unmodelled_rms_*`` (the model's own

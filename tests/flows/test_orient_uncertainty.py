@@ -15,7 +15,7 @@ import pytest
 
 from core.errors import InputError
 from core.geodesy import metres_per_degree
-from core.orientation.uncertainty import CorrelatedGroundError
+from core.orientation.ground_field import CorrelatedGroundError
 from core.points import ControlPoint, ImagePoint
 from flows import cli
 from flows.commands import orient as orient_command

@@ -8,15 +8,14 @@ import numpy as np
 import pytest
 
 from core.errors import InputError
-from core.orientation.uncertainty import (
+from core.orientation.ground_field import (
     NO_CORRELATION,
     CorrelatedGroundError,
-    along_track_covariance,
     correlated_covariance,
     correlated_ground_error,
-    parallax_covariance,
     with_correlated_error,
 )
+from core.orientation.uncertainty import along_track_covariance, parallax_covariance
 
 N = 120
 EXTENT_M = 20_000.0
