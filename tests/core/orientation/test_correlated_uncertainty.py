@@ -13,6 +13,7 @@ from core.orientation.ground_field import (
     CorrelatedGroundError,
     correlated_covariance,
     correlated_ground_error,
+    own_variance,
     with_correlated_error,
 )
 from core.orientation.uncertainty import along_track_covariance, parallax_covariance
@@ -21,12 +22,12 @@ N = 120
 EXTENT_M = 20_000.0
 
 
-def layout(seed: int = 0) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """GCPs spread over 20 km and their ground Jacobians in a pair of 10 m images looking
+def layout(seed: int = 0, n: int = N) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """``n`` GCPs spread over 20 km and their ground Jacobians in a pair of 10 m images looking
     across track at +-20 deg: east and up move the columns, north the rows (n, 2, 2, 3)."""
     rng = np.random.default_rng(seed)
-    east, north = rng.uniform(0, EXTENT_M, N), rng.uniform(0, EXTENT_M, N)
-    g = np.zeros((N, 2, 2, 3))
+    east, north = rng.uniform(0, EXTENT_M, n), rng.uniform(0, EXTENT_M, n)
+    g = np.zeros((n, 2, 2, 3))
     for k, tan in enumerate((np.tan(np.radians(20.0)), -np.tan(np.radians(20.0)))):
         g[:, k, 0, 0] = 0.1
         g[:, k, 0, 2] = 0.1 * tan
@@ -112,6 +113,30 @@ def test_sandwich_predicts_the_spread_of_the_parameters_under_correlated_gcp_err
     none = CorrelatedGroundError((0.0, 0.0, 0.0), 3000.0, 0)
     assert np.array_equal(correlated_covariance(cov, a, np.sqrt(sigma2), g, east, north, none),
                           cov)
+
+
+@pytest.mark.parametrize("n", [35, 120])
+def test_the_weights_own_share_is_what_the_residuals_leave_of_the_field(n: int):
+    """GCPs weighted with the field's variance added to their own 0.3 px (as the adjustment's
+    second run weights them), scaled by the variance component their residuals give over
+    2000 draws (0.7 under a 10 km field: the parameters absorb most of it): the own
+    variance ``own_variance`` states beside the field is the true 0.09 px^2 within 3 %,
+    where the weights less the field's whole variance give 0.036 (the sandwich then took
+    the absorbed part off twice). 35 GCPs (a tiny scene) and 120."""
+    east, north, g = layout(0, n)
+    error = CorrelatedGroundError((9.0, 9.0, 4.0), 10_000.0, 0)
+    rng = np.random.default_rng(3)
+    obs = np.einsum("nmak,dnk->dnma", g, correlated_field(east, north, error, rng, 2000)) \
+        + rng.normal(0.0, 0.3, (2000, n, 2, 2))
+    stated = 0.09 + np.einsum("nmak,k->nma", g**2, error.variance_m2)
+    a, wa, cov = affine_adjustment(east, north, 1.0 / stated.reshape(-1))
+    v = obs.reshape(len(obs), -1) - fitted(cov, wa, obs) @ a.reshape(-1, 6).T
+    factor = np.mean(np.sum(v**2 / stated.reshape(-1), axis=1)) / (v.shape[1] - 6)
+    assert factor < 0.8  # the residuals show a part of the field's variance
+    sigma = np.sqrt(stated * factor)
+    own = own_variance(cov * factor, a, sigma, g, east, north, error)
+    assert np.mean(own) == pytest.approx(0.09, rel=0.03)
+    assert np.mean(sigma**2 - np.einsum("nmak,k->nma", g**2, error.variance_m2)) < 0.05
 
 
 def test_correlated_ground_error_is_found_in_the_residuals_and_not_in_noise():
