@@ -18,8 +18,9 @@ Measured (2026-11-28): tiny seed 4 (33-41 GCPs, 40 m pixels) against its truth D
 points of 0.14 / 0.07 and 0.19 / 0.09 px; the reference is not the main source there. The same
 place simulated without a lens keeps the lens terms (Wald 82 / 66 against 16.3; the tie points'
 F 1.4 against 3.1), and its check-point columns are 0.107 / 0.104 px with them against 0.061 /
-0.081 without self-calibration; with the sandwich the Wald is 22 / 19, against 144 / 120 on the
-scene with a lens (472 / 389 with ``N^-1``).
+0.081 without self-calibration. With the sandwich the Wald is 22 / 19 there against 471 / 465
+with a lens (both against their truth DSM; ``N^-1``: 82 / 66 and 602 / 534), but 16.4 / 17.2
+against 144 / 120 against the SRTM-like references (``N^-1``: 18.5 / 22.1 and 472 / 389).
 
 Run: ``.venv/bin/python bench/gcp_error_sources.py SCENE_DIR ORIENT_DIR [...]``. Prints
 figures, asserts nothing.
