@@ -225,7 +225,9 @@ def own_variance(covariance: ArrayLike, param_jac: ArrayLike, sigma_px: ArrayLik
     redundancy = 1.0 - np.sum((af @ c) * wa, axis=1)  # R_ii
     lam = np.ones(af.shape[0])
     for axis in (slice(0, None, 2), slice(1, None, 2)):  # columns, rows
-        lam[axis] = 1.0 - np.sum(shown[axis] / s2.reshape(-1)[axis]) / np.sum(redundancy[axis])
+        r = float(np.sum(redundancy[axis]))
+        if r > 1e-9:  # else the residuals told nothing: the weights as they are
+            lam[axis] = 1.0 - np.sum(shown[axis] / s2.reshape(-1)[axis]) / r
     return (np.clip(lam, 0.0, 1.0) * s2.reshape(-1)).reshape(shape)
 
 
