@@ -43,7 +43,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 import prediction_check as pc  # noqa: E402
 
 from core.orientation.ground_field import _distances, correlated_ground_error  # noqa: E402
-from core.orientation.selfcal import TERMS  # noqa: E402
+from core.orientation.selfcal import TERMS, _wald  # noqa: E402
 from tasks.io.sensors import read_model_file  # noqa: E402
 
 CLASSES_KM = (0.0, 1.5, 3.0, 5.0, 8.0, 12.0, 18.0, 1e9)
@@ -59,9 +59,11 @@ def truth_reference(scene: Path, dest: Path) -> Path:
                       dst_transform=ref.transform, dst_crs=ref.crs, src_nodata=src.nodata,
                       dst_nodata=np.nan, resampling=Resampling.average)
             profile = {**ref.profile, "dtype": "float32", "nodata": np.nan}
-            with rasterio.open(dest, "w", **profile) as dst:
+            tmp = dest.with_suffix(".part.tif")
+            with rasterio.open(tmp, "w", **profile) as dst:
                 dst.write(out, 1)
                 dst.update_tags(**ref.tags())
+            tmp.replace(dest)
     return dest
 
 
@@ -88,15 +90,11 @@ def errors(scene: Path, out: Path) -> None:
             print(f"  {CLASSES_KM[k]:4.1f}-{min(CLASSES_KM[k + 1], 99):4.1f} km ({sel.sum():3d} "
                   f"pairs): products E/N/U {np.round(prod[sel].mean(axis=0), 1)}, the field "
                   f"{np.round(model, 1)}")
-    start = 0
-    for k, names in enumerate(seen["final"].param_names):
-        idx = [start + j for j, nm in enumerate(names) if nm in TERMS.values()]
-        start += len(names)
-        if idx:
-            p = np.concatenate([np.ravel(v) for v in seen["final"].params_after])[idx]
-            wald = [float(p @ np.linalg.solve(c[np.ix_(idx, idx)], p))
-                    for c in (seen["adj"].covariance, seen["final"].covariance)]
-            print(f"  {pc.NAMES[k]}: lens terms' Wald {wald[0]:.1f} with N^-1, "
+    for name, names in zip(pc.NAMES, seen["final"].param_names, strict=True):
+        terms = [t for t in TERMS.values() if t in names]
+        if terms:  # the same parameters, before and after the sandwich replaced N^-1
+            wald = [_wald(seen[k], name, terms) for k in ("adj", "final")]
+            print(f"  {name}: lens terms' Wald {wald[0]:.1f} with N^-1, "
                   f"{wald[1]:.1f} with the sandwich")
 
 

@@ -24,13 +24,13 @@ from numpy.typing import ArrayLike, NDArray
 from core.errors import ConvergenceError, GeometryError, InputError, InsufficientDataError
 from core.geodesy import geodetic_to_ecef, metres_per_degree
 from core.orientation.equations import GROUPS, Equations, prior_rows
-from core.orientation.ties import TieObservations, tie_residuals
 from core.orientation.ground_field import (
     NO_CORRELATION,
     CorrelatedGroundError,
     correlated_covariance,
     correlated_ground_error,
 )
+from core.orientation.ties import TieObservations, tie_residuals
 from core.orientation.uncertainty import (
     PredictedAccuracy,
     VarianceComponents,

@@ -195,16 +195,17 @@ def own_variance(covariance: ArrayLike, param_jac: ArrayLike, sigma_px: ArrayLik
     :func:`correlated_covariance`): ``lambda sigma^2``, one ``lambda`` per image axis (the
     components split the GCPs' columns from their rows, or find them alike), such that the
     expected weighted square sum of the residuals is their redundancy, as the estimation
-    left it: ``lambda r + tr(W R G K G' R') = r`` (``R = I - A C A' W``, ``r = tr(R)``). The residuals show only the part of the field
-    the parameters do not follow (its long wavelengths are absorbed), so the weights hold
-    that part, not the field's whole variance, and its absorbed part is not to be taken off
-    them again. 35 and 120 GCPs under a 1-10 km field with 0.3 px of their own (2000 draws):
-    0.0895-0.0900 px^2 found for the true 0.09, against 0.083-0.035 for the weights less the
-    field's whole variance, which the sandwich took before. Its effect on the check points'
-    spread is small where the field's off-diagonal part dominates (4000 draws: measured /
-    predicted 0.98-1.03, and 1.01-1.04 before), larger beyond the GCPs' common error: on
-    the eight tiny scenes of ``bench/uncertainty_sweep.py`` (``bench/prediction_check.py``),
-    measured / predicted pooled 1.79 / 1.35 before, 1.58 / 1.25 with this."""
+    left it: ``lambda r + tr(W R G K G' R') = r`` (``R = I - A C A' W``, ``r = tr(R)``).
+    The residuals show only the part of the field the parameters do not follow (its long
+    wavelengths are absorbed), so the weights hold that part, not the field's whole variance,
+    and its absorbed part is not to be taken off them again. 35 and 120 GCPs under a 1-10 km
+    field with 0.3 px of their own (2000 draws): 0.0895-0.0900 px^2 found for the true 0.09,
+    against 0.083-0.035 for the weights less the field's whole variance, which the sandwich took
+    before. Its effect on the check points' spread is small where the field's off-diagonal part
+    dominates (4000 draws: measured / predicted 0.98-1.03, and 1.01-1.04 before), larger beyond
+    the GCPs' common error: on the eight tiny scenes of ``bench/uncertainty_sweep.py``
+    (``bench/prediction_check.py``), measured / predicted pooled 1.79 / 1.35 before, 1.58 / 1.25
+    with this."""
     c = np.asarray(covariance, dtype=np.float64)
     a = np.asarray(param_jac, dtype=np.float64)
     s2 = np.asarray(sigma_px, dtype=np.float64) ** 2
@@ -225,9 +226,9 @@ def own_variance(covariance: ArrayLike, param_jac: ArrayLike, sigma_px: ArrayLik
     redundancy = 1.0 - np.sum((af @ c) * wa, axis=1)  # R_ii
     lam = np.ones(af.shape[0])
     for axis in (slice(0, None, 2), slice(1, None, 2)):  # columns, rows
-        r = float(np.sum(redundancy[axis]))
-        if r > 1e-9:  # else the residuals told nothing: the weights as they are
-            lam[axis] = 1.0 - np.sum(shown[axis] / s2.reshape(-1)[axis]) / r
+        red = float(np.sum(redundancy[axis]))
+        if red > 1e-9:  # else the residuals told nothing: the weights as they are
+            lam[axis] = 1.0 - np.sum(shown[axis] / s2.reshape(-1)[axis]) / red
     return (np.clip(lam, 0.0, 1.0) * s2.reshape(-1)).reshape(shape)
 
 

@@ -26,8 +26,8 @@ it sees, overlapping surface-matching windows) are smooth over kilometres too: i
 the residuals' parallax, which no ground error makes, tells a model error
 (:func:`parallax_covariance`); the rest is a correlated ground error
 (:mod:`core.orientation.ground_field`), which a check point does not show itself but which does
-not average out over the GCPs either, so it enters the parameters' covariance. The RMS predicted over a set of points is the square root of
-the mean of those variances per axis.
+not average out over the GCPs either, so it enters the parameters' covariance. The RMS
+predicted over a set of points is the square root of the mean of those variances per axis.
 """
 
 from __future__ import annotations

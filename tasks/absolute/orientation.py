@@ -28,13 +28,13 @@ from core.orientation.absolute import (
     with_gcp_errors_as_they_are,
 )
 from core.orientation.along_track import AlongTrack, estimate_along_track
-from core.orientation.selfcal import SelfCalibration, self_calibrate
-from core.orientation.ties import TieObservations
 from core.orientation.ground_field import (
     NO_CORRELATION,
     CorrelatedGroundError,
     with_correlated_error,
 )
+from core.orientation.selfcal import SelfCalibration, self_calibrate
+from core.orientation.ties import TieObservations
 from core.points import (
     CheckPoint,
     CheckPointSet,
