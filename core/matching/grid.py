@@ -1,4 +1,5 @@
-"""Ground points into a DEM grid: median per cell, small holes filled, a mask of what is not.
+"""Ground points into a DEM grid: median per cell, small holes filled, the edge cells left out, a
+mask of what is not.
 
 The grid is north-up in a projected frame (the local UTM zone): cell ``[i, j]`` covers
 ``x0 + j res .. x0 + (j + 1) res`` and ``y0 - (i + 1) res .. y0 - i res`` (``x0``, ``y0`` its
@@ -10,7 +11,8 @@ their :class:`~core.matching.dense.PixelStatus`, so a cell without height says w
   filled with the mean of the heights around it);
 - ``MASK_MISMATCH`` (1) the pixels there were seen by both images but not matched, or the
   cell was one of a tiny isolated group of heights (a blunder);
-- ``MASK_OCCLUDED`` (2) occluded in one image, outside the pair, or no pixel at all.
+- ``MASK_OCCLUDED`` (2) occluded in one image, outside the pair, or no pixel at all, or on the
+  DEM's edge (next to a cell outside the pair: :func:`without_rim`).
 
 No I/O here.
 """
@@ -171,7 +173,8 @@ def grid_dem(x_m: ArrayLike, y_m: ArrayLike, h_m: ArrayLike, status: ArrayLike, 
     """Grid ground points: ``h_m`` finite where matched, ``status`` a
     :class:`~core.matching.dense.PixelStatus` per point; ``(x0_m, y0_m)`` the north-west
     corner of the block. Groups of fewer than ``min_island_cells`` valid cells are blanked
-    (mismatch) before holes of fewer than ``max_hole_cells`` are filled."""
+    (mismatch) before holes of fewer than ``max_hole_cells`` are filled, and the cells next to
+    those outside the pair are blanked (:func:`without_rim`)."""
     if not res_m > 0 or min(shape) < 1:
         raise InputError(f"grid_dem needs res_m > 0 and a non-empty shape, got {res_m}, {shape}")
     z = median_per_cell(x_m, y_m, h_m, x0_m, y0_m, res_m, shape)
@@ -187,9 +190,37 @@ def grid_dem(x_m: ArrayLike, y_m: ArrayLike, h_m: ArrayLike, status: ArrayLike, 
     z, blanked = remove_small_islands(z, min_island_cells)
     mask[blanked] = MASK_MISMATCH
     z, _ = fill_small_holes(z, max_hole_cells)
+    seen = seen.reshape(shape)
+    z, rim = without_rim(z, ~(seen | np.isfinite(z)))
+    mask[rim] = MASK_OCCLUDED
     has_z = np.isfinite(z)
     mask[has_z] = MASK_VALID
-    return DemCells(z, mask, seen.reshape(shape) | has_z)
+    return DemCells(z, mask, seen | has_z | rim)
+
+
+def without_rim(z: NDArray[np.float32], outside: NDArray[np.bool_]
+                ) -> tuple[NDArray[np.float32], NDArray[np.bool_]]:
+    """Blank the heights next to (8-connected) the cells ``outside`` the pair (no pixel seen by
+    both images fell there): the DEM's edge. Such a cell holds matched points on its inner
+    side only, so its median is the height of a place off its centre: the surface moved
+    outwards by up to half a cell. On simulated ``tiny`` (80 m cells, 4 points each) the
+    relative DEM's outermost cells were 31-40 m out and the next two 6-10 m (regressed on the
+    slopes against the truth carried into the relative frame); the surface-matching windows
+    that the edge cuts then put their GCPs 6 m inwards on average (10 m where the cut moved
+    their cells' centroid 1.5 km or more; 0.1 m in the uncut ones): a shrinking of the GCPs
+    all round the scene, which the lens and rate terms took up. Without the outermost cells
+    the windows' bias fell to 2.6 and 5.0 m (one ring more: 2.1 and 2.2, not kept). The rims
+    of the voids inside the DEM are not blanked: their offsets point every way, and at a cell
+    of one pixel (Pleiades at 0.5 m) the rims of the mismatched patches were 6 % of the DSM.
+    The array's border is not outside: callers pad the grid (the halo of
+    :func:`tasks.dense.blocks.grid_block` reaches past the DEM's own border). Returns the grid
+    and the cells blanked."""
+    rim = np.isfinite(z) & ndimage.binary_dilation(outside, structure=np.ones((3, 3), dtype=bool))
+    if not rim.any():
+        return z, rim
+    out = z.copy()
+    out[rim] = np.nan
+    return out, rim
 
 
 @dataclass(frozen=True)

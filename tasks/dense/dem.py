@@ -350,7 +350,8 @@ def grid_dem_cog(plan: DensePlan, stats: tuple[TileStats, ...], work: Path, out:
     ``<out>.json``; remove the work folder unless ``keep_work``."""
     out = Path(out)
     spec = _grid_spec(plan, stats)
-    halo = max(cfg.max_hole_cells, cfg.min_island_cells, 1)
+    # a hole the halo cuts is not filled: the edge cells it would blank stay in the halo
+    halo = max(cfg.max_hole_cells, cfg.min_island_cells, 1) + 1
     base = darr.zeros(spec.shape, chunks=CHUNK, dtype=np.float32)
     stack = darr.map_blocks(grid_block, base, spec=spec, stats=stats, work=str(work),
                             origin_m=plan.origin_m, halo=halo,

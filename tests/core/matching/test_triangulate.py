@@ -112,18 +112,23 @@ def test_small_holes_are_filled_large_and_border_ones_are_not():
 
 
 def test_grid_dem_mask_says_why_a_cell_is_empty():
-    # cell (0, 0): matched points; (0, 1): only mismatched pixels; (0, 2): occluded ones;
-    # (0, 3): nothing; (1, 0): outside the pair only
-    pts = [(0.5, -0.5, 10.0, PixelStatus.VALID), (0.6, -0.4, 12.0, PixelStatus.VALID),
-           (1.5, -0.5, np.nan, PixelStatus.MISMATCH), (1.4, -0.6, np.nan, PixelStatus.MISMATCH),
-           (2.5, -0.5, np.nan, PixelStatus.OCCLUDED), (0.5, -1.5, np.nan, PixelStatus.OUTSIDE)]
+    # cells (0-2, 0-2): matched points (10 and 12 m); (0, 3): only mismatched pixels; (0, 4):
+    # occluded ones; (0, 5) and the rest: nothing; (3, 0): outside the pair only. The matched
+    # cells beside those outside the pair are the DEM's edge and blanked (see the next tests);
+    # the array's own border is not outside (a caller pads it): (0-1, 0-1) stay.
+    pts = [(c + 0.3, -r - 0.5, v, PixelStatus.VALID) for r in range(3) for c in range(3)
+           for v in (10.0, 12.0)]
+    pts += [(3.5, -0.5, np.nan, PixelStatus.MISMATCH), (3.4, -0.6, np.nan, PixelStatus.MISMATCH),
+            (4.5, -0.5, np.nan, PixelStatus.OCCLUDED), (0.5, -3.5, np.nan, PixelStatus.OUTSIDE)]
     x, y, h, s = (np.array(c) for c in zip(*pts))
-    cells = grid_dem(x, y, h, s.astype(np.uint8), 0.0, 0.0, 1.0, (2, 4), max_hole_cells=0)
-    assert cells.z_m[0, 0] == pytest.approx(11.0)
-    assert cells.mask[0].tolist() == [MASK_VALID, MASK_MISMATCH, MASK_OCCLUDED, MASK_OCCLUDED]
-    assert cells.mask[1, 0] == MASK_OCCLUDED
-    assert cells.overlap[0].tolist() == [True, True, True, False]
-    assert not cells.overlap[1, 0]
+    cells = grid_dem(x, y, h, s.astype(np.uint8), 0.0, 0.0, 1.0, (4, 6), max_hole_cells=0)
+    assert cells.z_m[1, 1] == pytest.approx(11.0) and cells.mask[1, 1] == MASK_VALID
+    assert np.isfinite(cells.z_m).sum() == 4 and np.isfinite(cells.z_m[:2, :2]).all()
+    assert cells.mask[0, 3:].tolist() == [MASK_MISMATCH, MASK_OCCLUDED, MASK_OCCLUDED]
+    assert cells.mask[3, 0] == MASK_OCCLUDED
+    assert cells.mask[0, 2] == MASK_OCCLUDED  # on the edge
+    assert cells.overlap[0].tolist() == [True, True, True, True, True, False]
+    assert not cells.overlap[3, 0]
 
 
 def test_grid_spec_is_aligned_on_the_resolution():
@@ -196,3 +201,31 @@ def test_a_tilted_plane_is_gridded_in_place_and_read_back_at_its_cell_centres():
     px, py = xc[inner] + 3.0, yc[inner] - 4.0  # between cell centres: bilinear reading
     back = grid.sample(px, py) - plane(px, py)
     assert np.isfinite(back).all() and abs(float(np.mean(back))) < 0.036
+
+
+def test_the_dems_edge_cells_hold_the_height_of_their_centres_or_none():
+    """The same plane and lattice: a cell that the points' edge cuts holds them on its inner
+    side only, and their median is the plane there, not at the cell's centre (the surface
+    moved outwards). Along the lattice's west and east edges, where the plane rises 0.3 m/m
+    eastwards, the outermost cells kept are neither high nor low."""
+
+    def plane(x, y):
+        return 1000.0 + 0.3 * x - 0.2 * y
+
+    a = np.radians(15.0)
+    i, j = np.mgrid[0:900, 0:450].astype(np.float64)
+    x = 1000.3 + 10.0 * j * np.cos(a) + 5.0 * i * np.sin(a)
+    y = 5000.7 - 10.0 * j * np.sin(a) + 5.0 * i * np.cos(a)
+    spec = GridSpec.covering((x.min(), y.min(), x.max(), y.max()), 20.0)
+    cells = grid_dem(x, y, plane(x, y), np.zeros(x.size, np.uint8), spec.x0_m, spec.y0_m,
+                     spec.res_m, spec.shape, max_hole_cells=0, min_island_cells=0)
+    jj, ii = np.meshgrid(np.arange(spec.n_cols), np.arange(spec.n_rows))
+    err = cells.z_m - plane(spec.x0_m + (jj + 0.5) * spec.res_m,
+                            spec.y0_m - (ii + 0.5) * spec.res_m)
+    ok = np.isfinite(cells.z_m)
+    rows = np.flatnonzero(ok.sum(axis=1) > 10)[5:-5]  # away from the north and south corners
+    west = np.array([err[r, np.flatnonzero(ok[r])[0]] for r in rows])
+    east = np.array([err[r, np.flatnonzero(ok[r])[-1]] for r in rows])
+    # a cell half covered holds the plane about 5 m inwards: 1.5 m high (west) or low (east)
+    assert abs(float(np.mean(west))) < 0.3 and abs(float(np.mean(east))) < 0.3
+    assert (cells.mask[~ok] != MASK_VALID).all()
