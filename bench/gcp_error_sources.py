@@ -8,16 +8,30 @@ into ``ORIENT_DIR_truthref``), it prints:
 
 - the used GCPs' true errors (triangulated with the true models, mean taken out): their
   standard deviation east / north / up, the plane fitted to them (m per km), and their mean
-  products in distance classes beside the exponential field fitted to them (a stationary field
-  is never negative; a scene-wide pattern is);
+  products in distance classes beside the exponential field fitted to them, as it is and less
+  its mean (the products are of errors less their mean: far apart, an exponential is then
+  negative too);
 - the self-calibration's Wald statistic of each image's lens terms with ``N^-1`` (what
-  ``orient`` tests) and with the sandwich covariance of the correlated field.
+  ``orient`` tests) and with the sandwich covariance of the correlated field;
+- each parameter's error from the GCPs' true errors over its standard deviation under their
+  own statistics (:func:`parameter_z`), and over several orientations its RMS;
+- with GCPFREE_SOURCES_PERFECT_DEM=1, every good window matched again with the relative DEM's
+  cells and with a perfect relative DEM (the truth DSM carried into the relative frame at the
+  same cells), their GCP errors against the true shift at the tie point
+  (:func:`perfect_dem`).
 
 Measured (2026-11-28): tiny seed 4 (33-41 GCPs, 40 m pixels) against its truth DSM still has
 5.8 / 5.5 m of horizontal GCP error (7.3 / 4.9 against its SRTM-like reference) and check
-points of 0.14 / 0.07 and 0.19 / 0.09 px; the reference is not the main source there. The same
-place simulated without a lens keeps the lens terms (Wald 82 / 66 against 16.3; the tie points'
-F 1.4 against 3.1), and its check-point columns are 0.107 / 0.104 px with them against 0.061 /
+points of 0.14 / 0.07 and 0.19 / 0.09 px. Over the eight tiny scenes against their SRTM-like
+references the windows' GCPs are 6.1-14.8 m east and 5.4-13.6 m north off with the relative
+DEM, 3.1-5.2 and 2.5-4.2 m with the perfect one: the relative DEM (11-16 m NMAD from the
+perfect one) makes most of the GCPs' error on tiny, not the reference. The lens terms' z had
+an RMS of 1.6-2.0 over those scenes: the GCPs' errors held a pattern across the swath. Its
+cause: the relative DEM's outermost cells, half covered by matched points, were 31-40 m
+outwards, and the windows the DEM's edge cuts put their GCPs 6 m inwards (a shrinking all
+round); ``core.matching.grid.without_rim`` now leaves those cells out. The same place
+simulated without a lens keeps the lens terms (Wald 82 / 66 against 16.3; the tie points' F
+1.4 against 3.1), and its check-point columns are 0.107 / 0.104 px with them against 0.061 /
 0.081 without self-calibration. With the sandwich the Wald is 22 / 19 there against 471 / 465
 with a lens (both against their truth DSM; ``N^-1``: 82 / 66 and 602 / 534), but 16.4 / 17.2
 against 144 / 120 against the SRTM-like references (``N^-1``: 18.5 / 22.1 and 472 / 389).
@@ -28,6 +42,7 @@ figures, asserts nothing.
 
 from __future__ import annotations
 
+import json
 import os
 import subprocess
 import sys
@@ -35,16 +50,28 @@ from pathlib import Path
 
 import numpy as np
 import rasterio
+from pyproj import Transformer
 from rasterio.warp import Resampling, reproject
+from scipy.ndimage import map_coordinates
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 
 import prediction_check as pc  # noqa: E402
 
-from core.orientation.ground_field import _distances, correlated_ground_error  # noqa: E402
+from core.geodesy import BBox, metres_per_degree  # noqa: E402
+from core.intersection import triangulate  # noqa: E402
+from core.matching.surface import SurfaceMatchConfig, match_window  # noqa: E402
+from core.orientation.ground_field import (  # noqa: E402
+    CorrelatedGroundError,
+    _distances,
+    correlated_ground_error,
+)
 from core.orientation.selfcal import TERMS, _wald  # noqa: E402
-from tasks.io.sensors import read_model_file  # noqa: E402
+from core.sensors.pushbroom import PushbroomModel  # noqa: E402
+from tasks.absolute.surface_match import TieGround, read_window_cells  # noqa: E402
+from tasks.io.dem import read_reference  # noqa: E402
+from tasks.io.sensors import load_model, read_model_file  # noqa: E402
 
 CLASSES_KM = (0.0, 1.5, 3.0, 5.0, 8.0, 12.0, 18.0, 1e9)
 
@@ -67,7 +94,96 @@ def truth_reference(scene: Path, dest: Path) -> Path:
     return dest
 
 
-def errors(scene: Path, out: Path) -> None:
+def parameter_z(seen: dict, e0: np.ndarray, field: CorrelatedGroundError) -> dict[str, float]:
+    """Each adjusted parameter's error made by the GCPs' true errors ``e0`` (n, 3; mean out),
+    over its standard deviation under their own statistics: each GCP's own error (its outer
+    product) plus ``field`` between GCPs. Over many scenes the z of a parameter has an RMS of
+    1 when those statistics hold what the errors do in its direction."""
+    n = len(e0)
+    r = field.correlation(_distances(seen["east"], seen["north"]))
+    np.fill_diagonal(r, 0.0)
+    stats = np.zeros((n, 3, n, 3))
+    stats[np.arange(n), :, np.arange(n), :] = e0[:, :, None] * e0[:, None, :]
+    for k, var in enumerate(field.variance_m2):
+        stats[:, k, :, k] += var * r
+    c, a, s, g = (seen[k] for k in ("c", "a", "s", "g"))
+    m = -c @ np.einsum("nmau,nmak->unk", a / s[..., None] ** 2, g).reshape(c.shape[0], -1)
+    sd = np.sqrt(np.diag(m @ stats.reshape(3 * n, 3 * n) @ m.T))
+    names = [f"{im}.{p}" for im, pn in zip(pc.NAMES, seen["final"].param_names, strict=True)
+             for p in pn]
+    return dict(zip(names, (m @ e0.ravel()) / sd, strict=True))
+
+
+def perfect_dem(scene: Path, out: Path, truths: list, reference: Path) -> None:
+    """Each good window matched again against ``reference``, once with the relative DEM's cells
+    (as ``orient`` matched them) and once with the truth DSM carried into the relative frame at
+    the same cells (a relative DEM without errors), both against the true shift at the
+    window's tie point; and the relative DEM's heights against the perfect ones."""
+    cfg = SurfaceMatchConfig(**json.loads((out / "report.json").read_text())["settings"][
+        "surface"])
+    rel = json.loads((out / "relative" / "rel.json").read_text())
+    models = [load_model(scene / "left.tif").model,
+              PushbroomModel.from_dict(rel["right_model"])]
+    ties = TieGround.from_tiepoints_json(out / "relative" / "rel.tiepoints.json")
+    with rasterio.open(scene / "truth" / "dsm.tif") as src:
+        truth = src.read(1).astype(np.float64)
+        tr, to_xy = src.transform, Transformer.from_crs(4326, src.crs, always_xy=True)
+    with rasterio.open(reference) as src:
+        b = src.bounds
+    ref = read_reference(reference, BBox(b.left + 0.01, b.bottom + 0.01, b.right - 0.01,
+                                         b.top - 0.01), "ellipsoidal")
+
+    def truth_h(lon: np.ndarray, lat: np.ndarray) -> np.ndarray:
+        x, y = to_xy.transform(lon, lat)
+        return map_coordinates(truth, [(y - tr.f) / tr.e - 0.5, (x - tr.c) / tr.a - 0.5],
+                               order=1, mode="nearest")
+
+    def true_shift(lon: np.ndarray, lat: np.ndarray, h: np.ndarray) -> np.ndarray:
+        """Where the relative frame's (lon, lat, h) truly is, less it (m east, north, up)."""
+        im = [mdl.project(lon, lat, h) for mdl in models]
+        t = triangulate(truths, [im[0][0], im[1][0]], [im[0][1], im[1][1]],
+                        (float(h.min()) - 800.0, float(h.max()) + 800.0))
+        m_lon, m_lat = metres_per_degree(lat)
+        return np.stack([(t.lon_deg - lon) * m_lon, (t.lat_deg - lat) * m_lat, t.h_m - h], 1)
+
+    err: dict[str, list[np.ndarray]] = {"relative DEM": [], "perfect DEM": []}
+    spread = []
+    for w in json.loads((out / "windows.json").read_text())["windows"]:
+        if w["status"] != "OK":
+            continue
+        i = w["tie_point"]
+        lon, lat, h = read_window_cells(str(out / "relative_dem.tif"), ties.lon_deg[i],
+                                        ties.lat_deg[i], cfg.radius_m)
+        ok = np.isfinite(h)
+        perfect = np.full_like(h, np.nan)
+        m_lon, m_lat = metres_per_degree(lat[ok])
+        sh = true_shift(lon[ok], lat[ok], h[ok])
+        for _ in range(2):  # the true shift at the perfect height, then the height again
+            perfect[ok] = truth_h(lon[ok] + sh[:, 0] / m_lon, lat[ok] + sh[:, 1] / m_lat) - sh[:, 2]
+            sh = true_shift(lon[ok], lat[ok], perfect[ok])
+        at_tie = triangulate(truths, [ties.left_col[i:i + 1], ties.right_col[i:i + 1]],
+                             [ties.left_row[i:i + 1], ties.right_row[i:i + 1]],
+                             (ties.h_m[i] - 800.0, ties.h_m[i] + 800.0))
+        t_lon, t_lat = (float(v[0]) for v in metres_per_degree(ties.lat_deg[i:i + 1]))
+        truth_shift = np.array([(at_tie.lon_deg[0] - ties.lon_deg[i]) * t_lon,
+                                (at_tie.lat_deg[0] - ties.lat_deg[i]) * t_lat,
+                                at_tie.h_m[0] - ties.h_m[i]])
+        for key, heights in (("relative DEM", h), ("perfect DEM", perfect)):
+            mt = match_window(lon, lat, heights, (ties.lon_deg[i], ties.lat_deg[i]), ref, cfg)
+            if mt.ok:
+                err[key].append(np.array([mt.shift_east_m, mt.shift_north_m, mt.shift_h_m])
+                                - truth_shift)
+        dh = (h - perfect)[ok]
+        spread.append(1.4826 * np.median(np.abs(dh - np.median(dh))))
+    for key, v in err.items():
+        x = np.array(v)
+        print(f"  windows matched with the {key}: {len(x)}, GCP error sd E/N/U "
+              f"{np.round(x.std(axis=0), 1)} m, mean {np.round(x.mean(axis=0), 1)}")
+    print(f"  relative DEM minus the perfect one: NMAD {np.median(spread):.1f} m (median over "
+          "the windows)")
+
+
+def errors(scene: Path, out: Path, pooled: dict[str, list[float]] | None = None) -> None:
     seen = pc.adjusted(scene, out)
     truths = [read_model_file(scene / "truth" / f"{n}_truth.json").model for n in pc.NAMES]
     e = pc.true_errors(truths, seen)
@@ -80,30 +196,45 @@ def errors(scene: Path, out: Path) -> None:
           f"plane per km east {np.round(plane[1], 2)}, north {np.round(plane[2], 2)}; field "
           f"fitted to them {field.length_m / 1000:.1f} km {np.round(field.variance_m2, 1)} m2")
     d = _distances(seen["east"], seen["north"])
-    iu = np.triu_indices(len(e0), 1)
+    n = len(e0)
+    centred = np.eye(n) - 1.0 / n  # the products are of errors less their mean: J C J
+    demeaned = centred @ field.correlation(d) @ centred
+    iu = np.triu_indices(n, 1)
     b = np.searchsorted(np.array(CLASSES_KM) * 1000.0, d[iu], side="right") - 1
     prod = e0[iu[0]] * e0[iu[1]]
     for k in range(len(CLASSES_KM) - 1):
         sel = b == k
         if sel.any():
             model = np.array(field.variance_m2) * np.exp(-d[iu][sel].mean() / field.length_m)
+            less_mean = (np.array(field.variance_m2) * demeaned[iu][sel].mean()
+                         - np.maximum(np.mean(e0**2, axis=0) - field.variance_m2, 0.0) / n)
             print(f"  {CLASSES_KM[k]:4.1f}-{min(CLASSES_KM[k + 1], 99):4.1f} km ({sel.sum():3d} "
                   f"pairs): products E/N/U {np.round(prod[sel].mean(axis=0), 1)}, the field "
-                  f"{np.round(model, 1)}")
+                  f"{np.round(model, 1)}, less its mean {np.round(less_mean, 1)}")
     for name, names in zip(pc.NAMES, seen["final"].param_names, strict=True):
         terms = [t for t in TERMS.values() if t in names]
         if terms:  # the same parameters, before and after the sandwich replaced N^-1
             wald = [_wald(seen[k], name, terms) for k in ("adj", "final")]
             print(f"  {name}: lens terms' Wald {wald[0]:.1f} with N^-1, "
                   f"{wald[1]:.1f} with the sandwich")
+    z = parameter_z(seen, e0, field)
+    print("  parameters' z (error from the GCPs / sd from their statistics): "
+          + ", ".join(f"{k} {v:+.1f}" for k, v in z.items()))
+    if pooled is not None:
+        for k, v in z.items():
+            pooled.setdefault(k, []).append(v)
+    if os.environ.get("GCPFREE_SOURCES_PERFECT_DEM") == "1":
+        perfect_dem(scene, out, truths, Path(json.loads((out / "report.json").read_text())[
+            "settings"]["reference"]))
 
 
 def main() -> None:
     args = sys.argv[1:]
     if not args or len(args) % 2:
         sys.exit("usage: gcp_error_sources.py SCENE_DIR ORIENT_DIR [SCENE_DIR ORIENT_DIR ...]")
+    pooled: dict[str, list[float]] = {}
     for scene, out in zip(map(Path, args[::2]), map(Path, args[1::2]), strict=True):
-        errors(scene, out)
+        errors(scene, out, pooled)
         if os.environ.get("GCPFREE_SOURCES_TRUTH_REF") == "1":
             again = out.with_name(out.name + "_truthref")
             if not (again / "report.json").is_file():
@@ -115,6 +246,10 @@ def main() -> None:
                                 "--no-progress", "--out", str(again)], check=True,
                                capture_output=True)
             errors(scene, again)
+    if len(args) > 2:
+        print("parameters' z, RMS over the orientations (1 where the errors' statistics hold): "
+              + ", ".join(f"{k} {np.sqrt(np.mean(np.square(v))):.2f} ({len(v)})"
+                          for k, v in pooled.items()))
 
 
 if __name__ == "__main__":
