@@ -62,16 +62,12 @@ import prediction_check as pc  # noqa: E402
 from core.geodesy import BBox, metres_per_degree  # noqa: E402
 from core.intersection import triangulate  # noqa: E402
 from core.matching.surface import SurfaceMatchConfig, match_window  # noqa: E402
-from core.orientation.ground_field import (  # noqa: E402
-    CorrelatedGroundError,
-    _distances,
-    correlated_ground_error,
-)
+from core.orientation.ground_field import CorrelatedGroundError, _distances  # noqa: E402
 from core.orientation.selfcal import TERMS, _wald  # noqa: E402
 from core.sensors.pushbroom import PushbroomModel  # noqa: E402
 from tasks.absolute.surface_match import TieGround, read_window_cells  # noqa: E402
 from tasks.io.dem import read_reference  # noqa: E402
-from tasks.io.sensors import load_model, read_model_file  # noqa: E402
+from tasks.io.sensors import load_model  # noqa: E402
 
 CLASSES_KM = (0.0, 1.5, 3.0, 5.0, 8.0, 12.0, 18.0, 1e9)
 
@@ -99,16 +95,8 @@ def parameter_z(seen: dict, e0: np.ndarray, field: CorrelatedGroundError) -> dic
     over its standard deviation under their own statistics: each GCP's own error (its outer
     product) plus ``field`` between GCPs. Over many scenes the z of a parameter has an RMS of
     1 when those statistics hold what the errors do in its direction."""
-    n = len(e0)
-    r = field.correlation(_distances(seen["east"], seen["north"]))
-    np.fill_diagonal(r, 0.0)
-    stats = np.zeros((n, 3, n, 3))
-    stats[np.arange(n), :, np.arange(n), :] = e0[:, :, None] * e0[:, None, :]
-    for k, var in enumerate(field.variance_m2):
-        stats[:, k, :, k] += var * r
-    c, a, s, g = (seen[k] for k in ("c", "a", "s", "g"))
-    m = -c @ np.einsum("nmau,nmak->unk", a / s[..., None] ** 2, g).reshape(c.shape[0], -1)
-    sd = np.sqrt(np.diag(m @ stats.reshape(3 * n, 3 * n) @ m.T))
+    m = pc.params_from_errors(seen)
+    sd = np.sqrt(np.diag(m @ pc.error_statistics(seen, e0, field) @ m.T))
     names = [f"{im}.{p}" for im, pn in zip(pc.NAMES, seen["final"].param_names, strict=True)
              for p in pn]
     return dict(zip(names, (m @ e0.ravel()) / sd, strict=True))
@@ -185,13 +173,9 @@ def perfect_dem(scene: Path, out: Path, truths: list, reference: Path) -> None:
 
 def errors(scene: Path, out: Path, pooled: dict[str, list[float]] | None = None) -> None:
     seen = pc.adjusted(scene, out)
-    truths = [read_model_file(scene / "truth" / f"{n}_truth.json").model for n in pc.NAMES]
-    e = pc.true_errors(truths, seen)
-    e0 = e - e.mean(axis=0)
+    truths, e0, field = pc.true_error_field(scene, seen)
     x = np.column_stack([np.ones(len(e0)), seen["east"] / 1000.0, seen["north"] / 1000.0])
     plane = np.linalg.lstsq(x, e0, rcond=None)[0]
-    vtrue = np.einsum("nmak,nk->nma", seen["g"], e0)
-    field = correlated_ground_error(seen["g"], vtrue, seen["east"], seen["north"])
     print(f"{out.name}: {len(e0)} GCPs, true error sd E/N/U {np.round(e0.std(axis=0), 1)} m; "
           f"plane per km east {np.round(plane[1], 2)}, north {np.round(plane[2], 2)}; field "
           f"fitted to them {field.length_m / 1000:.1f} km {np.round(field.variance_m2, 1)} m2")

@@ -51,7 +51,11 @@ from beyond_shift import beyond_shift  # noqa: E402
 from core.geodesy import metres_per_degree  # noqa: E402
 from core.intersection import triangulate  # noqa: E402
 from core.orientation.absolute import AbsoluteConfig  # noqa: E402
-from core.orientation.ground_field import _distances, correlated_ground_error  # noqa: E402
+from core.orientation.ground_field import (  # noqa: E402
+    CorrelatedGroundError,
+    _distances,
+    correlated_ground_error,
+)
 from core.orientation.uncertainty import ground_jacobian  # noqa: E402
 from core.orientation.ties import TieObservations, tie_residuals, tie_rows  # noqa: E402
 from core.points import control_points_from_dict  # noqa: E402
@@ -119,12 +123,43 @@ def true_errors(truths: list[Any], seen: dict[str, Any]) -> np.ndarray:
     return np.stack([(lon - t.lon_deg) * m_lon, (lat - t.lat_deg) * m_lat, h - t.h_m], axis=1)
 
 
+def true_error_field(scene: Path, seen: dict[str, Any]
+                     ) -> tuple[list[Any], np.ndarray, CorrelatedGroundError]:
+    """The scene's true models, the used GCPs' true errors less their mean (n, 3; m) and the
+    correlated field fitted to them as the adjustment fits its residuals'."""
+    truths = [read_model_file(scene / "truth" / f"{n}_truth.json").model for n in NAMES]
+    e = true_errors(truths, seen)
+    e0 = e - e.mean(axis=0)
+    vtrue = np.einsum("nmak,nk->nma", seen["g"], e0)
+    return truths, e0, correlated_ground_error(seen["g"], vtrue, seen["east"], seen["north"])
+
+
+def params_from_errors(seen: dict[str, Any]) -> np.ndarray:
+    """(u, 3 n): the linear map from the used GCPs' ground errors (east, north, up per GCP)
+    to the adjusted parameters' errors."""
+    c, a, s, g = (seen[k] for k in ("c", "a", "s", "g"))
+    return -c @ np.einsum("nmau,nmak->unk", a / s[..., None] ** 2, g).reshape(c.shape[0], -1)
+
+
+def error_statistics(seen: dict[str, Any], e0: np.ndarray,
+                     field: CorrelatedGroundError) -> np.ndarray:
+    """(3 n, 3 n): the statistics of the GCPs' true errors ``e0`` (n, 3; mean out): each
+    GCP's own error (its outer product) plus ``field`` between GCPs."""
+    n = len(e0)
+    r = field.correlation(_distances(seen["east"], seen["north"]))
+    np.fill_diagonal(r, 0.0)
+    stats = np.zeros((n, 3, n, 3))
+    stats[np.arange(n), :, np.arange(n), :] = e0[:, :, None] * e0[:, None, :]
+    for k, var in enumerate(field.variance_m2):
+        stats[:, k, :, k] += var * r
+    return stats.reshape(3 * n, 3 * n)
+
+
 def check_maps(scene: Path, seen: dict[str, Any], n: int) -> list[dict[str, np.ndarray]]:
     """Per image at its check points: ``J`` (p, 2, u total), ``T`` (p, 2, 3 n) the linear map
     from the GCPs' errors to the check points' error beyond their mean."""
-    final, c, a, s, g = (seen[k] for k in ("final", "c", "a", "s", "g"))
-    wa = a / s[..., None] ** 2
-    m = -c @ np.einsum("nmau,nmak->unk", wa, g).reshape(c.shape[0], -1)  # params <- errors
+    final, c = seen["final"], seen["c"]
+    m = params_from_errors(seen)
     pts = orientation.read_checkpoints(scene / "truth" / "checkpoints.json").points
     maps, start = [], 0
     for k, name in enumerate(NAMES):
@@ -248,19 +283,9 @@ def fmt(x: np.ndarray) -> str:
 
 def one(scene: Path, out: Path) -> dict[str, Any]:
     seen = adjusted(scene, out)
-    truths = [read_model_file(scene / "truth" / f"{n}_truth.json").model for n in NAMES]
-    e = true_errors(truths, seen)
-    n = len(e)
-    e0 = e - e.mean(axis=0)
-    vtrue = np.einsum("nmak,nk->nma", seen["g"], e0)
-    field = correlated_ground_error(seen["g"], vtrue, seen["east"], seen["north"])
-    r = field.correlation(_distances(seen["east"], seen["north"]))
-    np.fill_diagonal(r, 0.0)
-    stats = np.zeros((n, 3, n, 3))
-    stats[np.arange(n), :, np.arange(n), :] = e0[:, :, None] * e0[:, None, :]
-    for k, var in enumerate(field.variance_m2):
-        stats[:, k, :, k] += var * r
-    stats = stats.reshape(3 * n, 3 * n)
+    truths, e0, field = true_error_field(scene, seen)
+    n = len(e0)
+    stats = error_statistics(seen, e0, field)
     maps = check_maps(scene, seen, n)
     jack = jackknife(seen)
     tie_step, tie_mean = tie_errors(truths, seen)
