@@ -27,6 +27,7 @@ from core.matching.dense import (
     PixelStatus,
     PointingCorrection,
     average_half_pixel,
+    inner_valid,
     match_disparity,
     measure_y_offset,
     normalize_local,
@@ -195,7 +196,7 @@ def dense_tile(
     # an unmatched pixel whose (filled) match leaves the right image is outside the pair
     qu = np.rint(u - d - u0).astype(np.int64)
     qv = (v - v0).astype(np.int64)
-    right_in = (qu >= 0) & (qu < w) & rv[qv, np.clip(qu, 0, w - 1)]
+    right_in = (qu >= 0) & (qu < w) & inner_valid(rv, cfg)[qv, np.clip(qu, 0, w - 1)]
     status = np.where((status != PixelStatus.VALID) & ~right_in, np.uint8(PixelStatus.OUTSIDE),
                       status).astype(np.uint8)
     d_lo = float(min(np.min(d), 0.0)) if d.size else 0.0

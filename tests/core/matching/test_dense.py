@@ -53,10 +53,10 @@ def scene():
     return make_scene()
 
 
-def run(left, right, cfg=None, left_valid=None, refine=True):
+def run(left, right, cfg=None, left_valid=None, refine=True, right_valid=None):
     cfg = cfg or MatchingConfig()
     lv = np.ones(left.shape, bool) if left_valid is None else left_valid
-    rv = np.ones(right.shape, bool)
+    rv = np.ones(right.shape, bool) if right_valid is None else right_valid
     lz, rz = normalize_local(left, lv, 61), normalize_local(right, rv, 61)
     z = (lz, rz) if refine else (None, None)
     return match_disparity(quantize(lz, lv), quantize(rz, rv), lv, rv, 32, cfg, *z)
@@ -105,6 +105,44 @@ def test_a_changed_area_is_mismatched_and_nodata_is_outside(scene):
     # mostly refused; what passes is smooth random texture agreeing by chance both ways
     assert (hit == PixelStatus.MISMATCH).mean() > 0.5 and (hit == PixelStatus.VALID).mean() < 0.35
     assert (res.status[:, 300:] == PixelStatus.OUTSIDE).all()
+
+
+def test_pixels_whose_windows_reach_into_nodata_are_outside_and_the_rest_unbiased():
+    """Near a nodata edge SGBM's block, x-Sobel and Birchfield-Tomasi costs see the flat fill
+    beyond it. On a pair of constant disparity matched as the chain does (checked first
+    matching, half-pixel upside-down second, averaged), the pixels 1-3 px inside the left
+    image's valid area came out up to 0.08 px off, and those whose match fell 1-3 px before
+    a nodata band of the right image 0.28-0.48 px too large. They are now outside the pair,
+    and the pixels kept are unbiased at every distance from the edges."""
+    tex = texture(3)
+    v, u = np.mgrid[0:H, 0:W].astype(np.float64)
+    left, right, right_half = (sample(tex, v, u + s) for s in (0.0, D_BACK, D_BACK - 0.5))
+    lv = np.zeros((H, W), bool)
+    lv[30:130, 100:300] = True
+    rv = np.ones((H, W), bool)
+    rv[:, 180:200] = False  # seen by the left pixels 190.3..210.3
+    cfg = MatchingConfig()
+    lz, rz, rz2 = (normalize_local(a, m, 61) for a, m in ((left, lv), (right, rv),
+                                                          (right_half, rv)))
+    first = match_disparity(quantize(lz, lv), quantize(rz, rv), lv, rv, 32, cfg, lz, rz)
+    second = sgbm_disparity(quantize(lz, lv), quantize(rz2, rv), 32, cfg, upside_down=True)
+    d = average_half_pixel(first, second).disparity_px
+    st, err = first.status, d - D_BACK
+    assert (st[~lv] == PixelStatus.OUTSIDE).all()
+    assert (st[30:130, 100:104] == PixelStatus.OUTSIDE).all()
+    assert (st[30:32, 100:300] == PixelStatus.OUTSIDE).all()
+    assert (st[30:130, 191:214] == PixelStatus.OUTSIDE).all()
+    kept = np.isfinite(d)
+    assert (kept == (st == PixelStatus.VALID)).all()
+    assert kept[40:120, 110:180].mean() > 0.95 and kept[40:120, 220:290].mean() > 0.95
+    # distance (whole px, along the rows) to the nearest edge: of the left's valid area, or,
+    # where the match falls, of the right's
+    dist = np.ceil(np.minimum.reduce([u - 99, 300 - u, np.abs(180 + D_BACK - u),
+                                      np.abs(u - 200 - D_BACK)]) - 1e-9)
+    for k in range(1, 9):
+        ring = kept & (v >= 36) & (v < 124) & (dist == k)
+        if ring.sum() >= 50:
+            assert abs(np.median(err[ring])) < 0.1, (k, np.median(err[ring]))
 
 
 def test_input_checks(scene):
