@@ -16,9 +16,10 @@ true errors say, and with what chance allows:
 - ``model``: ``report.json``'s adjustment term (parameters' covariance), no unmodelled term;
 - ``jackknife``: a spatial block jackknife of the GCPs (k-means blocks, one left out at a time,
   linearised), which assumes no field shape, plus the unmodelled term;
-- ``perfect``: measured / predicted if the prediction were right (both images' parameter
-  errors drawn from the predicted covariance, the unmodelled term as independent noise):
-  5 / 50 / 95 % per ratio and the share of draws with all four within 0.7-1.5;
+- ``perfect``: measured / predicted beyond the common error if the prediction were right
+  (the check points' errors drawn from the covariance that prediction comes from, the
+  unmodelled term as independent noise): 5 / 50 / 95 % per ratio, the share of draws with
+  all four within 0.7-1.5, and each measured ratio's PIT (the share of those draws below it);
 - ``predicted beyond the common error``: the adjustment's own statistics (its GCP weights and
   fitted correlated error, no reference term) with the used GCPs' mean error taken out as the
   measurement takes it out (:func:`predicted_beyond_common`), and measured over it.
@@ -27,8 +28,10 @@ Run: ``.venv/bin/python bench/prediction_check.py SCENE_DIR ORIENT_DIR [SCENE_DI
 ...]`` (the simulator's output and ``gcpfree orient --self-calibrate --checkpoints
 SCENE_DIR/truth/checkpoints.json``'s). The adjustment is run again from ``ORIENT_DIR``'s GCPs
 and tie points with the settings in its ``report.json`` (deterministic: the same models).
-GCPFREE_PREDICTION_OUT=FILE writes every scene's figures there as JSON. Prints figures,
-asserts nothing.
+GCPFREE_PREDICTION_OUT=FILE writes every scene's figures there as JSON. Ends with the
+ratios within 0.7-1.5 against how many a right prediction puts there, and the PITs per group
+of scenes and axis (uniform if the predictions are true); ``prediction_check.py --summary
+FILE`` prints that again from a saved (or merged) FILE. Prints figures, asserts nothing.
 """
 
 from __future__ import annotations
@@ -176,15 +179,17 @@ def check_maps(scene: Path, seen: dict[str, Any], n: int) -> list[dict[str, np.n
     return maps
 
 
-def predicted_beyond_common(seen: dict[str, Any], maps: list[dict[str, np.ndarray]]
-                            ) -> list[np.ndarray]:
-    """Per image (col, row): the RMS the adjustment predicts at the check points beyond the
-    used GCPs' common error, as ``beyond_shift`` measures them: its own statistics (the GCPs'
-    weights and the correlated ground error it fitted, no reference term) through the map
-    from the GCPs' observation errors ``eps`` to the check point's error less its share of
-    the GCPs' mean ground error (``J C A' W eps - G mean_i(G_i^+ eps_i)``). The report's
-    term less the reference's keeps that mean, a draw per scene the measurement takes out:
-    1.1-1.2 times more on spot and hrs."""
+def beyond_common_covariance(seen: dict[str, Any], maps: list[dict[str, np.ndarray]]
+                             ) -> np.ndarray:
+    """(P, 2, P, 2) over both images' check points (left's first): the covariance of their
+    errors beyond the used GCPs' common error, as ``beyond_shift`` measures them, under the
+    adjustment's own statistics (the GCPs' weights and the correlated ground error it
+    fitted, no reference term; the unmodelled term not included). The map from the GCPs'
+    observation errors ``eps`` to a check point's error less its share of the GCPs' mean
+    ground error is ``J C A' W eps - G mean_i(G_i^+ eps_i)``; with the parameters'
+    covariance ``J C J'`` the cross terms with the mean come in. The report's term less the
+    reference's keeps that mean, a draw per scene the measurement takes out: 1.1-1.2 times
+    more on spot and hrs."""
     c, a, s, g = (seen[k] for k in ("c", "a", "s", "g"))
     err = seen["error"]
     n, u = a.shape[0], c.shape[0]
@@ -197,14 +202,24 @@ def predicted_beyond_common(seen: dict[str, Any], maps: list[dict[str, np.ndarra
     pbar = np.zeros((3, n, go.shape[1]))
     pbar[:, np.arange(n), :] = np.linalg.pinv(go).transpose(1, 0, 2) / n
     pbar = pbar.reshape(3, -1)
-    out = []
+    j = np.concatenate([mp["J"] for mp in maps]).reshape(-1, u)
+    y = j @ caw
+    z = np.concatenate([mp["G"] for mp in maps]).reshape(-1, 3) @ pbar
+    zs = z @ sigma
+    cov = j @ seen["final"].covariance @ j.T + zs @ z.T - zs @ y.T - y @ zs.T
+    return cov.reshape(len(cov) // 2, 2, len(cov) // 2, 2)
+
+
+def predicted_beyond_common(cov: np.ndarray, maps: list[dict[str, np.ndarray]]
+                            ) -> list[np.ndarray]:
+    """Per image (col, row): the RMS the adjustment predicts at the check points beyond the
+    used GCPs' common error (:func:`beyond_common_covariance`), its unmodelled term in."""
+    var = np.einsum("papa->pa", cov)
+    out, start = [], 0
     for mp in maps:
-        y = np.einsum("pau,uq->paq", mp["J"], caw)
-        z = np.einsum("pak,kq->paq", mp["G"], pbar)
-        zs = np.einsum("paq,qr->par", z, sigma)
-        extra = np.einsum("par,par->pa", zs, z) - 2.0 * np.einsum("par,par->pa", zs, y)
-        model2 = np.einsum("pau,uv,pav->pa", mp["J"], seen["final"].covariance, mp["J"])
-        out.append(np.sqrt(np.mean(model2 + extra + mp["mu"] ** 2, axis=0)))
+        p = len(mp["J"])
+        out.append(np.sqrt(np.mean(var[start:start + p], axis=0) + mp["mu"] ** 2))
+        start += p
     return out
 
 
@@ -262,18 +277,22 @@ def jackknife(seen: dict[str, Any]) -> np.ndarray:
     return (len(d) - 1) / len(d) * d.T @ d
 
 
-def perfect(seen: dict[str, Any], maps: list[dict[str, np.ndarray]]) -> np.ndarray:
-    """(draws, 4) measured / predicted of a right prediction."""
+def perfect(cov: np.ndarray, maps: list[dict[str, np.ndarray]], pred: list[np.ndarray]
+            ) -> np.ndarray:
+    """(draws, 4) measured / predicted beyond the common error if the prediction were right:
+    the check points' errors drawn from :func:`beyond_common_covariance` (both images
+    together), the unmodelled term as independent noise, over ``pred``."""
     rng = np.random.default_rng(0)
-    cov = seen["final"].covariance
-    w, vec = np.linalg.eigh(cov)
-    d = (vec * np.sqrt(np.clip(w, 0.0, None))) @ rng.normal(size=(len(w), DRAWS))
-    out = []
-    for mp in maps:
-        e = np.einsum("pau,ud->dpa", mp["J"], d) + rng.normal(0.0, mp["mu"], (DRAWS,) +
-                                                               mp["J"].shape[:2])
-        pred = np.sqrt(rms(mp["J"], cov) ** 2 + mp["mu"] ** 2)
-        out.append(np.sqrt(np.mean(e**2, axis=1)) / pred)
+    flat = cov.reshape(cov.shape[0] * 2, -1)
+    w, vec = np.linalg.eigh(0.5 * (flat + flat.T))
+    e = ((vec * np.sqrt(np.clip(w, 0.0, None))) @ rng.normal(size=(len(w), DRAWS))).T
+    e = e.reshape(DRAWS, -1, 2)
+    out, start = [], 0
+    for mp, p_rms in zip(maps, pred, strict=True):
+        p = len(mp["J"])
+        ek = e[:, start:start + p] + rng.normal(0.0, mp["mu"], (DRAWS, p, 2))
+        out.append(np.sqrt(np.mean(ek**2, axis=1)) / p_rms)
+        start += p
     return np.concatenate(out, axis=1)
 
 
@@ -289,14 +308,15 @@ def one(scene: Path, out: Path) -> dict[str, Any]:
     maps = check_maps(scene, seen, n)
     jack = jackknife(seen)
     tie_step, tie_mean = tie_errors(truths, seen)
-    ratios = perfect(seen, maps)
     measured = beyond_shift(scene, out)
     err = seen["error"]
     print(f"{scene.name}: {n} GCPs; fitted field {err.length_m / 1000:.1f} km "
           f"{np.round(np.sqrt(err.variance_m2), 1)} m, on the true errors "
           f"{field.length_m / 1000:.1f} km {np.round(np.sqrt(field.variance_m2), 1)} m; the "
           f"tie points' mean y-parallax against the true models {tie_mean:+.3f} px")
-    beyond = predicted_beyond_common(seen, maps)
+    cov = beyond_common_covariance(seen, maps)
+    beyond = predicted_beyond_common(cov, maps)
+    ratios = perfect(cov, maps, beyond)
     row: dict[str, Any] = {"scene": scene.name, "orient": out.name, "images": {}}
     for name, mp, pred in zip(NAMES, maps, beyond, strict=True):
         mu = mp["mu"]
@@ -320,6 +340,13 @@ def one(scene: Path, out: Path) -> dict[str, Any]:
                                "ratio": (meas / pred).tolist()}
     q = np.percentile(ratios, [5, 50, 95], axis=0)
     inside = (ratios >= 0.7) & (ratios <= 1.5)
+    for k, name in enumerate(NAMES):
+        got = np.array(row["images"][name]["ratio"])
+        row["images"][name].update(
+            perfect_5_50_95=q[:, 2 * k:2 * k + 2].T.tolist(),
+            p_within=inside[:, 2 * k:2 * k + 2].mean(axis=0).tolist(),
+            pit=(ratios[:, 2 * k:2 * k + 2] < got).mean(axis=0).tolist())
+    row["within_of_4"] = [float(inside.sum(axis=1).mean()), float(inside.sum(axis=1).var())]
     print("  perfect prediction, measured / predicted 5/50/95 %: " + ", ".join(
         f"{q[0, i]:.2f}/{q[1, i]:.2f}/{q[2, i]:.2f}" for i in range(4))
           + f"; all four within 0.7-1.5 in {inside.all(axis=1).mean():.0%} of draws, "
@@ -327,17 +354,51 @@ def one(scene: Path, out: Path) -> dict[str, Any]:
     return row
 
 
+def summary(doc: dict[str, Any]) -> None:
+    """How many ratios lie within 0.7-1.5 against how many a right prediction puts there,
+    and the ratios' PIT values (the share of a right prediction's draws below the measured
+    ratio: uniform on 0-1 if the predictions are true; near 1 under-predicted, near 0
+    over-predicted), per group of scenes and axis."""
+    scenes = [r for r in doc["scenes"] if "within_of_4" in r]
+    if not scenes:
+        return
+    mean = sum(r["within_of_4"][0] for r in scenes)
+    sd = np.sqrt(sum(r["within_of_4"][1] for r in scenes))
+    got = sum(int(0.7 <= x <= 1.5) for r in scenes for v in r["images"].values()
+              for x in v["ratio"])
+    print(f"within 0.7-1.5: {got} of {4 * len(scenes)}; a right prediction puts {mean:.1f} +- "
+          f"{sd:.1f} there (scenes independent)")
+    groups: dict[str, list[dict[str, Any]]] = {}
+    for r in scenes:
+        groups.setdefault(r["scene"].split("_")[0], []).append(r)
+    from scipy.stats import kstest
+
+    for label, rs in [("all", scenes), *sorted(groups.items())]:
+        for axis, name in enumerate(("columns", "rows")):
+            pit = np.array([v["pit"][axis] for r in rs for v in r["images"].values()])
+            hist = np.histogram(pit, bins=5, range=(0.0, 1.0))[0]
+            print(f"  {label:5s} {name:7s}: {len(pit):2d} PITs, mean {pit.mean():.2f} (right: "
+                  f"0.50 +- {np.sqrt(1 / 12 / len(pit)):.2f} if independent), by fifths "
+                  f"{' '.join(str(h) for h in hist)}, KS p {kstest(pit, 'uniform').pvalue:.2f}")
+
+
 def main() -> None:
     args = sys.argv[1:]
+    if len(args) == 2 and args[0] == "--summary":
+        summary(json.loads(Path(args[1]).read_text()))
+        return
     if not args or len(args) % 2:
-        sys.exit("usage: prediction_check.py SCENE_DIR ORIENT_DIR [SCENE_DIR ORIENT_DIR ...]")
+        sys.exit("usage: prediction_check.py SCENE_DIR ORIENT_DIR [SCENE_DIR ORIENT_DIR ...] | "
+                 "--summary FILE")
     rows = [one(Path(scene), Path(out)) for scene, out in zip(args[::2], args[1::2],
                                                               strict=True)]
+    ratios = np.array([r["images"][name]["ratio"] for r in rows for name in NAMES])
+    doc = {"scenes": rows, "within_0.7_1.5": int(np.sum((ratios >= 0.7) & (ratios <= 1.5))),
+           "n_ratios": int(ratios.size)}
+    summary(doc)
     dest = os.environ.get("GCPFREE_PREDICTION_OUT")
     if dest:  # every ratio, and how many lie within 0.7-1.5
-        ratios = np.array([r["images"][name]["ratio"] for r in rows for name in NAMES])
-        Path(dest).write_text(json.dumps({"scenes": rows, "within_0.7_1.5": int(np.sum(
-            (ratios >= 0.7) & (ratios <= 1.5))), "n_ratios": int(ratios.size)}, indent=1))
+        Path(dest).write_text(json.dumps(doc, indent=1))
 
 
 if __name__ == "__main__":
