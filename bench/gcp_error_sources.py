@@ -64,6 +64,7 @@ from core.intersection import triangulate  # noqa: E402
 from core.matching.surface import SurfaceMatchConfig, match_window  # noqa: E402
 from core.orientation.ground_field import CorrelatedGroundError, _distances  # noqa: E402
 from core.orientation.selfcal import TERMS, _wald  # noqa: E402
+from core.robust import nmad  # noqa: E402
 from core.sensors.pushbroom import PushbroomModel  # noqa: E402
 from tasks.absolute.surface_match import TieGround, read_window_cells  # noqa: E402
 from tasks.io.dem import read_reference  # noqa: E402
@@ -162,7 +163,7 @@ def perfect_dem(scene: Path, out: Path, truths: list, reference: Path) -> None:
                 err[key].append(np.array([mt.shift_east_m, mt.shift_north_m, mt.shift_h_m])
                                 - truth_shift)
         dh = (h - perfect)[ok]
-        spread.append(1.4826 * np.median(np.abs(dh - np.median(dh))))
+        spread.append(nmad(dh))
     for key, v in err.items():
         x = np.array(v)
         print(f"  windows matched with the {key}: {len(x)}, GCP error sd E/N/U "
@@ -189,7 +190,7 @@ def errors(scene: Path, out: Path, pooled: dict[str, list[float]] | None = None)
     for k in range(len(CLASSES_KM) - 1):
         sel = b == k
         if sel.any():
-            model = np.array(field.variance_m2) * np.exp(-d[iu][sel].mean() / field.length_m)
+            model = np.array(field.variance_m2) * field.correlation(d[iu][sel].mean())
             less_mean = (np.array(field.variance_m2) * demeaned[iu][sel].mean()
                          - np.maximum(np.mean(e0**2, axis=0) - field.variance_m2, 0.0) / n)
             print(f"  {CLASSES_KM[k]:4.1f}-{min(CLASSES_KM[k + 1], 99):4.1f} km ({sel.sum():3d} "
