@@ -30,8 +30,10 @@ SYMMETRY_OFFSET = 0.05
 
 @dataclass(frozen=True, eq=False)
 class WindowCells:
-    """The relative DEM in a window, averaged on a lattice: lon/lat (degrees) and height ``h_m``
-    of each lattice cell (NaN when no valid relative cell fell in it), ``cell_m`` its size."""
+    """The relative DEM in a window, averaged on a lattice: height ``h_m`` of each lattice cell
+    (NaN when no valid relative cell fell in it) and where it is, lon/lat (degrees) and x/y (m
+    from the centre): the mean position of the cells averaged (the lattice cell's centre when
+    none), ``cell_m`` its size."""
 
     lon_deg: FloatArray
     lat_deg: FloatArray
@@ -50,7 +52,10 @@ def window_cells(lon_deg: ArrayLike, lat_deg: ArrayLike, h_m: ArrayLike,
     """Average the relative DEM's cells (NaN heights = mismatched) within ``radius_m`` of
     ``centre`` onto a square lattice of ``cell_m`` around it, or coarser when the relative DEM
     is: a lattice cell is at least sqrt(2) times the input's spacing, so that every cell of a
-    complete input receives a value whatever the grids' orientations."""
+    complete input receives a value whatever the grids' orientations. A lattice cell's height is
+    placed where the cells it averages are, not at its centre: a lattice cell of 113 m holds 1-4
+    of tiny's 80 m cells, off its centre by up to half a cell, and at the DEM's edge only its
+    inner part (a window cut there then measured the terrain up to 3 m off, 1.2 m RMS whole)."""
     lon = np.ravel(np.asarray(lon_deg, dtype=np.float64))
     lat = np.ravel(np.asarray(lat_deg, dtype=np.float64))
     h = np.ravel(np.asarray(h_m, dtype=np.float64))
@@ -66,16 +71,18 @@ def window_cells(lon_deg: ArrayLike, lat_deg: ArrayLike, h_m: ArrayLike,
     idx = iy[keep] * n_side + ix[keep]
     hv = h[inside][keep]
     good = np.isfinite(hv)
-    total = np.bincount(idx[good], weights=hv[good], minlength=n_side * n_side)
     count = np.bincount(idx[good], minlength=n_side * n_side)
-    with np.errstate(invalid="ignore", divide="ignore"):
-        mean = np.where(count > 0, total / count, np.nan)
     gx = (np.arange(n_side) + 0.5) * cell_m - n_side * cell_m / 2
-    xx, yy = np.meshgrid(gx, gx)
-    in_disk = (np.hypot(xx, yy) <= radius_m).ravel()
+    xx, yy = (g.ravel() for g in np.meshgrid(gx, gx))
+    in_disk = np.hypot(xx, yy) <= radius_m
+    has = count > 0
+    mean = np.full(n_side * n_side, np.nan)
+    for out, value in ((mean, hv), (xx, x[inside][keep]), (yy, y[inside][keep])):
+        total = np.bincount(idx[good], weights=value[good], minlength=n_side * n_side)
+        out[has] = total[has] / count[has]  # a cell's mean height is where its inputs are
     mean = np.where(in_disk, mean, np.nan)
-    return WindowCells(centre[0] + xx.ravel() / float(m_lon), centre[1] + yy.ravel() / float(m_lat),
-                       mean, xx.ravel(), yy.ravel(), float(cell_m), (n_side, n_side),
+    return WindowCells(centre[0] + xx / float(m_lon), centre[1] + yy / float(m_lat),
+                       mean, xx, yy, float(cell_m), (n_side, n_side),
                        int(inside.sum()),
                        int((~np.isfinite(h[inside])).sum()), int(in_disk.sum()))
 
