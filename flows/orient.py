@@ -150,7 +150,7 @@ def orient_flow(params: OrientParams) -> OrientOutcome:
     ties = TieGround.from_tiepoints_json(rel.rel_json.with_suffix(".tiepoints.json"))
     windows = match_surfaces(out / "relative_dem.tif", ties, reference, cfg, params.spacing_m,
                              out=out / "windows.json", progress=params.progress,
-                             workers=params.workers)
+                             workers=params.workers, models=(rel.left.model, rel.right.model))
     verdict = relief_sufficiency(windows.matches, cfg, params.min_windows,
                                  reference.cell_size_m())
     sar = None

@@ -47,14 +47,15 @@ from core.errors import InputError
 from core.geodesy import ARCSEC, geodetic_to_enu, metres_per_degree
 from core.matching.lattice import (
     WindowCells,
-    centre_inflation,
+    basis_at,
     correlations,
     curvature_m,
     despike,
     differences,
+    inflation_at,
     relief_m,
+    site,
     surface_basis,
-    symmetric,
     window_cells,
 )
 from core.matching.peaks import peak_hessian, quadratic_peak
@@ -63,6 +64,7 @@ from core.points import ControlPoint, ImagePoint
 from core.robust import nmad, robust_fit
 
 FloatArray = NDArray[np.float64]
+Locate = Callable[[float, float, float], Mapping[str, tuple[float, float]]]  # -> (col, row)
 
 #: a window whose height differences from the reference at its peak depart from their plane
 #: by a quadratic of this RMS (m) at least, and by 3 times its noise, is compared about
@@ -152,7 +154,11 @@ class WindowMatch:
     reference's nominal noise ``cfg.height_noise_m``); ``spread_m`` the robust spread of the
     height differences about their dominant mode after the shift (NaN when not matched);
     ``n_dem_cells`` the window's lattice cells the relative DEM fills (``n_cells`` of them have
-    a reference height too): a scene smaller than a window fills few of them.
+    a reference height too): a scene smaller than a window fills few of them. ``at_lon_deg``,
+    ``at_lat_deg``, ``at_h_m``: the relative point the shift holds at, the lattice cell
+    nearest the centroid of the cells matched (:func:`core.matching.lattice.site`; the tie
+    point's neighbourhood unless the DEM's edge cuts the window), the vertical shift being
+    the difference surface's height there.
     """
 
     status: WindowStatus
@@ -171,6 +177,9 @@ class WindowMatch:
     masked_share: float = 1.0
     spread_m: float = float("nan")
     n_dem_cells: int = 0
+    at_lon_deg: float = float("nan")
+    at_lat_deg: float = float("nan")
+    at_h_m: float = float("nan")
 
     @property
     def ok(self) -> bool:
@@ -309,10 +318,10 @@ def _refined(cells: WindowCells, reference: GeoDEM, cfg: SurfaceMatchConfig,
                    sy=float(fy[jy, jx] + ddy * cfg.refine_step_arcsec))
 
 
-def _vertical(cells: WindowCells, reference: GeoDEM, peak: _Peak, cfg: SurfaceMatchConfig
-              ) -> tuple[float, float, NDArray[np.bool_]]:
-    """(vertical shift at the centre, robust spread, blunders) of the height differences at the
-    peak's shift (:func:`core.matching.lattice.differences`): their robust
+def _vertical(cells: WindowCells, reference: GeoDEM, peak: _Peak, cfg: SurfaceMatchConfig,
+              at: tuple[float, float] = (0.0, 0.0)) -> tuple[float, float, NDArray[np.bool_]]:
+    """(vertical shift at ``at`` (m from the centre), robust spread, blunders) of the height
+    differences at the peak's shift (:func:`core.matching.lattice.differences`): their robust
     :func:`core.matching.lattice.surface_basis` (plane, quadratic or constant) moved to their
     dominant mode (:func:`core.robust.robust_fit`), and the lattice cells further than
     :data:`BLUNDER_K` spreads from it."""
@@ -321,7 +330,7 @@ def _vertical(cells: WindowCells, reference: GeoDEM, peak: _Peak, cfg: SurfaceMa
     coef, spread = robust_fit(diff, basis, mode_scale_m=cfg.height_noise_m)
     far = np.zeros(cells.h_m.size, dtype=bool)
     far[both] = np.abs(diff - basis @ coef) > BLUNDER_K * max(spread, cfg.height_noise_m)
-    return float(coef[0]), float(spread), far  # coef[0]: at the centre, x = y = 0 there
+    return float(basis_at(*at, cfg.detrend)[0] @ coef), float(spread), far
 
 
 def _without_blunders(cells: WindowCells, reference: GeoDEM, cfg: SurfaceMatchConfig,
@@ -352,7 +361,8 @@ def _without_blunders(cells: WindowCells, reference: GeoDEM, cfg: SurfaceMatchCo
             break
         far = _vertical(cells, reference, peak, cfg)[2]
     peak = _refined(cells, reference, cfg, peak)
-    dz, spread, _ = _vertical(cells, reference, peak, cfg)
+    k = site(cells)
+    dz, spread, _ = _vertical(cells, reference, peak, cfg, (cells.x_m[k], cells.y_m[k]))
     return cells, peak, dz, spread
 
 
@@ -372,40 +382,27 @@ def match_window(lon_deg: ArrayLike, lat_deg: ArrayLike, h_m: ArrayLike,
     follows them: spikes first (:func:`despike`), then, at the peak, cells further than
     :data:`BLUNDER_K` robust spreads from the reference (at least ``cfg.height_noise_m``), and
     the peak is searched again around the first one without them (at most
-    :data:`BLUNDER_ROUNDS` times). The relief is the spread of the heights correlated. A
-    window the DEM's edge cuts is matched point-symmetric about its centre
-    (:func:`core.matching.lattice.symmetric`), whole when what is left cannot make a GCP."""
+    :data:`BLUNDER_ROUNDS` times). The relief is the spread of the heights correlated. The
+    shift holds where the cells matched are (``at_*``: :func:`core.matching.lattice.site`),
+    not at ``centre`` when the DEM's edge cuts the window."""
     m_lon, m_lat = (float(v) for v in metres_per_degree(centre[1]))
     cell = cfg.cell_m if cfg.cell_m is not None else reference.cell_size_m()
     raw = window_cells(lon_deg, lat_deg, h_m, centre, cfg.radius_m, cell)
-    return _match_raw(raw, reference, cfg, prior, (m_lon, m_lat))[0]
+    return _matched(raw, reference, cfg, prior, (m_lon, m_lat))[0]
 
 
-def _match_raw(raw: WindowCells, reference: GeoDEM, cfg: SurfaceMatchConfig,
-               prior: tuple[float, float, float] | None, m_per_deg: tuple[float, float]
-               ) -> tuple[WindowMatch, WindowCells, SurfaceMatchConfig]:
-    """:func:`_matched` on the window's lattice ``raw``: despiked, cut symmetric, whole when the
-    cut cannot make a GCP."""
+def _matched(raw: WindowCells, reference: GeoDEM, cfg: SurfaceMatchConfig,
+             prior: tuple[float, float, float] | None, m_per_deg: tuple[float, float]
+             ) -> tuple[WindowMatch, WindowCells, SurfaceMatchConfig]:
+    """:func:`match_window` on the window's lattice ``raw``, with the cells it correlated last
+    (despiked, without the blunders) and the configuration it used (its ``detrend``: plane or
+    quadratic)."""
+    m_lon, m_lat = m_per_deg
     valid = np.isfinite(raw.h_m)
     paired = valid.copy()  # and a reference height there
     paired[valid] = np.isfinite(reference.height_m(raw.lon_deg[valid], raw.lat_deg[valid]))
     masked = 1.0 - paired.sum() / max(raw.n_disk, 1)  # mismatched cells or reference voids
-    whole = despike(raw)
-    cut = symmetric(whole)
-    out = _matched(cut, paired, masked, reference, cfg, prior, m_per_deg)
-    if cut is not whole and out[0].status != WindowStatus.OK:  # too little left symmetric
-        out = _matched(whole, paired, masked, reference, cfg, prior, m_per_deg)
-    return out
-
-
-def _matched(cells: WindowCells, paired: NDArray[np.bool_], masked: float, reference: GeoDEM,
-             cfg: SurfaceMatchConfig, prior: tuple[float, float, float] | None,
-             m_per_deg: tuple[float, float]
-             ) -> tuple[WindowMatch, WindowCells, SurfaceMatchConfig]:
-    """:func:`match_window` on the window's ``cells`` (``paired``: the lattice cells with a
-    reference height, ``masked`` the share of the disk without), with the cells it correlated
-    last and the configuration it used (its ``detrend``: plane or quadratic)."""
-    m_lon, m_lat = m_per_deg
+    cells = despike(raw)
     valid = np.isfinite(cells.h_m)
     n_pairs = int(np.count_nonzero(paired & valid))
     pred, relief, slope, n_eff = predicted_precision_m(cells, cfg)
@@ -434,13 +431,16 @@ def _matched(cells: WindowCells, paired: NDArray[np.bool_], masked: float, refer
     curv = float(np.min(np.abs(np.linalg.eigvalsh(scale @ peak.hess @ scale))))
     precision = (float(spread / (relief * np.sqrt(curv * n_eff))) if curv > 0 and relief > 0
                  else float("inf"))
+    k = site(cells)
     result = WindowMatch(
         WindowStatus.OK, shift_lon_arcsec=peak.sx, shift_lat_arcsec=peak.sy,
         shift_h_m=dz, shift_east_m=float(peak.sx * ARCSEC * m_lon),
         shift_north_m=float(peak.sy * ARCSEC * m_lat), correlation=peak.correlation,
-        precision_m=precision, precision_h_m=float(spread * np.sqrt(centre_inflation(
-            cells, cfg.detrend) / max(n_eff, 1))),
-        spread_m=float(spread), **{**base, "relief_m": relief})
+        precision_m=precision, precision_h_m=float(spread * np.sqrt(inflation_at(
+            cells, cfg.detrend, cells.x_m[k], cells.y_m[k]) / max(n_eff, 1))),
+        spread_m=float(spread), at_lon_deg=float(cells.lon_deg[k]),
+        at_lat_deg=float(cells.lat_deg[k]), at_h_m=float(cells.h_m[k]),
+        **{**base, "relief_m": relief})
     if peak.correlation < cfg.min_correlation:
         result = WindowMatch(**{**vars(result), "status": WindowStatus.LOW_CORRELATION})
     elif not precision <= cfg.max_precision_m:
@@ -539,13 +539,15 @@ def search_windows(lon_deg: ArrayLike, lat_deg: ArrayLike, match: MatchWindows,
 
 def gcps_from_windows(centres: ArrayLike, matches: Sequence[WindowMatch], lon_deg: ArrayLike,
                       lat_deg: ArrayLike, h_m: ArrayLike,
-                      image_points: Mapping[str, tuple[ArrayLike, ArrayLike]]
-                      ) -> tuple[ControlPoint, ...]:
-    """A GCP of every good window: its centre tie point (index into ``lon_deg``, ``lat_deg``,
-    ``h_m``, the relative ground coordinates) moved by the window's 3-D shift, measured where
-    the tie point is in each image (``image_points``: image name -> (col, row) arrays indexed
-    like the tie points), with the window's precisions (the vertical one at least
-    :data:`MIN_GCP_SIGMA_H_M`) and figures (``provenance``). Ids count from 1."""
+                      image_points: Mapping[str, tuple[ArrayLike, ArrayLike]],
+                      locate: Locate | None = None) -> tuple[ControlPoint, ...]:
+    """A GCP of every good window: the relative point its shift holds at (``at_*``) moved by
+    its 3-D shift, where ``locate`` puts that point in each image with the models the relative
+    DEM was made with. Without ``locate`` (or ``at_*``: an older file), its centre tie point
+    (index into ``lon_deg``, ``lat_deg``, ``h_m``, the relative ground coordinates) where
+    ``image_points`` (image name -> (col, row) arrays indexed like the tie points) has it.
+    With the window's precisions (the vertical one at least :data:`MIN_GCP_SIGMA_H_M`) and
+    figures (``provenance``). Ids count from 1."""
     lon, lat, h = (np.asarray(v, dtype=np.float64) for v in (lon_deg, lat_deg, h_m))
     pts = {name: (np.asarray(c, dtype=np.float64), np.asarray(r, dtype=np.float64))
            for name, (c, r) in image_points.items()}
@@ -553,13 +555,17 @@ def gcps_from_windows(centres: ArrayLike, matches: Sequence[WindowMatch], lon_de
     for i, m in zip(np.asarray(centres, dtype=np.intp), matches, strict=True):
         if m.status != WindowStatus.OK:
             continue
+        p = (lon[i], lat[i], h[i])
+        seen = {name: (float(c[i]), float(r[i])) for name, (c, r) in pts.items()}
+        if locate is not None and np.isfinite([m.at_lon_deg, m.at_lat_deg, m.at_h_m]).all():
+            p = (m.at_lon_deg, m.at_lat_deg, m.at_h_m)
+            seen = {name: (float(c), float(r)) for name, (c, r) in locate(*p).items()}
         gcps.append(ControlPoint(
             id=len(gcps) + 1,
-            lon_deg=float(lon[i] + m.shift_lon_arcsec * ARCSEC),
-            lat_deg=float(lat[i] + m.shift_lat_arcsec * ARCSEC),
-            h_m=float(h[i] + m.shift_h_m),
-            image_points={name: ImagePoint(float(c[i]), float(r[i]))
-                          for name, (c, r) in pts.items()},
+            lon_deg=float(p[0] + m.shift_lon_arcsec * ARCSEC),
+            lat_deg=float(p[1] + m.shift_lat_arcsec * ARCSEC),
+            h_m=float(p[2] + m.shift_h_m),
+            image_points={name: ImagePoint(*cr) for name, cr in seen.items()},
             sigma_xy_m=m.precision_m, sigma_h_m=max(m.precision_h_m, MIN_GCP_SIGMA_H_M),
             source="srtm_surface_match", provenance={"tie_point": int(i), **m.to_dict()}))
     return tuple(gcps)
@@ -574,9 +580,9 @@ def correlation_surface(lon_deg: ArrayLike, lat_deg: ArrayLike, h_m: ArrayLike,
                         ) -> tuple[FloatArray, FloatArray]:
     """The correlation of one window over the whole grid of shifts (Goncalves's Fig. 5).
 
-    Same inputs as :func:`match_window`, and the same cells and comparison: despiked, cut
-    symmetric or whole, without the blunders found at the peak (searched over the whole range),
-    about planes or quadratics as the window was. Returns the shifts ``(n,)`` in
+    Same inputs as :func:`match_window`, and the same cells and comparison: despiked, without
+    the blunders found at the peak (searched over the whole range), about planes or quadratics
+    as the window was. Returns the shifts ``(n,)`` in
     arcseconds (the same for dlon and dlat: ``-cfg.shift_max_arcsec ..
     +cfg.shift_max_arcsec`` every ``cfg.shift_step_arcsec``) and the correlation ``(n, n)``
     indexed ``[dlat, dlon]``, NaN where fewer than ``cfg.min_cells`` pairs are valid (all NaN
@@ -588,7 +594,7 @@ def correlation_surface(lon_deg: ArrayLike, lat_deg: ArrayLike, h_m: ArrayLike,
     if np.count_nonzero(np.isfinite(raw.h_m)) < cfg.min_cells:
         return grid, np.full((grid.size, grid.size), np.nan)
     m_lon, m_lat = (float(v) for v in metres_per_degree(centre[1]))
-    _, cells, cfg = _match_raw(raw, reference, cfg, None, (m_lon, m_lat))
+    _, cells, cfg = _matched(raw, reference, cfg, None, (m_lon, m_lat))
     gx, gy = np.meshgrid(grid, grid)
     rho = _valid_rho(cells, reference, gx.ravel(), gy.ravel(), cfg.min_cells, cfg.detrend)
     return grid, rho.reshape(gx.shape)

@@ -29,6 +29,7 @@ from core.matching.surface import (
     search_windows,
 )
 from core.points import ControlPoint, control_points_to_dict
+from core.sensors.base import SensorModel
 from tasks.io.crs import Projection
 from tasks.io.rasters import atomic_write_json, read_json
 from tasks.scheduling import compute
@@ -129,12 +130,14 @@ def match_surfaces(dem_path: Path, ties: TieGround, reference: GeoDEM,
                    cfg: SurfaceMatchConfig = SurfaceMatchConfig(), spacing_m: float | None = None,
                    names: tuple[str, str] = ("left", "right"),
                    out: Path | None = None, progress: bool = False,
-                   workers: int | None = None) -> SurfaceMatchResult:
+                   workers: int | None = None,
+                   models: tuple[SensorModel, SensorModel] | None = None) -> SurfaceMatchResult:
     """Match a window around each chosen tie point (``spacing_m`` apart, default the window
-    radius) and make a GCP of each good one: the tie point's relative ground coordinates moved
-    by the window's 3-D shift, with its image positions and the window's precision.
-    ``progress``: a progress bar over the windows on stderr; ``workers``: the threads that
-    match them (default one per core)."""
+    radius) and make a GCP of each good one: the relative point its shift holds at moved by the
+    window's 3-D shift, where ``models`` (the relative orientation's, the images ``names``)
+    see that point, with the window's precision; without ``models``, the window's centre tie
+    point where it was measured. ``progress``: a progress bar over the windows on stderr;
+    ``workers``: the threads that match them (default one per core)."""
     centres = choose_windows(ties.lon_deg, ties.lat_deg, ties.h_m, ties.score,
                              spacing_m or cfg.radius_m)
     if progress:
@@ -146,9 +149,14 @@ def match_surfaces(dem_path: Path, ties: TieGround, reference: GeoDEM,
         return _match_all(dem_path, ties, centres[k], reference, cfg, priors, progress, workers)
 
     matches = tuple(search_windows(ties.lon_deg[centres], ties.lat_deg[centres], match))
+    def locate(lon: float, lat: float, h: float) -> dict[str, tuple[float, float]]:
+        seen = [m.project(np.array([lon]), np.array([lat]), np.array([h])) for m in models]
+        return {n: (float(c[0]), float(r[0])) for n, (c, r) in zip(names, seen, strict=True)}
+
     gcps = gcps_from_windows(centres, matches, ties.lon_deg, ties.lat_deg, ties.h_m,
                              {names[0]: (ties.left_col, ties.left_row),
-                              names[1]: (ties.right_col, ties.right_row)})
+                              names[1]: (ties.right_col, ties.right_row)},
+                             None if models is None else locate)
     result = SurfaceMatchResult(centres, matches, gcps)
     if out is not None:
         atomic_write_json(out, result.to_dict())

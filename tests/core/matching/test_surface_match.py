@@ -118,12 +118,16 @@ def test_a_curved_relative_dem_gives_its_height_at_the_centre(ref):
     assert abs(w.shift_h_m - shift[2]) < 2.0
 
 
-def test_a_window_cut_by_the_dem_edge_measures_its_centre(ref):
+def test_a_window_cut_by_the_dem_edge_says_where_its_shift_holds(ref):
     """The relative DEM deformed by 15 m/km east across the swath (the steepest part of the
-    deformation a lens the delivered models miss leaves, simulated tiny with --lens) and cut
-    1 km east of the tie point (the stereo overlap's edge): kept point-symmetric about the tie
-    point, the window measures the deformation there; all its cells measured it about 1.7 km
-    inward, 20 m off."""
+    deformation a lens the delivered models miss leaves, simulated tiny with ``--lens``) and cut
+    1 km east of the tie point (the stereo overlap's edge): all its cells matched, the window
+    measures the deformation where they are, 1.17 km west of the tie point (the cut disk's
+    centroid; 150 m at the tie point, 132 m there: placed at the tie point, the GCP would be
+    17.5 m off), and says where that is, a relative point on its surface. Whole windows hold
+    at their centre."""
+    from core.matching.lattice import site, window_cells
+
     rng = np.random.default_rng(3)
     xs = np.arange(-4500.0, 4500.0, 40.0)
     x, y = np.meshgrid(xs, xs)
@@ -133,18 +137,20 @@ def test_a_window_cut_by_the_dem_edge_measures_its_centre(ref):
     h[x > 1000.0] = np.nan
     w = match_window(lon, lat, h, (LON0, LAT0), ref)
     assert w.ok
-    assert abs(w.shift_east_m - 150.0) < 4.0 and abs(w.shift_north_m) < 4.0
-    assert abs(w.shift_h_m - 12.0) < 2.0
-    # holes scattered over a window (mismatches, voids) leave it whole
-    from core.matching.lattice import symmetric, window_cells
-
+    at_x, at_y = (w.at_lon_deg - LON0) * M_LON, (w.at_lat_deg - LAT0) * M_LAT
+    assert -1300.0 < at_x < -1050.0 and abs(at_y) < 150.0  # the cut disk's centroid: -1.17 km
+    assert abs(w.shift_east_m - (150.0 + 0.015 * at_x)) < 4.0 and abs(w.shift_north_m) < 4.0
+    # the cells span 75 m of deformation, which one translation leaves in the height
+    # differences where the terrain slopes: 2.2 m here (0.2 m with the window cut symmetric
+    # about its tie point, 3454 of its 7316 cells, as it was before)
+    assert abs(w.shift_h_m - 12.0) < 3.0
+    assert abs(w.at_h_m - terrain(w.at_lon_deg + (150.0 + 0.015 * at_x) / M_LON, w.at_lat_deg)
+               + 12.0) < 25.0  # a lattice cell's mean height (113 m cells over this relief)
+    # holes scattered over a window (mismatches, voids) leave it at its centre
     h = terrain(lon, lat)
     h[rng.random(h.shape) < 0.2] = np.nan
     cells = window_cells(lon, lat, h, (LON0, LAT0), 4000.0, 90.0)
-    assert symmetric(cells) is cells
-    cut = window_cells(lon, lat, np.where(x > 1000.0, np.nan, h), (LON0, LAT0), 4000.0, 90.0)
-    kept = np.isfinite(symmetric(cut).h_m).reshape(cut.shape)
-    assert np.array_equal(kept, kept[::-1, ::-1]) and kept.sum() > 0.4 * np.isfinite(cut.h_m).sum()
+    assert np.hypot(cells.x_m[site(cells)], cells.y_m[site(cells)]) < 100.0
 
 
 def test_a_coarse_relative_dem_is_placed_where_its_cells_are():
@@ -335,7 +341,8 @@ def test_two_pass_search_and_the_gcps_it_makes():
     """The first-pass windows are searched over the whole range, the others around the shift
     their affine fit predicts, and a window whose peak is on its prior box's border again
     over the whole range; every good window makes one GCP: its tie point moved by the shift,
-    measured where the tie point is in each image."""
+    measured where the tie point is in each image, or where the window says its shift holds,
+    measured where the models put that point."""
     from core.matching.surface import (
         MIN_GCP_SIGMA_H_M,
         first_pass_mask,
@@ -376,3 +383,11 @@ def test_two_pass_search_and_the_gcps_it_makes():
     assert g.image_points["left"].col == 4.0 and g.image_points["right"].row == 500.0
     assert g.sigma_xy_m == 4.0 and g.sigma_h_m == MIN_GCP_SIGMA_H_M
     assert g.source == "srtm_surface_match" and g.provenance["tie_point"] == 4
+    # a window that says where its shift holds: its GCP is there, where the models see it
+    at = replace(found[4], at_lon_deg=lon[4] + 0.01, at_lat_deg=lat[4], at_h_m=620.0)
+    g = gcps_from_windows([4], [at], lon, lat, h, {"left": (np.arange(n), np.zeros(n))},
+                          lambda lo, la, hh: {"left": (lo * 100.0, hh), "right": (la, 1.0)})[0]
+    assert g.lon_deg == pytest.approx(lon[4] + 0.01 + at.shift_lon_arcsec / 3600, abs=1e-12)
+    assert g.h_m == 623.0 and g.image_points["left"].row == 620.0
+    assert g.image_points["left"].col == pytest.approx((lon[4] + 0.01) * 100.0)
+    assert g.image_points["right"].col == lat[4] and g.provenance["tie_point"] == 4
