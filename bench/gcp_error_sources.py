@@ -17,7 +17,7 @@ into ``ORIENT_DIR_truthref``), it prints:
   own statistics (:func:`parameter_z`), and over several orientations its RMS;
 - with GCPFREE_SOURCES_PERFECT_DEM=1, every good window matched again with the relative DEM's
   cells and with a perfect relative DEM (the truth DSM carried into the relative frame at the
-  same cells), their GCP errors against the true shift at the tie point
+  same cells), their GCP errors against the true shift where each window says its shift holds
   (:func:`perfect_dem`).
 
 Measured (2026-11-28): tiny seed 4 (33-41 GCPs, 40 m pixels) against its truth DSM still has
@@ -106,8 +106,8 @@ def parameter_z(seen: dict, e0: np.ndarray, field: CorrelatedGroundError) -> dic
 def perfect_dem(scene: Path, out: Path, truths: list, reference: Path) -> None:
     """Each good window matched again against ``reference``, once with the relative DEM's cells
     (as ``orient`` matched them) and once with the truth DSM carried into the relative frame at
-    the same cells (a relative DEM without errors), both against the true shift at the
-    window's tie point; and the relative DEM's heights against the perfect ones."""
+    the same cells (a relative DEM without errors), both against the true shift where the
+    window says its shift holds; and the relative DEM's heights against the perfect ones."""
     cfg = SurfaceMatchConfig(**json.loads((out / "report.json").read_text())["settings"][
         "surface"])
     rel = json.loads((out / "relative" / "rel.json").read_text())
@@ -150,18 +150,12 @@ def perfect_dem(scene: Path, out: Path, truths: list, reference: Path) -> None:
         for _ in range(2):  # the true shift at the perfect height, then the height again
             perfect[ok] = truth_h(lon[ok] + sh[:, 0] / m_lon, lat[ok] + sh[:, 1] / m_lat) - sh[:, 2]
             sh = true_shift(lon[ok], lat[ok], perfect[ok])
-        at_tie = triangulate(truths, [ties.left_col[i:i + 1], ties.right_col[i:i + 1]],
-                             [ties.left_row[i:i + 1], ties.right_row[i:i + 1]],
-                             (ties.h_m[i] - 800.0, ties.h_m[i] + 800.0))
-        t_lon, t_lat = (float(v[0]) for v in metres_per_degree(ties.lat_deg[i:i + 1]))
-        truth_shift = np.array([(at_tie.lon_deg[0] - ties.lon_deg[i]) * t_lon,
-                                (at_tie.lat_deg[0] - ties.lat_deg[i]) * t_lat,
-                                at_tie.h_m[0] - ties.h_m[i]])
         for key, heights in (("relative DEM", h), ("perfect DEM", perfect)):
             mt = match_window(lon, lat, heights, (ties.lon_deg[i], ties.lat_deg[i]), ref, cfg)
-            if mt.ok:
+            if mt.ok:  # against the true shift where the window says its shift holds
+                at = [np.array([v]) for v in (mt.at_lon_deg, mt.at_lat_deg, mt.at_h_m)]
                 err[key].append(np.array([mt.shift_east_m, mt.shift_north_m, mt.shift_h_m])
-                                - truth_shift)
+                                - true_shift(*at)[0])
         dh = (h - perfect)[ok]
         spread.append(nmad(dh))
     for key, v in err.items():

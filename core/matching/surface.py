@@ -198,9 +198,6 @@ class WindowMatch:
         return cls(**kw)
 
 
-# ------------------------------------------------------------------------- matching
-
-
 def _valid_rho(cells: WindowCells, reference: GeoDEM, sx_arcsec: FloatArray,
                sy_arcsec: FloatArray, min_cells: int, detrend: bool | int) -> FloatArray:
     """Correlations at shifts (arcsec), NaN where fewer than ``min_cells`` pairs are valid."""
@@ -448,9 +445,6 @@ def _matched(raw: WindowCells, reference: GeoDEM, cfg: SurfaceMatchConfig,
     return result, cells, cfg
 
 
-# ------------------------------------------------------------------------- search prior
-
-
 def shift_prior(lon_deg: ArrayLike, lat_deg: ArrayLike, matches: Sequence[WindowMatch],
                 lon_new: ArrayLike, lat_new: ArrayLike, min_half_arcsec: float = 6.0,
                 min_windows: int = 6) -> FloatArray | None:
@@ -479,8 +473,6 @@ def shift_prior(lon_deg: ArrayLike, lat_deg: ArrayLike, matches: Sequence[Window
     pred = b @ coef
     return np.column_stack([pred, np.full(len(pred), half)])
 
-
-# ------------------------------------------------------------------------- the scene
 
 #: windows searched over the whole shift range before the others are searched around the shift
 #: those predict (:func:`search_windows`)
@@ -542,12 +534,14 @@ def gcps_from_windows(centres: ArrayLike, matches: Sequence[WindowMatch], lon_de
                       image_points: Mapping[str, tuple[ArrayLike, ArrayLike]],
                       locate: Locate | None = None) -> tuple[ControlPoint, ...]:
     """A GCP of every good window: the relative point its shift holds at (``at_*``) moved by
-    its 3-D shift, where ``locate`` puts that point in each image with the models the relative
-    DEM was made with. Without ``locate`` (or ``at_*``: an older file), its centre tie point
-    (index into ``lon_deg``, ``lat_deg``, ``h_m``, the relative ground coordinates) where
-    ``image_points`` (image name -> (col, row) arrays indexed like the tie points) has it.
-    With the window's precisions (the vertical one at least :data:`MIN_GCP_SIGMA_H_M`) and
-    figures (``provenance``). Ids count from 1."""
+    its 3-D shift, measured where its centre tie point (index into ``lon_deg``, ``lat_deg``,
+    ``h_m``, the relative ground coordinates) is in each image (``image_points``: image name
+    -> (col, row) arrays indexed like the tie points) moved by what ``locate`` (the models the
+    relative DEM was made with) says of the way from the tie point to that point: their own
+    parallax (a lens they miss) stays out of it, which the point they project carries (20 m of
+    miss at the swath's end of simulated hrs with ``--lens``). Without ``locate`` (or ``at_*``:
+    an older file), the tie point. With the window's precisions (the vertical one at least
+    :data:`MIN_GCP_SIGMA_H_M`) and figures (``provenance``)."""
     lon, lat, h = (np.asarray(v, dtype=np.float64) for v in (lon_deg, lat_deg, h_m))
     pts = {name: (np.asarray(c, dtype=np.float64), np.asarray(r, dtype=np.float64))
            for name, (c, r) in image_points.items()}
@@ -558,8 +552,10 @@ def gcps_from_windows(centres: ArrayLike, matches: Sequence[WindowMatch], lon_de
         p = (lon[i], lat[i], h[i])
         seen = {name: (float(c[i]), float(r[i])) for name, (c, r) in pts.items()}
         if locate is not None and np.isfinite([m.at_lon_deg, m.at_lat_deg, m.at_h_m]).all():
+            at, tie = locate(m.at_lon_deg, m.at_lat_deg, m.at_h_m), locate(*p)  # see above
+            seen = {n: (cr[0] + at[n][0] - tie[n][0], cr[1] + at[n][1] - tie[n][1])
+                    for n, cr in seen.items()}
             p = (m.at_lon_deg, m.at_lat_deg, m.at_h_m)
-            seen = {name: (float(c), float(r)) for name, (c, r) in locate(*p).items()}
         gcps.append(ControlPoint(
             id=len(gcps) + 1,
             lon_deg=float(p[0] + m.shift_lon_arcsec * ARCSEC),
@@ -569,9 +565,6 @@ def gcps_from_windows(centres: ArrayLike, matches: Sequence[WindowMatch], lon_de
             sigma_xy_m=m.precision_m, sigma_h_m=max(m.precision_h_m, MIN_GCP_SIGMA_H_M),
             source="srtm_surface_match", provenance={"tie_point": int(i), **m.to_dict()}))
     return tuple(gcps)
-
-
-# ------------------------------------------------------------------------- report figure
 
 
 def correlation_surface(lon_deg: ArrayLike, lat_deg: ArrayLike, h_m: ArrayLike,

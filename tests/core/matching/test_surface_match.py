@@ -342,7 +342,7 @@ def test_two_pass_search_and_the_gcps_it_makes():
     their affine fit predicts, and a window whose peak is on its prior box's border again
     over the whole range; every good window makes one GCP: its tie point moved by the shift,
     measured where the tie point is in each image, or where the window says its shift holds,
-    measured where the models put that point."""
+    measured where the tie point is moved as the models move that point from it."""
     from core.matching.surface import (
         MIN_GCP_SIGMA_H_M,
         first_pass_mask,
@@ -383,11 +383,14 @@ def test_two_pass_search_and_the_gcps_it_makes():
     assert g.image_points["left"].col == 4.0 and g.image_points["right"].row == 500.0
     assert g.sigma_xy_m == 4.0 and g.sigma_h_m == MIN_GCP_SIGMA_H_M
     assert g.source == "srtm_surface_match" and g.provenance["tie_point"] == 4
-    # a window that says where its shift holds: its GCP is there, where the models see it
+    # a window that says where its shift holds: its GCP is there, measured where the tie
+    # point was, moved as the models move the point from the tie point to there
     at = replace(found[4], at_lon_deg=lon[4] + 0.01, at_lat_deg=lat[4], at_h_m=620.0)
-    g = gcps_from_windows([4], [at], lon, lat, h, {"left": (np.arange(n), np.zeros(n))},
-                          lambda lo, la, hh: {"left": (lo * 100.0, hh), "right": (la, 1.0)})[0]
+    g = gcps_from_windows([4], [at], lon, lat, h,
+                          {"left": (np.arange(n), np.zeros(n)), "right": (np.ones(n), h)},
+                          lambda lo, la, hh: {"left": (lo * 100.0, hh), "right": (la, 7.0)})[0]
     assert g.lon_deg == pytest.approx(lon[4] + 0.01 + at.shift_lon_arcsec / 3600, abs=1e-12)
-    assert g.h_m == 623.0 and g.image_points["left"].row == 620.0
-    assert g.image_points["left"].col == pytest.approx((lon[4] + 0.01) * 100.0)
-    assert g.image_points["right"].col == lat[4] and g.provenance["tie_point"] == 4
+    assert g.h_m == 623.0 and g.image_points["left"].row == pytest.approx(120.0)
+    assert g.image_points["left"].col == pytest.approx(5.0)  # 4 + 0.01 * 100
+    assert g.image_points["right"].col == 1.0 and g.image_points["right"].row == 500.0
+    assert g.provenance["tie_point"] == 4
