@@ -149,6 +149,7 @@ def match_surfaces(dem_path: Path, ties: TieGround, reference: GeoDEM,
         return _match_all(dem_path, ties, centres[k], reference, cfg, priors, progress, workers)
 
     matches = tuple(search_windows(ties.lon_deg[centres], ties.lat_deg[centres], match))
+
     def locate(lon: float, lat: float, h: float) -> dict[str, tuple[float, float]]:
         seen = [m.project(np.array([lon]), np.array([lat]), np.array([h])) for m in models]
         return {n: (float(c[0]), float(r[0])) for n, (c, r) in zip(names, seen, strict=True)}
