@@ -11,8 +11,9 @@ into ``ORIENT_DIR_truthref``), it prints:
   products in distance classes beside the exponential field fitted to them, as it is and less
   its mean (the products are of errors less their mean: far apart, an exponential is then
   negative too);
-- the self-calibration's Wald statistic of each image's lens terms with ``N^-1`` (what
-  ``orient`` tests) and with the sandwich covariance of the correlated field;
+- the Wald statistic of each image's lens terms in the final adjustment with ``N^-1`` and with
+  the sandwich covariance of the correlated field (``orient`` tests the latter, on the
+  adjustment with every term);
 - each parameter's error from the GCPs' true errors over its standard deviation under their
   own statistics (:func:`parameter_z`), and over several orientations its RMS;
 - with GCPFREE_SOURCES_PERFECT_DEM=1, every good window matched again with the relative DEM's
