@@ -4,7 +4,8 @@ Simulates the `tiny` preset (40 m pixels, 100-300 m metadata errors, lens) over 
 its relief scaled by each factor of GCPFREE_RELIEF_FACTORS (default 0.05 ... 1), runs `gcpfree
 orient` on each (degraded SRTM-like reference, no GCP) and prints, per factor: the median relief
 of the windows (std of heights about their plane), the windows that qualified, and the check
-point RMS (worst of P and L over both images), or the refusal. Writes relief_sweep.png (and
+point RMS (worst of P and L over both images) and the self-calibration's decision, or the
+refusal. Writes relief_sweep.png (and
 .json) into GCPFREE_RELIEF_OUT (default the current folder) when matplotlib is there. About a
 minute and a half per factor on 2 cores. GCPFREE_RELIEF_ERRORS: the simulator's errors,
 realistic (default: measured attitude profile, ephemeris and detector errors, an SRTM-like
@@ -60,6 +61,7 @@ def one(factor: float, tmp: Path, env: dict[str, str]) -> dict:
     row["gcps"] = rep["gcps"]["used"]
     row["check_rms_px"] = max(max(c["rms_col_px"], c["rms_row_px"])
                               for c in rep["check_points"].values())
+    row["lens"] = (rep["absolute"].get("self_calibration") or {}).get("decision")
     return row
 
 
@@ -76,6 +78,8 @@ def main() -> None:
                       f"{row['qualified']}/{row['windows']} windows qualified, {row['gcps']} "
                       f"GCPs, check points {row['check_rms_px']:.2f} px")
             print(f"relief factor {f:<5g} relief {relief:>8}: {result}", flush=True)
+            if row.get("lens"):
+                print(f"  lens terms: {row['lens']}", flush=True)
     ok = [r for r in rows if r.get("check_rms_px", 99) <= 1.0]
     if ok:
         low = min(ok, key=lambda r: r["factor"])
