@@ -49,6 +49,11 @@ LENS_TERMS = ("k1", "k3", "p1", "p2")
 #: does not depend on the GCPs and still applies
 MIN_GCPS_PER_TERM = 4
 TERMS = {"look_scale": "k1", "bow": "p1", "radial_cubic": "k3", "across_quadratic": "p2"}
+#: an image's terms are worth keeping when their Wald statistic on the sandwich covariance
+#: (the GCPs' correlated ground error in it) exceeds this many per term: the break-even of
+#: mean squared error (Mallows' Cp, Akaike), where the error the terms remove (their squared
+#: estimate less its variance) exceeds the variance their estimation adds
+WORTH_PER_TERM = 2.0
 
 
 @dataclass(frozen=True, eq=False)
@@ -69,6 +74,8 @@ class SelfCalibration:
     wald_limit: float = float("nan")
     ties: dict[str, float] = field(default_factory=dict)
     decision: str = ""
+    wald_correlated: dict[str, float] = field(default_factory=dict)
+    wald_correlated_limit: float = float("nan")
 
     @property
     def applied(self) -> bool:
@@ -118,6 +125,8 @@ class SelfCalibration:
                                     for k, (e, s) in terms.items()}
                                 for n, terms in self.significant.items()},
                 "wald": self.wald, "wald_limit": self.wald_limit,
+                "wald_correlated": self.wald_correlated,
+                "wald_correlated_limit": self.wald_correlated_limit,
                 "tie_points": self.ties or None,
                 "improvement": self.improvement(), "decision": self.decision}
 
@@ -165,16 +174,19 @@ def self_calibrate(models: Sequence[SensorModel], obs: Observations, names: Sequ
     :data:`MIN_GCPS_PER_TERM` per term they decide nothing (the Wald statistics are still
     reported).
 
-    The Wald statistic takes the terms' covariance with the GCPs' ground error correlated over
-    kilometres in it (:func:`~core.orientation.absolute.with_gcp_errors_as_they_are`, the
-    sandwich): surface-matching GCPs share the relative DEM's and the reference's errors, a
-    smooth pattern across the swath that ``N^-1`` takes for independent noise averaging out,
-    so it reads a lens into it. Simulated ``tiny`` with realistic errors and no lens, four
-    places: ``N^-1`` gave Wald 25.2 for one image (limit 16.3), whose terms were kept and left
-    its check points 0.18 px off in columns beyond the reference's shift, against 0.16 without
-    them; with the sandwich 5.8, and none kept. With a lens (1.5 px at the CCD's ends) the
-    sandwich's Wald is still 62-711 over 21 scenes (tiny, spot, hrs, independent
-    references).
+    Worth it also means beyond the GCPs' correlated ground error: surface-matching GCPs share
+    the relative DEM's and the reference's errors, a smooth pattern across the swath that
+    ``N^-1`` takes for independent noise averaging out, so its Wald test reads a lens into
+    it. The terms' Wald statistic on their covariance with that error in it (the sandwich,
+    :func:`~core.orientation.absolute.with_gcp_errors_as_they_are`) must exceed
+    :data:`WORTH_PER_TERM` per term, where the error they remove exceeds the error their
+    estimation adds. Not a 3-sigma test there: a lens left out costs far more than a term
+    kept in vain, and the fitted field is itself uncertain. Simulated ``tiny`` with realistic
+    errors and no lens, four places: ``N^-1`` gave Wald 25.2 for one image (limit 16.3), whose
+    terms were kept and left its check points 0.18 px off in columns beyond the reference's
+    shift, against 0.16 without them; its sandwich Wald is 5.8, and none is kept now. ``make
+    demo``'s pair (30 GCPs, a lens of 1.5 px at the CCD's ends) has sandwich Walds of 16.0
+    and 12.5: refused at 16.3 its check points' columns were 0.47 / 0.50 px, kept 0.08 / 0.13.
     """
     from scipy.stats import chi2, f, norm
 
@@ -197,13 +209,19 @@ def self_calibrate(models: Sequence[SensorModel], obs: Observations, names: Sequ
     limit = float(chi2.ppf(1.0 - p_two, len(terms)))
     calibrated = [n for n, m in zip(names, trial_models, strict=True)
                   if isinstance(m, PushbroomModel)]
-    # the terms' covariance with the GCPs' correlated ground error in it (the sandwich)
+    wald = {n: _wald(trial, n, terms) for n in calibrated}
+    # worth it: the terms' covariance with the GCPs' correlated ground error in it (the
+    # sandwich), against the error the terms would add
     judged, _ = with_gcp_errors_as_they_are(trial, trial_obs, trial.inlier, config)
-    wald = {n: _wald(judged, n, terms) for n in calibrated}
+    worth = {n: _wald(judged, n, terms) for n in calibrated}
+    worth_limit = WORTH_PER_TERM * len(terms)
     enough = keep.sum() >= MIN_GCPS_PER_TERM * len(terms)
-    chosen = [n for n in calibrated if wald[n] > limit] if enough else []
+    chosen = ([n for n in calibrated if wald[n] > limit and worth[n] > worth_limit]
+              if enough else [])
     walds = ", ".join(f"{n} {w:.1f}" for n, w in wald.items())
-    why = (f"GCPs: Wald {walds} against {limit:.1f}" if enough else
+    worths = ", ".join(f"{n} {w:.1f}" for n, w in worth.items())
+    why = (f"GCPs: Wald {walds} against {limit:.1f}, with their correlated error {worths} "
+           f"against {worth_limit:.0f}" if enough else
            f"GCPs decide nothing: {int(keep.sum())} kept, {MIN_GCPS_PER_TERM * len(terms)} "
            f"needed ({MIN_GCPS_PER_TERM} per term; Wald {walds} against {limit:.1f})")
     tie_info: dict[str, float] = {}
@@ -238,11 +256,15 @@ def self_calibrate(models: Sequence[SensorModel], obs: Observations, names: Sequ
             break
         chosen.remove(min(weak, key=lambda n: drops[n]))
     if not chosen or with_lens is None:
-        verdict = ("none kept: they lowered no image's column RMS by "
-                   f"{100.0 * min_col_drop:.0f} %" if with_lens is not None
-                   else "none significant")
+        if with_lens is not None:
+            verdict = ("none kept: they lowered no image's column RMS by "
+                       f"{100.0 * min_col_drop:.0f} %")
+        elif enough and any(wald[n] > limit for n in calibrated):
+            verdict = "none worth it beyond the GCPs' correlated error"
+        else:
+            verdict = "none significant"
         return SelfCalibration(without, None, {}, t_threshold, wald, limit, tie_info,
-                               f"{verdict} ({why})")
+                               f"{verdict} ({why})", worth, worth_limit)
     if with_lens.tie_rms_px is not None:
         tie_info["rms_px_with"] = with_lens.tie_rms_px
     significant: dict[str, dict[str, tuple[float, float]]] = {}
@@ -252,4 +274,4 @@ def self_calibrate(models: Sequence[SensorModel], obs: Observations, names: Sequ
             significant[name] = {t: (float(pa[pn.index(t)]), float(sd[pn.index(t)]))
                                  for t in terms}
     return SelfCalibration(without, with_lens, significant, t_threshold, wald, limit, tie_info,
-                           f"kept in {', '.join(chosen)} ({why})")
+                           f"kept in {', '.join(chosen)} ({why})", worth, worth_limit)

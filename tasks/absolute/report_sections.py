@@ -195,9 +195,11 @@ class LensCalibration:
     """The lens self-calibration (:meth:`core.orientation.selfcal.SelfCalibration.to_dict`):
     whether terms were ``applied``, the terms kept per image (``significant``: term ->
     estimate, sigma, the term's name in the menu), the GCP residual RMS without and with them
-    per image, each image's Wald statistic against its limit, and the tie points' evidence
-    (their parallax RMS without and with the terms, the F test; null without tie points);
-    ``decision``: why, in one line (absent from older reports, read as None)."""
+    per image, each image's Wald statistic against its limit (``wald``: on ``N^-1``;
+    ``wald_correlated``: on the sandwich covariance, the GCPs' correlated ground error in it,
+    against ``wald_correlated_limit``; absent from older reports), and the tie points'
+    evidence (their parallax RMS without and with the terms, the F test; null without tie
+    points); ``decision``: why, in one line (absent from older reports, read as None)."""
 
     applied: bool
     t_threshold: float
@@ -207,6 +209,8 @@ class LensCalibration:
     wald_limit: float | None = None
     tie_points: Mapping[str, float] | None = None
     decision: str | None = None
+    wald_correlated: Mapping[str, float] | None = None
+    wald_correlated_limit: float | None = None
 
     def to_dict(self) -> dict[str, Any]:
         return {"applied": self.applied, "t_threshold": self.t_threshold,
@@ -215,11 +219,14 @@ class LensCalibration:
                 "wald": dict(self.wald) if self.wald is not None else None,
                 "wald_limit": self.wald_limit,
                 "tie_points": dict(self.tie_points) if self.tie_points is not None else None,
-                **({"decision": self.decision} if self.decision is not None else {})}
+                **({"decision": self.decision} if self.decision is not None else {}),
+                **({"wald_correlated": dict(self.wald_correlated),
+                    "wald_correlated_limit": self.wald_correlated_limit}
+                   if self.wald_correlated is not None else {})}
 
     @classmethod
     def from_dict(cls, d: Doc, where: str = "absolute.self_calibration") -> LensCalibration:
-        limit = d.get("wald_limit")
+        limit, worth = d.get("wald_limit"), d.get("wald_correlated_limit")
         decision = (None if d.get("decision") is None
                     else str(_get(d, "decision", where, str)))
         return cls(_get(d, "applied", where, bool), _get(d, "t_threshold", where, NUMBER),
@@ -227,7 +234,9 @@ class LensCalibration:
                    dict(_get(d, "improvement", where, Mapping)),
                    _optional(d, "wald", where),
                    float(limit) if isinstance(limit, (int, float)) else None,
-                   _optional(d, "tie_points", where), decision)
+                   _optional(d, "tie_points", where), decision,
+                   _optional(d, "wald_correlated", where),
+                   float(worth) if isinstance(worth, (int, float)) else None)
 
 
 @dataclass(frozen=True)

