@@ -186,8 +186,9 @@ def test_wald_test_alone_applies_the_lens_only_to_the_distorted_image(pair):
 
 def field_gcps(truth, n, sxy, sh, length_m, own, seed):
     """GCPs whose ground error is a field correlated as ``exp(-d / length_m)`` (``sxy`` east
-    and north, ``sh`` up; m), as surface matching's share a reference's noise and a relative
-    DEM's deformation, plus ``own`` m of their own; measured in both images by ``truth``."""
+    and north, ``sh`` up; m), as surface matching's GCPs share a reference's noise and a
+    relative DEM's deformation, plus ``own`` m of their own; measured in both images by
+    ``truth``."""
     rng = np.random.default_rng(seed)
     lon, lat, h, cols, rows = measured(truth, n, rng)
     x, y = (lon - lon.mean()) * M_LON, (lat - lat.mean()) * M_LAT
