@@ -12,8 +12,8 @@ into ``ORIENT_DIR_truthref``), it prints:
   its mean (the products are of errors less their mean: far apart, an exponential is then
   negative too);
 - the Wald statistic of each image's lens terms in the final adjustment with ``N^-1`` and with
-  the sandwich covariance of the correlated field (``orient`` tests the latter, on the
-  adjustment with every term);
+  the sandwich covariance of the correlated field (``orient`` tests both on the adjustment
+  with every term: ``N^-1`` at 3 sigma, the sandwich over 2 per term);
 - each parameter's error from the GCPs' true errors over its standard deviation under their
   own statistics (:func:`parameter_z`), and over several orientations its RMS;
 - with GCPFREE_SOURCES_PERFECT_DEM=1, every good window matched again with the relative DEM's
