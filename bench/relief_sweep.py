@@ -6,10 +6,10 @@ orient` on each (degraded SRTM-like reference, no GCP) and prints, per factor: t
 of the windows (std of heights about their plane), the windows that qualified, and the check
 point RMS (worst of P and L over both images) and the self-calibration's decision, or the
 refusal. Writes relief_sweep.png (and .json) into GCPFREE_RELIEF_OUT (default the current
-folder) when matplotlib is there. About a minute and a half per factor on 2 cores. GCPFREE_RELIEF_ERRORS: the simulator's errors,
-realistic (default: measured attitude profile, ephemeris and detector errors, an SRTM-like
-reference with partial canopy and misregistration) or simple (attitude biases and rates only).
-Prints figures, asserts nothing.
+folder) when matplotlib is there. About a minute and a half per factor on 2 cores.
+GCPFREE_RELIEF_ERRORS: the simulator's errors, realistic (default: measured attitude profile,
+ephemeris and detector errors, an SRTM-like reference with partial canopy and
+misregistration) or simple (attitude biases and rates only). Prints figures, asserts nothing.
 """
 
 from __future__ import annotations
