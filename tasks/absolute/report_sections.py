@@ -226,7 +226,7 @@ class LensCalibration:
 
     @classmethod
     def from_dict(cls, d: Doc, where: str = "absolute.self_calibration") -> LensCalibration:
-        limit, worth = d.get("wald_limit"), d.get("wald_correlated_limit")
+        limit, limit_correlated = d.get("wald_limit"), d.get("wald_correlated_limit")
         decision = (None if d.get("decision") is None
                     else str(_get(d, "decision", where, str)))
         return cls(_get(d, "applied", where, bool), _get(d, "t_threshold", where, NUMBER),
@@ -236,7 +236,8 @@ class LensCalibration:
                    float(limit) if isinstance(limit, (int, float)) else None,
                    _optional(d, "tie_points", where), decision,
                    _optional(d, "wald_correlated", where),
-                   float(worth) if isinstance(worth, (int, float)) else None)
+                   float(limit_correlated) if isinstance(limit_correlated, (int, float))
+                   else None)
 
 
 @dataclass(frozen=True)
