@@ -400,9 +400,9 @@ def summary(doc: dict[str, Any]) -> None:
                     f"independent), by fifths {' '.join(str(h) for h in hist)}, KS p "
                     f"{kstest(pit, 'uniform').pvalue:.2f}")
             if axis == 0 and all("all_four_within" in r for r in rs):
-                got = sum(int(0.7 <= x <= 1.5) for r in rs for v in r["images"].values()
-                          for x in v["ratio"])
-                print(f"  {label:18s} {got} of {4 * len(rs)} within; a right prediction puts "
+                held = sum(int(0.7 <= x <= 1.5) for r in rs for v in r["images"].values()
+                           for x in v["ratio"])
+                print(f"  {label:18s} {held} of {4 * len(rs)} within; a right prediction puts "
                       f"{sum(r['within_of_4'][0] for r in rs):.1f} +- "
                       f"{np.sqrt(sum(r['within_of_4'][1] for r in rs)):.1f} there, and all "
                       f"{4 * len(rs)} in {np.prod([r['all_four_within'] for r in rs]):.1e} "
