@@ -188,8 +188,8 @@ def perfect_dem(scene: Path, out: Path, truths: list, reference: Path) -> None:
                 if key == "perfect DEM":  # the window's slope-weighted deformation, less at
                     gy, gx = np.gradient(heights.reshape(-1, int(np.argmax(np.diff(lon) < 0))
                                                          + 1))
-                    w = np.nan_to_num(np.stack([gx.ravel()[ok], gy.ravel()[ok]], 1) ** 2)
-                    averaged.append(np.sum(w * sh[:, :2], axis=0) / w.sum(axis=0)
+                    weight = np.nan_to_num(np.stack([gx.ravel()[ok], gy.ravel()[ok]], 1) ** 2)
+                    averaged.append(np.sum(weight * sh[:, :2], axis=0) / weight.sum(axis=0)
                                     - at_shift[:2])
         dh = (h - perfect)[ok]
         spread.append(nmad(dh))
