@@ -95,7 +95,7 @@ def make_pairs(tmp: Path, dsm: Path) -> dict[str, tuple[Path, Path]]:
 
 
 def ours_in_process(ref: Path, dem: Path, repeat: int) -> dict[str, float]:
-    from core.coregister import nuth_kaab
+    from core.evaluation.coregister import nuth_kaab
     from tasks.evaluation.coregister import read_grid
 
     ref_grid, _ = read_grid(ref)

@@ -62,7 +62,7 @@ from flows._env import configure_environment
 configure_environment()
 import numpy as np
 from core.matching.grid import GridSpec
-from core.ortho import OrthoConfig
+from core.ortho.ortho import OrthoConfig
 from tasks.ortho.orthorectify import plan_ortho, orthorectify
 from tasks.ortho.inputs import describe_dem
 from tasks.io.sensors import load_model
@@ -76,8 +76,8 @@ else:
     dem, occlusion = scene / "reference.tif", False
 warm = 0.0
 if kind != "gdal":  # load (or compile, the first time) the Numba kernels before the clock
-    from core import kernels
-    from core.ortho import SourceWindow, resample
+    from core.ortho import kernels
+    from core.ortho.ortho import SourceWindow, resample
     t = time.perf_counter()
     loaded.model.project(np.zeros(3) + 5.0, np.zeros(3) + 44.0, np.zeros(3))
     z = np.zeros((2, 2))
@@ -165,7 +165,7 @@ def agreement(a: Path, b: Path) -> str:
     import numpy as np
     import rasterio
 
-    from core.ortho_compare import CompareConfig
+    from core.ortho.ortho_compare import CompareConfig
     from tasks.ortho.compare import compare_orthos, plan_compare
 
     with rasterio.open(a) as fa, rasterio.open(b) as fb:

@@ -6,7 +6,7 @@ Run from the repository root::
 
 Prints best-of-``repeat`` wall times, ratios (with the load average: the machine's other work
 slows every figure; read the ratios of one run) and the largest disagreement; asserts nothing.
-``gcpfree`` is the compiled kernel (:func:`core.kernels.rpc_project`, split over the cores);
+``gcpfree`` is the compiled kernel (:func:`core.sensors.rpc_kernels.rpc_project`, split over the cores);
 ``gcpfree NumPy`` the same model evaluated with NumPy, the reference the kernel is tested
 against. The first call's time (Numba's import, then loading the kernel from its on-disk
 cache, or compiling it the first time) is printed apart.

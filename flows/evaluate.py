@@ -10,7 +10,7 @@ from __future__ import annotations
 
 from prefect import flow
 
-from core.evaluation_report import EvaluationReport
+from core.evaluation.evaluation_report import EvaluationReport
 from tasks.evaluation.lidar import EvaluationOptions, evaluate_lidar, write_evaluation
 
 

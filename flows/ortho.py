@@ -19,7 +19,7 @@ from pathlib import Path
 
 from prefect import flow
 
-from core.ortho_compare import CompareConfig
+from core.ortho.ortho_compare import CompareConfig
 from tasks.io.sensors import load_model
 from tasks.ortho.compare import CompareSummary, compare_orthos, plan_compare
 from tasks.ortho.inputs import describe_dem

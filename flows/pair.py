@@ -92,7 +92,7 @@ def make_orthos(params: PairParams, out: Path, skipped: list[str]) -> dict[str, 
     """Both images orthorectified with their oriented models over the reference DEM, on one
     grid (the left image's GSD, its UTM zone), then compared window by window; the products
     that read back are kept (their names added to ``skipped``)."""
-    from core.ortho_compare import CompareConfig
+    from core.ortho.ortho_compare import CompareConfig
     from tasks.archive.pair import product_ok
     from tasks.io.rasters import open_raster
     from tasks.ortho.compare import compare_orthos, plan_compare

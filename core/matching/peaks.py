@@ -4,7 +4,7 @@ and orientation correlation, the tie points' measure for pairs lit by two suns.
 
 Used by the tie points (:mod:`core.matching.tiepoints`), the pointing correction of dense
 matching (:mod:`core.matching.dense`), the ortho-versus-ortho check
-(:mod:`core.ortho_compare`) and surface matching (:mod:`core.matching.surface`, whose
+(:mod:`core.ortho.ortho_compare`) and surface matching (:mod:`core.matching.surface`, whose
 correlation over lon/lat shifts is its own but whose peak is fitted here).
 
 Conventions: correlation arrays are indexed ``[row, col]`` (``[dy, dx]``); offsets are returned

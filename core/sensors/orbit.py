@@ -86,7 +86,8 @@ class Orbit:
 
     def interpolate(self, t_s: ArrayLike) -> tuple[FloatArray, FloatArray]:
         """ECEF position (m, 3) metres and velocity (m, 3) m/s at times ``t_s`` (m,) seconds."""
-        from core.kernels import orbit_states  # imports Numba: only when interpolating
+        # imports Numba: only when interpolating
+        from core.sensors.orbit_kernels import orbit_states
 
         t = np.atleast_1d(np.asarray(t_s, dtype=np.float64)).ravel()
         k = min(LAGRANGE_POINTS, self.times_s.size)
@@ -98,7 +99,7 @@ class Orbit:
         position (m, 3) as :meth:`interpolate`, the local orbital frame (m, 3, 3) as
         :func:`orbital_frame`, the attitude's rotation (m, 3, 3) as :func:`rotation_rpy` and
         camera -> ECEF, their product; in one compiled pass."""
-        from core.kernels import platform_frames
+        from core.sensors.orbit_kernels import platform_frames
 
         t = np.atleast_1d(np.asarray(t_s, dtype=np.float64)).ravel()
         k = min(LAGRANGE_POINTS, self.times_s.size)
@@ -133,14 +134,14 @@ class Orbit:
 
 def orbital_frame(pos_m: FloatArray, vel_m_s: FloatArray) -> FloatArray:
     """Local orbital frame (m, 3, 3): columns X (along track), Y (right), Z (to Earth centre)."""
-    from core.kernels import orbital_frames
+    from core.sensors.orbit_kernels import orbital_frames
 
     return orbital_frames(pos_m, vel_m_s)
 
 
 def rotation_rpy(roll_rad: FloatArray, pitch_rad: FloatArray, yaw_rad: FloatArray) -> FloatArray:
     """``Rz(yaw) Ry(pitch) Rx(roll)``, shape (m, 3, 3): camera frame -> local orbital frame."""
-    from core.kernels import rotations_rpy
+    from core.sensors.orbit_kernels import rotations_rpy
 
     return rotations_rpy(roll_rad, pitch_rad, yaw_rad)
 

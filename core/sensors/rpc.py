@@ -228,7 +228,8 @@ class RPCModel:
             np.asarray(lat_deg, dtype=np.float64),
             np.asarray(h_m, dtype=np.float64),
         )
-        from core.kernels import rpc_project  # imports Numba: only when projecting
+        # imports Numba: only when projecting
+        from core.sensors.rpc_kernels import rpc_project
 
         col, row = rpc_project(self._forward, lon.ravel(), lat.ravel(), h.ravel(),
                                self._ground_norm, self._image_affine)

@@ -14,7 +14,7 @@ from typing import TYPE_CHECKING
 from flows.commands._pair import VERTICAL_HELP, VERTICALS
 
 if TYPE_CHECKING:
-    from core.evaluation_report import EvaluationReport
+    from core.evaluation.evaluation_report import EvaluationReport
 
 Z_UNITS = ("auto", "m", "ft", "us-ft")  # "auto" and the keys of core.heights.Z_UNITS
 
@@ -122,7 +122,7 @@ def run(args: argparse.Namespace) -> int:
     from flows._env import prefect_api
 
     with prefect_api() as api:  # a temporary Prefect server boots meanwhile
-        from core.evaluation import StatsConfig
+        from core.evaluation.evaluation import StatsConfig
         from tasks.evaluation.lidar import EvaluationOptions, plan_evaluation
         from tasks.io.sensor_info import check_json_target
 

@@ -60,7 +60,7 @@ def run(args: argparse.Namespace) -> int:
     from flows._env import prefect_api
 
     with prefect_api() as api:  # a temporary Prefect server boots meanwhile
-        from core.void_fill import FillConfig
+        from core.evaluation.void_fill import FillConfig
         from tasks.evaluation.void_fill import FillOptions, plan_fill
         from tasks.io.sensor_info import check_json_target
 

@@ -335,7 +335,7 @@ def _number(v: Any) -> float | None:
 def pair_row(entry_id: str, status: str, out: Path, reason: str = "") -> PairRow:
     """The summary line of a pair: its figures read from ``out/report.json``
     (:func:`tasks.absolute.report.read_report`) and ``out/eval.json``
-    (:class:`core.evaluation_report.EvaluationReport`) when they read back; a failed pair
+    (:class:`core.evaluation.evaluation_report.EvaluationReport`) when they read back; a failed pair
     reports only its reason."""
     from tasks.absolute.report import read_report
     from tasks.archive.pair import read_evaluation_stats

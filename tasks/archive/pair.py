@@ -219,8 +219,8 @@ def read_evaluation_stats(path: Path):  # -> dict[str, DzStats] | None
     """The statistics of an ``eval.json`` of ``gcpfree evaluate``, per class and ``all``
     (:class:`core.evaluation.DzStats`, as the evaluation report writes them), or None when
     it is missing or not one."""
-    from core.evaluation import DzStats
-    from core.evaluation_report import REPORT_FORMAT
+    from core.evaluation.evaluation import DzStats
+    from core.evaluation.evaluation_report import REPORT_FORMAT
 
     try:
         doc = _read_json(path)

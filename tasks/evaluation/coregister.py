@@ -1,5 +1,5 @@
 """``gcpfree coregister``: read two DEM rasters, align one onto the other (Nuth & Kaab), write
-the translation. The maths is :func:`core.coregister.nuth_kaab`.
+the translation. The maths is :func:`core.evaluation.coregister.nuth_kaab`.
 
 Both DEMs' vertical datums are decided by the one rule (:func:`tasks.io.dem.dem_datum`); when
 they differ, the DEM's heights are brought to the reference's datum with the EGM96 geoid
@@ -15,7 +15,7 @@ import pyproj
 import rasterio
 from rasterio.warp import Resampling, reproject
 
-from core.coregister import CoregConfig, CoregResult, DemGrid, nuth_kaab
+from core.evaluation.coregister import CoregConfig, CoregResult, DemGrid, nuth_kaab
 from core.dem import GeoDEM, SurfaceGrid
 from core.errors import InputError
 from core.heights import DatumDecision

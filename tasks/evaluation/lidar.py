@@ -8,7 +8,7 @@ to the DEM's, the DEM windows they fall in are read (rasterio windows, bounded i
 interpolated bilinearly at the points (:mod:`tasks.io.rasters_at_points`; the lidar is never
 interpolated), heights are brought to metres and to the DEM's vertical datum
 (:mod:`core.heights`), and the differences ``dz = DEM - lidar`` are accumulated per class by
-:mod:`core.evaluation`. Memory stays flat whatever the file size.
+:mod:`core.evaluation.evaluation`. Memory stays flat whatever the file size.
 
 Units and datums, read from the files (``auto``) unless given:
 
@@ -43,8 +43,8 @@ import rasterio
 from prefect import task
 
 from core.errors import CoverageError, InputError, InsufficientDataError
-from core.evaluation import ClassedDz, StatsConfig
-from core.evaluation_report import (
+from core.evaluation.evaluation import ClassedDz, StatsConfig
+from core.evaluation.evaluation_report import (
     DemInfo,
     EvaluationReport,
     GcpCheck,

@@ -1,5 +1,5 @@
 """Tasks of ``gcpfree fill-voids``: an SRTM tile's voids filled from an oriented DSM, written back
-in the tile's own format and grid. The maths is :func:`core.void_fill.delta_surface_fill`.
+in the tile's own format and grid. The maths is :func:`core.evaluation.void_fill.delta_surface_fill`.
 
 1. The tile: an SRTM ``.hgt`` (1201x1201 or 3601x3601 big-endian int16, placed by its name,
    ``N44E005.hgt``) or a lon/lat GeoTIFF of any size (int16 SRTM tiles, or float heights).
@@ -34,13 +34,13 @@ from rasterio.windows import Window
 
 from core.dem import sample_bilinear
 from core.errors import CoverageError, InputError
-from core.evaluation_report import DemInfo
+from core.evaluation.evaluation_report import DemInfo
 from core.geodesy import ARCSEC, metres_per_degree
 from core.geoid import GeoidGrid
 from core.grid_points import affine_nodes
 from core.heights import VERTICAL_CHOICES, HeightFrame
 from core.jsonio import to_json
-from core.void_fill import FillConfig, FillResult, delta_surface_fill, dsm_to_datum
+from core.evaluation.void_fill import FillConfig, FillResult, delta_surface_fill, dsm_to_datum
 from tasks.io.crs import Projection
 from tasks.io.dem import dem_datum
 from tasks.io.geoid import load_geoid

@@ -11,9 +11,9 @@ process decodes it and sends the raw point records through a pipe, and a crash o
 becomes one :class:`~core.errors.InputError` naming the file. A plain LAS is read here (laspy,
 NumPy only). Damaged bytes can also decode without any error into wrong points (always in a
 plain LAS; in a LAZ when the damage keeps the decoder going): every chunk is checked
-(:func:`core.evaluation_report.refused_points`: inside the header's box, no reserved class), the
+(:func:`core.evaluation.evaluation_report.refused_points`: inside the header's box, no reserved class), the
 refused points are counted and left out, and a file with more of them than
-:data:`core.evaluation_report.MAX_REFUSED_SHARE` of its points is refused as corrupt.
+:data:`core.evaluation.evaluation_report.MAX_REFUSED_SHARE` of its points is refused as corrupt.
 """
 
 from __future__ import annotations
@@ -37,7 +37,7 @@ from numpy.typing import NDArray
 from pyproj.exceptions import CRSError
 
 from core.errors import GcpFreeError, InputError
-from core.evaluation_report import (
+from core.evaluation.evaluation_report import (
     MAX_REFUSED_SHARE,
     LidarInfo,
     refused_points,
@@ -348,7 +348,7 @@ def lidar_chunks(path: Path, n: int, expected: int, accept_classes: Sequence[int
                  ) -> Iterator[LidarChunk]:
     """The file's points, ``n`` at a time, checked (module docstring): a truncated or corrupt
     file raises InputError, as does one with more than
-    :data:`~core.evaluation_report.MAX_REFUSED_SHARE` of its ``expected`` points outside its header's
+    :data:`~core.evaluation.evaluation_report.MAX_REFUSED_SHARE` of its ``expected`` points outside its header's
     box (as soon as that many are). Points of a reserved class are left out and counted but do
     not condemn the file: national products use them (AHN's class 26), so only the box, which
     a sound file never breaks, decides. ``accept_classes``: reserved classes the user named

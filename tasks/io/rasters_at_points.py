@@ -19,7 +19,7 @@ import rasterio
 
 from core.dem import sample_bilinear
 from core.errors import InputError
-from core.evaluation_report import (
+from core.evaluation.evaluation_report import (
     NO_CODE,
     NO_LANDCOVER,
     DemInfo,
@@ -149,7 +149,7 @@ def sample_dem(src: rasterio.io.DatasetReader, raster: RasterSource, x: np.ndarr
 def sample_classes(src: rasterio.io.DatasetReader, raster: RasterSource, nodata: int | None,
                    x: np.ndarray, y: np.ndarray) -> np.ndarray:
     """Class codes of the cells holding points in the raster's CRS, reading only the windows
-    they need; :data:`core.evaluation_report.NO_CODE` off the raster and on its ``nodata``."""
+    they need; :data:`core.evaluation.evaluation_report.NO_CODE` off the raster and on its ``nodata``."""
     fi, fj = affine_nodes(raster.transform, x, y)
     codes = np.full(fi.shape, NO_CODE, dtype=np.int64)
     for g in window_groups(fi, fj, raster.shape, WINDOW_CELLS, nearest=True):

@@ -13,7 +13,7 @@ from pathlib import Path
 import pyproj
 
 from core.errors import InputError
-from core.evaluation_report import CrsInfo
+from core.evaluation.evaluation_report import CrsInfo
 
 
 def existing_file(path: Path, what: str, hint: str) -> Path:

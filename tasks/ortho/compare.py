@@ -1,12 +1,12 @@
 """Tasks of the ortho-versus-ortho check: two orthos of a pair on one lattice correlated on a
-grid of windows (:mod:`core.ortho_compare`), block by block with Dask.
+grid of windows (:mod:`core.ortho.ortho_compare`), block by block with Dask.
 
 1. :func:`plan_compare`: both orthos read as georeferenced rasters in one projected CRS, with
    the same square cells on the same lattice (``gcpfree ortho`` aligns its grids on multiples
    of the cell size, so two orthos at one ``--resolution`` and ``--crs`` always are); their
    common area and the windows in it. Anything else stops here in one line.
 2. :func:`compare_orthos`: blocks of windows read the two orthos over their windows and search
-   areas (band 1, nodata as NaN) and run :func:`core.ortho_compare.match_windows`
+   areas (band 1, nodata as NaN) and run :func:`core.ortho.ortho_compare.match_windows`
    (:func:`compare_block`); writes ``OUT`` (JSON: statistics, status counts, every window),
    and when asked a map of the discrepancy norm per window (COG, one cell per window centred
    on it) and a quiver plot (PNG).
@@ -26,7 +26,7 @@ from prefect.cache_policies import NO_CACHE
 
 from core.errors import InputError
 from core.matching.grid import GridSpec
-from core.ortho_compare import (
+from core.ortho.ortho_compare import (
     CompareConfig,
     DiscrepancyStats,
     ShiftStatus,

@@ -20,7 +20,7 @@ from rasterio.windows import Window
 
 from core.errors import CoverageError, InputError
 from core.geodesy import BBox, metres_per_degree
-from core.ortho import SourceWindow, TileDEM
+from core.ortho.ortho import SourceWindow, TileDEM
 from tasks.io.crs import Projection
 from tasks.io.dem import VERTICALS, dem_datum, read_reference
 from tasks.io.geoid import load_geoid

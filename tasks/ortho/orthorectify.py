@@ -34,7 +34,7 @@ from core.errors import CoverageError, InputError
 from core.geodesy import utm_epsg
 from core.heights import DatumDecision
 from core.matching.grid import GridSpec
-from core.ortho import OrthoConfig, resample, source_window, tile_geometry, to_dtype
+from core.ortho.ortho import OrthoConfig, resample, source_window, tile_geometry, to_dtype
 from core.sensors.base import ray_ground_move_per_m
 from core.sensors.footprint import footprint_box, footprint_lonlat, scene_height_range_m
 from core.sensors.viewing import point_geometry

@@ -7,7 +7,7 @@ from __future__ import annotations
 import math
 from typing import Any
 
-from core.evaluation import DzStats
+from core.evaluation.evaluation import DzStats
 from core.orientation.absolute import CheckPointStats
 from tasks.absolute.report import (
     Absolute,

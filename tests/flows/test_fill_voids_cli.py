@@ -15,7 +15,7 @@ import rasterio
 
 from core.dem import sample_bilinear
 from core.errors import InputError
-from core.evaluation import DzAccumulator, StatsConfig
+from core.evaluation.evaluation import DzAccumulator, StatsConfig
 from core.grid_points import affine_nodes
 from flows.commands import dsm, fill_voids
 from tasks.io.crs import Projection

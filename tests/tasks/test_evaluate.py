@@ -23,8 +23,8 @@ from scipy.interpolate import RegularGridInterpolator
 from scipy.stats import binned_statistic_2d
 
 from core.errors import CoverageError, InputError, InsufficientDataError
-from core.evaluation import StatsConfig
-from core.evaluation_report import EvaluationReport
+from core.evaluation.evaluation import StatsConfig
+from core.evaluation.evaluation_report import EvaluationReport
 from tasks.evaluation.lidar import (
     EvaluationOptions,
     evaluate_lidar,

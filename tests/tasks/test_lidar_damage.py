@@ -30,7 +30,7 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
 from core.errors import GcpFreeError, InputError
-from core.evaluation_report import MAX_REFUSED_SHARE, EvaluationReport, refused_points
+from core.evaluation.evaluation_report import MAX_REFUSED_SHARE, EvaluationReport, refused_points
 from flows import cli
 from tasks.evaluation.lidar import EvaluationOptions, evaluate_plan, plan_evaluation
 from tasks.io import lidar as lidar_io

@@ -33,8 +33,8 @@ from scipy.interpolate import RegularGridInterpolator
 from core.errors import CoverageError, InputError
 from core.geodesy import BBox
 from core.matching.grid import GridSpec
-from core.ortho import OrthoConfig, tile_geometry
-from core.ortho_compare import CompareConfig
+from core.ortho.ortho import OrthoConfig, tile_geometry
+from core.ortho.ortho_compare import CompareConfig
 from core.sensors.footprint import footprint_lonlat
 from tasks.io.crs import Projection
 from tasks.io.dem import read_reference

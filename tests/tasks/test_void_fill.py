@@ -15,7 +15,7 @@ import rasterio
 
 from core.errors import CoverageError, InputError
 from core.geodesy import metres_per_degree
-from core.void_fill import FillConfig
+from core.evaluation.void_fill import FillConfig
 from tasks.evaluation.void_fill import (
     FillOptions,
     fill_tile_voids,

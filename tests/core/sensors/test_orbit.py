@@ -1,4 +1,4 @@
-"""The orbit's compiled interpolation and local frames (:mod:`core.kernels`, used by
+"""The orbit's compiled interpolation and local frames (:mod:`core.sensors.orbit_kernels`, used by
 :class:`core.sensors.orbit.Orbit`) against independent implementations: SciPy's barycentric
 Lagrange interpolator over the same samples, NumPy's cross products."""
 
@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 from scipy.interpolate import BarycentricInterpolator
 
-from core.kernels import MIN_SPLIT
+from core.parallel import MIN_SPLIT
 from core.sensors.orbit import LAGRANGE_POINTS, Orbit, orbital_frame, rotation_rpy
 
 

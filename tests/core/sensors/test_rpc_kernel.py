@@ -1,4 +1,4 @@
-"""The compiled RPC projection (:func:`core.kernels.rpc_project`, behind
+"""The compiled RPC projection (:func:`core.sensors.rpc_kernels.rpc_project`, behind
 ``RPCModel.project``) against the NumPy evaluation of the same model and against rpcm (an
 independent implementation, when installed), on real vendor RPCs, with every bias mode, NaN
 inputs, broadcasting and arrays large enough to be split over threads."""
@@ -8,7 +8,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from core.kernels import MIN_SPLIT
+from core.parallel import MIN_SPLIT
 from core.sensors.rpc import RPCModel
 from tests.core.sensors.test_rpc import REAL_ALL, domain_points, load
 from tests.peers import rpcm_model_module

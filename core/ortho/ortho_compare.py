@@ -4,8 +4,9 @@ statistics of the discrepancy.
 
 Each window of the left ortho (``window_px`` cells a side) is searched for in the right one
 within ``+-search_px`` cells by normalised cross-correlation (:func:`window_shift`, with the
-NCC, integer peak and quadratic of :mod:`core.matching.peaks`); the integer peak is refined to sub-pixel by resampling the right ortho (cubic B-spline) at the
-current shift and a quarter cell around it and fitting a quadratic to those 3x3 correlations,
+NCC, integer peak and quadratic of :mod:`core.matching.peaks`); the integer peak is refined to
+sub-pixel by resampling the right ortho (cubic B-spline) at the current shift and a quarter cell
+around it and fitting a quadratic to those 3x3 correlations,
 a few times over. The quadratic fit on whole-cell neighbours alone is biased towards whole
 cells ("pixel locking", and by the correlation peak's asymmetry); on close neighbours centred
 on the current estimate the bias vanishes: shifts of an exactly known texture come back

@@ -1,5 +1,5 @@
 """What ``eval.json`` holds, and the bookkeeping of the points that fills it (step 6, the
-evaluation against lidar; the statistics themselves are :mod:`core.evaluation`).
+evaluation against lidar; the statistics themselves are :mod:`core.evaluation.evaluation`).
 
 - The report's schema: :class:`EvaluationReport` and its parts (the DEM, the lidar file and the
   land cover as read, :class:`PointCounts`, the optional mask and GCP checks), each a frozen
@@ -22,7 +22,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from core.errors import InputError
-from core.evaluation import DzAccumulator, DzStats, StatsConfig
+from core.evaluation.evaluation import DzAccumulator, DzStats, StatsConfig
 from core.geoid import GeoidGrid
 from core.heights import HeightFrame, height_difference_m
 from core.jsonio import json_ready, to_json

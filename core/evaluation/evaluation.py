@@ -28,8 +28,8 @@ statistic distributed as ``F^-1(U_(k))`` with ``U_(k) ~ Beta(k, n + 1 - k)``, so
 replicate of a percentile costs two random draws, exact in distribution, for any ``n``.
 
 What ``eval.json`` holds and the bookkeeping of the points (which are evaluated, where the
-others went) are :mod:`core.evaluation_report`. No I/O here: ``tasks.evaluation.lidar`` reads
-the points and the DEM and calls these functions; heights are brought to metres and one datum
+others went) are :mod:`core.evaluation.evaluation_report`. No I/O here: ``tasks.evaluation.lidar``
+reads the points and the DEM and calls these functions; heights are brought to metres and one datum
 by :mod:`core.heights`, points placed on the DEM's grid by :mod:`core.grid_points`.
 """
 

@@ -1,4 +1,4 @@
-"""The compiled ortho kernels of :mod:`core.kernels` against independent implementations:
+"""The compiled ortho kernels of :mod:`core.ortho.kernels` against independent implementations:
 scipy's ``map_coordinates(order=1)`` for the bilinear samplers (random data with voids,
 positions on the edges, on integer nodes, just outside, NaN), a per-point Python loop for
 nearest and cubic convolution, dense matrices and exact quadratics for the lattice
@@ -12,7 +12,7 @@ import numpy as np
 import pytest
 from scipy.ndimage import map_coordinates
 
-from core.kernels import (
+from core.ortho.kernels import (
     bilinear,
     cell_heights,
     footprint_bounds,
@@ -20,7 +20,7 @@ from core.kernels import (
     to_integer,
     upsample,
 )
-from core.ortho import SourceWindow, _Axis, resample
+from core.ortho.ortho import SourceWindow, _Axis, resample
 
 # ---------------------------------------------------------------------------- helpers
 

@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 
 from core.errors import InputError
-from core.ortho_compare import (
+from core.ortho.ortho_compare import (
     CompareConfig,
     ShiftStatus,
     WindowShifts,

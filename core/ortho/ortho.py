@@ -119,7 +119,7 @@ class TileDEM:
     def height(self, fi: FloatArray, fj: FloatArray, n_m: FloatArray) -> FloatArray:
         """Ellipsoidal height at grid indices, N given; NaN off the grid or next to a void
         (the rule of :func:`core.dem.sample_bilinear`, compiled)."""
-        from core.kernels import bilinear  # imports Numba: only when a tile is computed
+        from core.ortho.kernels import bilinear  # imports Numba: only when a tile is computed
 
         return bilinear(self.z, fi, fj) + n_m
 
@@ -198,7 +198,7 @@ class _Axis:
 
 def _upsample(node_values: FloatArray, rows: _Axis, cols: _Axis) -> FloatArray:
     """Node values (..., ny, nx) interpolated at every cell (..., n_rows, n_cols)."""
-    from core.kernels import upsample
+    from core.ortho.kernels import upsample
 
     v = np.asarray(node_values, dtype=np.float64)
     out = upsample(v.reshape(-1, *v.shape[-2:]), rows.taps, rows.weights, cols.taps,
@@ -209,8 +209,8 @@ def _upsample(node_values: FloatArray, rows: _Axis, cols: _Axis) -> FloatArray:
 def _cell_heights(dem: TileDEM, dem_nodes: tuple[FloatArray, FloatArray, FloatArray],
                   rows: _Axis, cols: _Axis) -> FloatArray:
     """Height of every cell: the DEM indices and undulation interpolated from the nodes, then
-    :meth:`TileDEM.height` there (one compiled pass, :func:`core.kernels.cell_heights`)."""
-    from core.kernels import cell_heights
+    :meth:`TileDEM.height` there (one compiled pass, :func:`core.ortho.kernels.cell_heights`)."""
+    from core.ortho.kernels import cell_heights
 
     return cell_heights(np.stack(dem_nodes), rows.taps, rows.weights, cols.taps, cols.weights,
                         dem.z)
@@ -331,7 +331,7 @@ def tile_geometry(model: SensorModel, cells: GridSpec, dem: TileDEM, to_lonlat: 
         if not any(refine):
             break
         steps = [max(1, s // 2) if r else s for s, r in zip(steps, refine, strict=True)]
-    from core.kernels import image_position
+    from core.ortho.kernels import image_position
 
     col, row = image_position(fit.coeffs, rows.taps, rows.weights, cols.taps, cols.weights, h,
                               fit.h_mid, fit.h_half)
@@ -426,7 +426,7 @@ def _occlusion(model: SensorModel, dem: TileDEM, fit: _Fit, rows: _Axis, cols: _
     gi1, gj1 = dem.indices(np.asarray(lon2, float), np.asarray(lat2, float))
     rays = list(_upsample(np.stack([*dem_nodes, (gi1 - gi0) / dh, (gj1 - gj0) / dh]), rows,
                           cols))
-    from core.kernels import bilinear
+    from core.ortho.kernels import bilinear
 
     occluded = np.zeros(h.shape, bool)
     z = np.asarray(dem.z, dtype=np.float64)
@@ -493,7 +493,7 @@ def source_window(col: FloatArray, row: FloatArray, image_size: tuple[int, int],
                   resampling: str) -> SourceWindow | None:
     """The window of the image (``image_size`` = (cols, rows)) the positions need, with the
     resampling kernel's margin; None when no position falls in the image."""
-    from core.kernels import footprint_bounds
+    from core.ortho.kernels import footprint_bounds
 
     n_inside, c_min, c_max, r_min, r_max = footprint_bounds(col, row, image_size)
     if n_inside == 0:
@@ -532,9 +532,9 @@ def resample(window: NDArray, win: SourceWindow, col: FloatArray, row: FloatArra
     :func:`core.dem.sample_bilinear` (NaN next to a nodata pixel), ``cubic`` cubic
     convolution (Keys, a = -0.5). The window's edges repeat beyond it so the whole pixel
     footprint has values. One compiled pass over the cells
-    (:func:`core.kernels.resample_window`).
+    (:func:`core.ortho.kernels.resample_window`).
     """
-    from core.kernels import BILINEAR, CUBIC, NEAREST, resample_window
+    from core.ortho.kernels import BILINEAR, CUBIC, NEAREST, resample_window
 
     kind = {"nearest": NEAREST, "bilinear": BILINEAR, "cubic": CUBIC}[resampling]
     return resample_window(np.asarray(window), col, row, (win.col0, win.row0), win.factor,
@@ -549,7 +549,7 @@ def to_dtype(values: FloatArray, dtype: np.dtype | str, nodata: float | None) ->
     if dtype.kind in "iu":
         info = np.iinfo(dtype)
         if nodata is None or math.isnan(nodata) or info.min <= nodata <= info.max:
-            from core.kernels import to_integer
+            from core.ortho.kernels import to_integer
 
             return to_integer(values, dtype, nodata)  # one compiled pass
         v = np.clip(np.rint(values), info.min, info.max)  # a nodata the type cannot hold

@@ -10,7 +10,7 @@ from scipy import ndimage
 from core.errors import InputError
 from core.geoid import GeoidGrid
 from core.heights import HeightFrame
-from core.void_fill import (
+from core.evaluation.void_fill import (
     FillConfig,
     delta_surface_fill,
     dsm_to_datum,

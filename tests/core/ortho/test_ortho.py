@@ -18,7 +18,7 @@ from core.dem import GeoDEM, SurfaceGrid
 from core.errors import InputError
 from core.geoid import GeoidGrid
 from core.matching.grid import GridSpec
-from core.ortho import (
+from core.ortho.ortho import (
     OrthoConfig,
     SourceWindow,
     TileDEM,

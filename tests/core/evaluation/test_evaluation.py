@@ -10,8 +10,8 @@ import numpy as np
 import pytest
 
 from core.errors import InputError
-from core.evaluation import ClassedDz, DzAccumulator, DzStats, StatsConfig
-from core.evaluation_report import (
+from core.evaluation.evaluation import ClassedDz, DzAccumulator, DzStats, StatsConfig
+from core.evaluation.evaluation_report import (
     NO_CODE,
     NO_LANDCOVER,
     CrsInfo,

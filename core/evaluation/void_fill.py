@@ -26,8 +26,8 @@ differences averaged over 3 / 5 / 7 cells; 13.7 m for the DSM alone on those cel
 (``tests/flows/test_fill_voids_cli.py``).
 
 Heights in metres, both grids on the same nodes and in the same vertical datum (the task
-converts the DSM); NaN marks voids and missing DSM. No I/O here: ``tasks.evaluation.void_fill`` reads the
-tile and the DSM and writes the result.
+converts the DSM); NaN marks voids and missing DSM. No I/O here: ``tasks.evaluation.void_fill``
+reads the tile and the DSM and writes the result.
 """
 
 from __future__ import annotations
@@ -42,7 +42,7 @@ from numpy.typing import ArrayLike, NDArray
 from scipy import ndimage
 
 from core.errors import InputError
-from core.evaluation import DzAccumulator, DzStats, StatsConfig
+from core.evaluation.evaluation import DzAccumulator, DzStats, StatsConfig
 from core.geoid import GeoidGrid
 from core.heights import HeightFrame
 from core.robust import nmad
