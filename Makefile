@@ -1,4 +1,4 @@
-# make demo | make test | make bench — each bootstraps .venv on first use.
+# make demo | make test | make bench | make docs — each bootstraps .venv on first use.
 PYTHON ?= python3
 VENV   := .venv
 PY     := $(VENV)/bin/python
@@ -9,14 +9,14 @@ OUT    ?= out
 # flows/_env.py (the CLI and the test suite call it)
 export PREFECT_HOME ?= $(CURDIR)/.prefect
 
-.PHONY: demo test bench venv clean
+.PHONY: demo test bench docs venv clean
 
 venv: $(STAMP)
 
 $(STAMP): pyproject.toml
 	test -x $(PY) || $(PYTHON) -m venv $(VENV)
 	$(PY) -m pip install --quiet --upgrade pip
-	$(PY) -m pip install --quiet -e ".[test]"
+	$(PY) -m pip install --quiet -e ".[test,docs]"
 	touch $(STAMP)
 
 demo: $(STAMP)
@@ -43,5 +43,10 @@ bench: $(STAMP)
 	$(PY) -m pip install --quiet --no-deps "rpcm>=1.4"
 	$(PY) bench/run_all.py
 
+# the documentation site (Sphinx + MyST, docs/) into site/; strict: a warning fails the build
+docs: $(STAMP)
+	$(PY) -m sphinx -W --keep-going -q -b html docs site
+	@echo "documentation site: site/index.html"
+
 clean:
-	rm -rf $(OUT) .prefect .pytest_cache
+	rm -rf $(OUT) .prefect .pytest_cache site
