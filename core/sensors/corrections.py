@@ -4,7 +4,8 @@ that module's docstring for their meaning."""
 
 from __future__ import annotations
 
-from dataclasses import dataclass, fields
+from collections.abc import Mapping
+from dataclasses import dataclass, field, fields, replace
 
 import numpy as np
 from numpy.typing import NDArray
@@ -39,9 +40,16 @@ ORBIT_TERMS: dict[str, tuple[int, float]] = {
 }
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, eq=False)
 class Corrections:
-    """Corrections to the delivered model, one per adjustable parameter (units: module doc)."""
+    """Corrections to the delivered model, one per adjustable parameter (units: module doc).
+
+    The polynomial, orbit and lens corrections are fields; the along-track harmonics are one
+    (3, :data:`N_HARMONICS`) array ``harmonic_rad`` ([roll, pitch, yaw] x k = 1..N), whose
+    entries the adjustment and the model files name ``roll_h1 ... yaw_h8``
+    (:data:`ATTITUDE_HARMONICS`): :meth:`value` and :meth:`with_values` take every name of
+    :data:`PARAM_NAMES`.
+    """
 
     roll_bias: float = 0.0
     pitch_bias: float = 0.0
@@ -60,33 +68,49 @@ class Corrections:
     k3: float = 0.0
     p1: float = 0.0
     p2: float = 0.0
-    roll_h1: float = 0.0
-    roll_h2: float = 0.0
-    roll_h3: float = 0.0
-    roll_h4: float = 0.0
-    roll_h5: float = 0.0
-    roll_h6: float = 0.0
-    roll_h7: float = 0.0
-    roll_h8: float = 0.0
-    pitch_h1: float = 0.0
-    pitch_h2: float = 0.0
-    pitch_h3: float = 0.0
-    pitch_h4: float = 0.0
-    pitch_h5: float = 0.0
-    pitch_h6: float = 0.0
-    pitch_h7: float = 0.0
-    pitch_h8: float = 0.0
-    yaw_h1: float = 0.0
-    yaw_h2: float = 0.0
-    yaw_h3: float = 0.0
-    yaw_h4: float = 0.0
-    yaw_h5: float = 0.0
-    yaw_h6: float = 0.0
-    yaw_h7: float = 0.0
-    yaw_h8: float = 0.0
+    harmonic_rad: FloatArray = field(default_factory=lambda: np.zeros((3, N_HARMONICS)))
+
+    def __post_init__(self) -> None:
+        h = np.array(self.harmonic_rad, dtype=np.float64)
+        if h.shape != (3, N_HARMONICS):
+            raise InputError(f"the along-track harmonics must be (3, {N_HARMONICS}) angles "
+                             f"(roll, pitch, yaw x 1..{N_HARMONICS}), got shape {h.shape}")
+        h.setflags(write=False)
+        object.__setattr__(self, "harmonic_rad", h)
+
+    def __eq__(self, other: object) -> bool:
+        if not isinstance(other, Corrections):
+            return NotImplemented
+        return all(self.value(n) == other.value(n) for n in PARAM_NAMES)
+
+    __hash__ = None  # type: ignore[assignment]
+
+    @classmethod
+    def from_values(cls, values: Mapping[str, float]) -> Corrections:
+        """Corrections from a mapping of names of :data:`PARAM_NAMES` (absent: 0)."""
+        return cls().with_values(values)
+
+    def value(self, name: str) -> float:
+        """The correction called ``name`` (any of :data:`PARAM_NAMES`)."""
+        if name in ATTITUDE_HARMONICS:
+            axis, k = ATTITUDE_HARMONICS[name]
+            return float(self.harmonic_rad[axis, k - 1])
+        return float(getattr(self, name))
 
     def values(self, names: tuple[str, ...]) -> FloatArray:
-        return np.array([getattr(self, n) for n in names], dtype=np.float64)
+        return np.array([self.value(n) for n in names], dtype=np.float64)
+
+    def with_values(self, values: Mapping[str, float]) -> Corrections:
+        """These corrections with those named in ``values`` replaced."""
+        h = self.harmonic_rad.copy()
+        plain = {}
+        for name, v in values.items():
+            if name in ATTITUDE_HARMONICS:
+                axis, k = ATTITUDE_HARMONICS[name]
+                h[axis, k - 1] = v
+            else:
+                plain[name] = float(v)
+        return replace(self, **plain, harmonic_rad=h)
 
     def attitude_delta(self) -> FloatArray:
         """(3, 3): [roll, pitch, yaw] x [bias, rate, quad]."""
@@ -97,13 +121,12 @@ class Corrections:
 
     def harmonics(self) -> FloatArray:
         """(3, N_HARMONICS): [roll, pitch, yaw] x the along-track harmonics 1..N."""
-        coef = np.zeros((3, N_HARMONICS))
-        for name, (axis, k) in ATTITUDE_HARMONICS.items():
-            coef[axis, k - 1] = getattr(self, name)
-        return coef
+        return self.harmonic_rad
 
 
-PARAM_NAMES: tuple[str, ...] = tuple(f.name for f in fields(Corrections))
+PARAM_NAMES: tuple[str, ...] = (
+    tuple(f.name for f in fields(Corrections) if f.name != "harmonic_rad")
+    + tuple(ATTITUDE_HARMONICS))
 PARAM_UNITS: dict[str, str] = {
     **{n: ("rad", "rad/s", "rad/s^2")[power] for n, (_, power) in ATTITUDE_TERMS.items()},
     **{n: "m" for n in ORBIT_TERMS}, **{n: "1" for n in LENS},

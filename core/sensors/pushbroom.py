@@ -190,7 +190,7 @@ class PushbroomModel:
                 f"with_params needs {len(self.adjust)} finite values for {self.adjust}, "
                 f"got {p.size}"
             )
-        new = replace(self.corrections, **dict(zip(self.adjust, map(float, p), strict=True)))
+        new = self.corrections.with_values(dict(zip(self.adjust, map(float, p), strict=True)))
         return replace(self, corrections=new)
 
     @property
@@ -542,8 +542,8 @@ class PushbroomModel:
             "camera": self.camera.to_dict(),
             "distortion": self.distortion.to_dict(),
             "adjust": list(self.adjust),
-            "corrections": {n: getattr(self.corrections, n) for n in PARAM_NAMES
-                            if n not in ATTITUDE_HARMONICS or getattr(self.corrections, n)},
+            "corrections": {n: self.corrections.value(n) for n in PARAM_NAMES
+                            if n not in ATTITUDE_HARMONICS or self.corrections.value(n)},
             "correction_centre": list(self.correction_centre),  # type: ignore[arg-type]
             "harmonic_span_s": list(self.harmonic_span),  # type: ignore[arg-type]
         }
@@ -575,7 +575,8 @@ class PushbroomModel:
             line_period_s=get_float(timing, "line_period_s", "timing"),
             distortion=LensDistortion.from_dict(get_dict(d, "distortion")),
             adjust=get_str_tuple(d, "adjust", ""),
-            corrections=Corrections(**{k: get_float(corr, k, "corrections") for k in corr}),
+            corrections=Corrections.from_values(
+                {k: get_float(corr, k, "corrections") for k in corr}),
             # files written before the key existed put the lens corrections about the axis
             correction_centre=correction_centre_of(d),
             harmonic_span=harmonic_span_of(d),

@@ -309,6 +309,34 @@ def test_params_protocol(spot: PushbroomModel):
         spot.with_adjust(("roll_bias", "spin"))
 
 
+def test_the_harmonics_are_one_array_under_their_old_names(spot: PushbroomModel):
+    """The adjustment's names are those of the 41 fields Corrections had before the harmonics
+    became one (3, 8) array, in the same order; each harmonic name is its cell of the array,
+    and a model file naming a harmonic reads into that cell and writes it back."""
+    from core.sensors.corrections import N_HARMONICS, Corrections
+
+    old = ("roll_bias", "pitch_bias", "yaw_bias", "roll_rate", "pitch_rate", "yaw_rate",
+           "roll_quad", "pitch_quad", "yaw_quad", "orbit_along_m", "orbit_across_m",
+           "orbit_radial_m", "focal_scale", "k1", "k3", "p1", "p2",
+           *(f"{a}_h{k}" for a in ("roll", "pitch", "yaw") for k in range(1, 9)))
+    assert PARAM_NAMES == old and N_HARMONICS == 8
+    c = Corrections.from_values({"pitch_h2": 1e-6, "yaw_h8": -2e-6, "k1": 3e-5})
+    expected = np.zeros((3, 8))
+    expected[1, 1], expected[2, 7] = 1e-6, -2e-6
+    np.testing.assert_array_equal(c.harmonics(), expected)
+    assert c.value("pitch_h2") == 1e-6 and c.k1 == 3e-5 and c != Corrections()
+    m = spot.with_adjust(("roll_bias", "yaw_h8", "pitch_h2")).with_params([1e-7, 4e-6, 5e-6])
+    assert m.corrections.harmonic_rad[2, 7] == 4e-6 and m.corrections.value("pitch_h2") == 5e-6
+    d = spot.to_dict()
+    d["corrections"] = {"roll_h3": 7e-7}
+    back = PushbroomModel.from_dict(d)
+    assert back.corrections.harmonic_rad[0, 2] == 7e-7
+    assert back.to_dict()["corrections"]["roll_h3"] == 7e-7
+    assert "roll_h4" not in back.to_dict()["corrections"]  # zero harmonics are not written
+    with pytest.raises(InputError, match=r"\(3, 8\)"):
+        Corrections(harmonic_rad=np.zeros((3, 7)))
+
+
 def test_orbit_and_attitude_validate_their_inputs():
     t = np.arange(8.0) * 30
     p = np.ones((8, 3)) * 7e6
