@@ -19,6 +19,7 @@ from prefect.cache_policies import NO_CACHE
 from rasterio.windows import Window
 
 from core.dem import GeoDEM
+from core.matching.relief import ReliefVerdict, relief_sufficiency
 from core.matching.surface import (
     SurfaceMatchConfig,
     WindowMatch,
@@ -112,6 +113,12 @@ class SurfaceMatchResult:
     centres: np.ndarray
     matches: tuple[WindowMatch, ...]
     gcps: tuple[ControlPoint, ...]
+
+    def verdict(self, cfg: SurfaceMatchConfig, min_windows: int, cell_m: float
+                ) -> ReliefVerdict:
+        """Whether enough windows have the relief to match (``cell_m``: the reference's cell
+        size), :func:`core.matching.relief.relief_sufficiency`."""
+        return relief_sufficiency(self.matches, cfg, min_windows, cell_m)
 
     def counts(self) -> dict[str, int]:
         out: dict[str, int] = {}
