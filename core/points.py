@@ -174,6 +174,18 @@ class ControlPoint:
     __hash__ = None  # type: ignore[assignment]
 
 
+@dataclass(frozen=True)
+class GcpSet:
+    """The gcps.json document: its envelope (constants) and the GCPs; written and read by
+    :data:`tasks.io.products.GCPS`."""
+
+    format: str = "gcpfree.gcps"
+    version: int = 1
+    heights: str = "h_m WGS84 ellipsoidal"
+    image_coordinates: str = CheckPointSet.IMAGE_COORDINATES
+    points: tuple[ControlPoint, ...] = ()
+
+
 def control_points_to_dict(points: tuple[ControlPoint, ...]) -> dict[str, Any]:
     """The gcps.json document."""
     return {"format": "gcpfree.gcps", "version": 1,

@@ -1,0 +1,358 @@
+"""JSON documents through one library: pydantic's ``TypeAdapter`` over the project's frozen
+dataclasses, one schema per document.
+
+Why pydantic: it comes with Prefect (no new dependency), it validates with the path of the
+value that is wrong, and it writes the JSON Schema of each document (:mod:`tasks.io.schemas`,
+the site's product pages). core/ stays NumPy/SciPy: the dataclasses there carry only their type
+hints, and this module turns those hints into what pydantic validates and serialises.
+
+The pattern, to move a document onto it:
+
+1. The value is a frozen dataclass (in core/, or a task's result class). Its fields and their
+   type hints are the schema: :func:`record` makes of it the type pydantic reads and writes:
+   ``float`` written as a number, NaN as ``null`` and ``null`` read back as NaN; NumPy arrays
+   as (nested) lists; tuples back as tuples; nested dataclasses, ``X | None``, mappings and
+   ``Literal`` as their hints say; an ``Enum`` by its name. Fields with a default may be
+   absent (a file written before the field existed), unknown keys are ignored. Per class,
+   :class:`Layout` says where the file's keys differ from the fields: ``keys`` (a field
+   written under another name), ``omit_default`` (left out when at its default),
+   ``computed`` (keys written from the value and ignored on read), ``inline`` (a dataclass
+   field whose keys are written at this level), ``spread`` (a mapping field whose items are
+   written at this level, and read back from the keys that are no field's), ``types`` (a
+   field's pydantic-ready type when its hint does not say how the file holds it), ``order``
+   (the file's order of the keys, when it is not the fields'). Register it with
+   :func:`layout` before the first :func:`record` of the class.
+2. The document is a :class:`Document`: its file name, the dataclass of the whole file (the
+   envelope too: ``format``, ``version`` and constant keys are fields with their defaults),
+   what to give instead of a bad file (the message's hint), and the ``format``/``version``
+   its reader checked before (checked the same way; None: not checked).
+3. Callers: ``DOC.dump(value)`` a JSON-ready dict (:func:`core.jsonio.to_json` writes it, the
+   one writer), ``DOC.load(data)`` the value (one-line InputError naming the document and the
+   key path), ``DOC.write(path, value)``, ``DOC.read(path)`` and ``DOC.json_schema()``.
+
+Example (gcps.json, :data:`tasks.io.products.GCPS`; ``GcpSet`` is the document's dataclass,
+its envelope fields with their defaults, then ``points: tuple[ControlPoint, ...]``)::
+
+    layout(ControlPoint, keys={"image_points": "images"})
+    GCPS = Document("gcps.json", GcpSet, hint="give the gcps.json written by gcpfree orient")
+    GCPS.write(out / "gcps.json", GcpSet(points=gcps))
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import enum
+import math
+import types
+import typing
+from collections.abc import Callable, Mapping
+from dataclasses import dataclass, field
+from functools import cache
+from pathlib import Path
+from typing import Annotated, Any, Generic, NotRequired, TypeVar, Union, get_args, get_origin
+
+import numpy as np
+from pydantic import (
+    AfterValidator,
+    BeforeValidator,
+    PlainSerializer,
+    PlainValidator,
+    TypeAdapter,
+    ValidationError,
+    WithJsonSchema,
+    WrapSerializer,
+)
+from typing_extensions import TypedDict  # pydantic needs this one before Python 3.12
+
+from core.errors import InputError
+
+T = TypeVar("T")
+
+
+# ------------------------------------------------------------------------------ leaf types
+
+
+def _number(v: Any) -> float:
+    """A JSON number as a float; null (a NaN the writer wrote) as NaN."""
+    if v is None:
+        return math.nan
+    if isinstance(v, bool) or not isinstance(v, (int, float)):
+        raise ValueError("must be a number")  # noqa: TRY004 - pydantic reports ValueErrors
+    return float(v)
+
+
+def _integer(v: Any) -> int:
+    if isinstance(v, bool) or not isinstance(v, int):
+        raise ValueError("must be an integer")  # noqa: TRY004 - as above
+    return v
+
+
+def _array(v: Any) -> np.ndarray:
+    """A (nested) list of numbers (nulls for NaN) as a float64 array."""
+    def ok(x: Any) -> bool:
+        if isinstance(x, list):
+            return all(ok(e) for e in x)
+        return x is None or (isinstance(x, (int, float)) and not isinstance(x, bool))
+
+    if isinstance(v, np.ndarray):
+        return v
+    if not isinstance(v, list) or not ok(v):
+        raise ValueError("must be a (nested) list of numbers")
+    try:
+        return np.array(v, dtype=np.float64)  # None -> nan
+    except ValueError:
+        raise ValueError("must be a rectangular nested list of numbers") from None
+
+
+NUMBER_SCHEMA = {"anyOf": [{"type": "number"}, {"type": "null"}],
+                 "description": "null stands for NaN"}
+Number = Annotated[float, PlainValidator(_number), WithJsonSchema(NUMBER_SCHEMA)]
+Integer = Annotated[int, PlainValidator(_integer), WithJsonSchema({"type": "integer"})]
+Array = Annotated[np.ndarray, PlainValidator(_array),
+                  PlainSerializer(lambda a: np.asarray(a).tolist()),
+                  WithJsonSchema({"type": "array", "description": "numbers, nested by axis"})]
+
+
+def _by_name(cls: type[enum.Enum]) -> Any:
+    def read(v: Any) -> enum.Enum:
+        if isinstance(v, cls):
+            return v
+        if not isinstance(v, str) or v not in cls.__members__:
+            raise ValueError(f"must be one of {list(cls.__members__)}")
+        return cls[v]
+
+    return Annotated[cls, PlainValidator(read), PlainSerializer(lambda e: e.name),
+                     WithJsonSchema({"enum": list(cls.__members__)})]
+
+
+# ------------------------------------------------------------------------------ records
+
+
+@dataclass(frozen=True)
+class Layout:
+    """Where a class's JSON differs from its fields (see the module docstring)."""
+
+    keys: Mapping[str, str] = field(default_factory=dict)
+    omit_default: tuple[str, ...] = ()
+    computed: Mapping[str, Callable[[Any], Any]] = field(default_factory=dict)
+    inline: tuple[str, ...] = ()
+    spread: str | None = None
+    types: Mapping[str, Any] = field(default_factory=dict)
+    order: tuple[str, ...] = ()
+
+
+_LAYOUTS: dict[type, Layout] = {}
+
+
+def layout(cls: type, **kw: Any) -> None:
+    """Register the :class:`Layout` of ``cls`` (before its first :func:`record`)."""
+    if cls in _LAYOUTS or cls in _RECORDED:
+        raise RuntimeError(f"{cls.__name__}'s layout is registered once, before its record")
+    _LAYOUTS[cls] = Layout(**kw)
+
+
+_RECORDED: set[type] = set()
+
+
+def shape(tp: Any) -> Any:
+    """The pydantic-ready type of a field's type hint ``tp``."""
+    origin, args = get_origin(tp), get_args(tp)
+    if tp is float:
+        return Number
+    if tp is int:
+        return Integer
+    if tp is np.ndarray or origin is np.ndarray:
+        return Array
+    if isinstance(tp, type) and issubclass(tp, enum.Enum):
+        return _by_name(tp)
+    if dataclasses.is_dataclass(tp):
+        return record(tp)
+    if origin in (Union, types.UnionType):
+        return Union[tuple(shape(a) for a in args)]  # noqa: UP007
+    if origin is tuple:
+        if len(args) == 2 and args[1] is Ellipsis:
+            return tuple[shape(args[0]), ...]
+        return tuple[tuple(shape(a) for a in args)] if args else tuple
+    if origin in (Mapping, dict, typing.Mapping):
+        return dict[shape(args[0]), shape(args[1])] if args else dict
+    if origin is list:
+        return list[shape(args[0])]
+    if origin is Annotated:
+        return shape(args[0])
+    return tp  # str, bool, Any, Literal[...]
+
+
+_KEYS: dict[type, tuple[str, ...]] = {}
+
+
+@cache
+def record(cls: type) -> Any:
+    """The pydantic-ready type of the dataclass ``cls``: a TypedDict of its init fields (keys
+    and presence as its :class:`Layout` says) read into ``cls(**fields)`` and written from the
+    instance."""
+    _RECORDED.add(cls)
+    lay = _LAYOUTS.get(cls, Layout())
+    hints = typing.get_type_hints(cls)
+    init = [f for f in dataclasses.fields(cls) if f.init]
+    key = {f.name: lay.keys.get(f.name, f.name) for f in init}
+    defaults = {f.name: (f.default if f.default is not dataclasses.MISSING else f.default_factory())
+                for f in init if f.default is not dataclasses.MISSING
+                or f.default_factory is not dataclasses.MISSING}
+    items = {}
+    for f in init:
+        tp = lay.types.get(f.name) or shape(hints[f.name])
+        items[key[f.name]] = NotRequired[tp] if f.name in defaults else tp
+    for k in lay.computed:
+        items[k] = NotRequired[Any]
+    body = TypedDict(cls.__name__, items)  # type: ignore[operator]
+    # the keys of this level of the file: an inlined field's own, a spread field's none
+    inlined = {key[n]: _KEYS[hints[n]] if hints[n] in _KEYS else _keys_of(hints[n])
+               for n in lay.inline}
+    spread = key[lay.spread] if lay.spread else None
+    own = tuple(k for f in init for k in inlined.get(key[f.name], (key[f.name],))
+                if k != spread) + tuple(lay.computed)
+    _KEYS[cls] = own
+
+    def gather(d: Any) -> Any:
+        """The file's level as the TypedDict's: inlined keys into their field, the keys that
+        are no field's into the spread field."""
+        if not isinstance(d, dict) or not (inlined or spread):
+            return d
+        out = {k: v for k, v in d.items() if not any(k in ks for ks in inlined.values())}
+        for f_key, ks in inlined.items():
+            out[f_key] = {k: d[k] for k in ks if k in d}
+        if spread:
+            out = {k: v for k, v in out.items() if k in own or k in inlined}
+            out[spread] = {k: v for k, v in d.items() if k not in own}
+        return out
+
+    def build(d: Mapping[str, Any]) -> Any:
+        return cls(**{f.name: d[key[f.name]] for f in init if key[f.name] in d})
+
+    def write(obj: Any, handler: Callable[[Any], Any]) -> Any:
+        if not isinstance(obj, cls):
+            return handler(obj)
+        d = {key[f.name]: getattr(obj, f.name) for f in init
+             if not (f.name in lay.omit_default
+                     and _equal(getattr(obj, f.name), defaults[f.name]))}
+        out = handler(d)
+        flat: dict[str, Any] = {}
+        for k, v in out.items():
+            if k in inlined or k == spread:
+                flat.update(v)
+            else:
+                flat[k] = v
+        flat.update({k: fn(obj) for k, fn in lay.computed.items()})
+        return {k: flat[k] for k in lay.order if k in flat} | flat if lay.order else flat
+
+    return Annotated[body, BeforeValidator(gather), AfterValidator(build), WrapSerializer(write)]
+
+
+def _keys_of(cls: type) -> tuple[str, ...]:
+    record(cls)
+    return _KEYS[cls]
+
+
+def _equal(a: Any, b: Any) -> bool:
+    try:
+        return bool(a == b)
+    except ValueError:  # arrays
+        return bool(np.array_equal(a, b))
+
+
+# ------------------------------------------------------------------------------ documents
+
+
+def _loc(loc: tuple[Any, ...]) -> str:
+    # pydantic puts the name of a function validator or union member in the path: keep keys
+    parts = [str(p) for p in loc if not (isinstance(p, str) and ("[" in p or p.startswith(
+        ("function-", "nullable", "tuple", "list", "dict"))))]
+    return ".".join(parts)
+
+
+def _message(err: ValidationError) -> str:
+    """The first error of ``err`` in one line: the key path, what it must be, what it was."""
+    e = err.errors(include_url=False)[0]
+    where = _loc(tuple(e["loc"]))
+    what = e["msg"].removeprefix("Value error, ").replace("Input should be", "must be")
+    ctx_error = (e.get("ctx") or {}).get("error")
+    if isinstance(ctx_error, InputError):
+        return str(ctx_error)
+    if e["type"] == "missing":
+        return f"key '{where}' is missing"
+    if e["type"] == "literal_error":
+        return f"key '{where}' {what}, got {e['input']!r:.80}"
+    got = e.get("input")
+    return f"key '{where or '<root>'}' {what[:1].lower()}{what[1:]}, got {got!r:.80}"
+
+
+@dataclass(frozen=True)
+class Document(Generic[T]):
+    """One JSON document: its file ``name``, the type of its value (a dataclass whose fields
+    are the document's keys, envelope included: ``format``, ``version`` and constant keys are
+    fields with their default), the message's ``hint`` (what to give instead), and the
+    envelope checks its reader made before (``format`` and ``version``, None: not checked)."""
+
+    name: str
+    value_type: Any
+    hint: str
+    format: str | None = None
+    version: int | None = None
+
+    @property
+    def adapter(self) -> TypeAdapter:
+        return _adapter(self.value_type)
+
+    def dump(self, value: T) -> dict[str, Any]:
+        """The document as JSON-ready values (NaN still NaN: :func:`core.jsonio.to_json`
+        writes it as null)."""
+        return _plain(self.adapter.dump_python(value, mode="python"))
+
+    def load(self, data: Any, what: str | None = None) -> T:
+        """The value of a parsed document; InputError naming ``what`` (default the
+        document's name) and the key that is wrong."""
+        what = what or self.name
+        if not isinstance(data, dict):
+            raise InputError(f"{what}: not a JSON object; {self.hint}")
+        if self.format is not None and data.get("format") != self.format:
+            raise InputError(f"{what}: key 'format' is {data.get('format')!r:.40}, not "
+                             f"{self.format!r}; {self.hint}")
+        if self.version is not None and data.get("version") != self.version:
+            raise InputError(f"{what}: version {data.get('version')!r:.40} is not "
+                             f"{self.version}; {self.hint}")
+        try:
+            return self.adapter.validate_python(data)
+        except ValidationError as exc:
+            raise InputError(f"{what}: {_message(exc)}; {self.hint}") from None
+
+    def read(self, path: str | Path) -> T:
+        from tasks.io.rasters import read_json
+
+        return self.load(read_json(path, self.name, self.hint), f"{self.name} {path}")
+
+    def write(self, path: str | Path, value: T) -> Path:
+        from tasks.io.rasters import atomic_write_json
+
+        return atomic_write_json(Path(path), self.dump(value))
+
+    def json_schema(self) -> dict[str, Any]:
+        """The JSON Schema of the document."""
+        return {"title": self.name, **self.adapter.json_schema()}
+
+
+def _plain(v: Any) -> Any:
+    """pydantic's python dump with the tuples it keeps as lists (json_ready would turn them
+    too; here so that a dumped document equals what the hand-written writers returned)."""
+    if isinstance(v, dict):
+        return {k: _plain(x) for k, x in v.items()}
+    if isinstance(v, (list, tuple)):
+        return [_plain(x) for x in v]
+    return v
+
+
+@cache
+def _adapter(value_type: Any) -> TypeAdapter:
+    return TypeAdapter(shape(value_type))
+
+
+__all__ = ["Array", "Document", "Integer", "Layout", "Number", "layout", "record", "shape"]
