@@ -67,7 +67,11 @@ def options(parser: argparse.ArgumentParser) -> list[Option]:
         default = ""
         if action.default not in (None, False, argparse.SUPPRESS) and action.nargs != 0:
             default = str(action.default)
-        text = formatter._expand_help(action) if action.help else ""
+        try:
+            text = formatter._expand_help(action) if action.help else ""
+        except (TypeError, ValueError, KeyError) as exc:  # `gcpfree CMD --help` fails too
+            raise RuntimeError(f"{parser.prog} {'/'.join(action.option_strings)}: its help text "
+                               f"does not format ({exc}); a literal % is written %%") from exc
         out.append(Option(flags, values, default, bool(action.required), " ".join(text.split())))
     return out
 

@@ -7,10 +7,12 @@ Where the schema comes from, first found wins:
 1. the serialisation layer's own JSON schemas, :data:`SCHEMA_MODULE` (``tasks.io.schemas``),
    when it exists: a mapping ``SCHEMAS`` or a function ``schemas()`` giving ``name -> JSON
    schema``, looked up under any of :attr:`Product.keys`;
-2. else the typed value the code reads the document into (:attr:`Product.typed`, a frozen
+2. else the layer's documents themselves, the objects of :data:`DOCUMENT_MODULE`
+   (``tasks.io.products``) with a ``name`` (the file's) and a ``json_schema()``;
+3. else the typed value the code reads the document into (:attr:`Product.typed`, a frozen
    dataclass), turned into a JSON schema by :func:`dataclass_schema` from its fields and type
    hints: field names and types, the class docstrings as descriptions;
-3. else (a document the code still writes as a plain dict) no generated schema: the page says
+4. else (a document the code still writes as a plain dict) no generated schema: the page says
    so, and its notes describe the keys.
 
 Either way one renderer (:func:`render`) turns the JSON schema into tables, so pointing the
@@ -32,6 +34,7 @@ from pathlib import Path
 from typing import Any
 
 SCHEMA_MODULE = "tasks.io.schemas"
+DOCUMENT_MODULE = "tasks.io.products"
 
 
 @dataclass(frozen=True)
@@ -80,14 +83,29 @@ PRODUCTS = (
 # ---------------------------------------------------------------------------- sources
 
 
-def layer_schemas() -> Mapping[str, Any] | None:
-    """The serialisation layer's schemas (name -> JSON schema), or None while it is absent."""
+def _optional_module(name: str) -> Any:
     try:
-        module = importlib.import_module(SCHEMA_MODULE)
+        return importlib.import_module(name)
     except ModuleNotFoundError as exc:
-        if exc.name and SCHEMA_MODULE.startswith(exc.name):
+        if exc.name and name.startswith(exc.name):
             return None
         raise
+
+
+def layer_schemas() -> Mapping[str, Any] | None:
+    """The serialisation layer's schemas (name -> JSON schema), or None while it is absent:
+    :data:`SCHEMA_MODULE`'s, else those of :data:`DOCUMENT_MODULE`'s documents."""
+    module = _optional_module(SCHEMA_MODULE)
+    if module is None:
+        docs = _optional_module(DOCUMENT_MODULE)
+        if docs is None:
+            return None
+        found = {}
+        for value in vars(docs).values():
+            if (not isinstance(value, type) and isinstance(getattr(value, "name", None), str)
+                    and callable(getattr(value, "json_schema", None))):
+                found[value.name] = value.json_schema()
+        return found or None
     found = getattr(module, "SCHEMAS", None)
     if found is None and callable(getattr(module, "schemas", None)):
         found = module.schemas()
@@ -97,12 +115,15 @@ def layer_schemas() -> Mapping[str, Any] | None:
     return found
 
 
+LAYER = "the serialisation layer's JSON schema of the document (`tasks.io.documents`)"
+
+
 def schema_of(product: Product, layer: Mapping[str, Any] | None) -> tuple[dict | None, str]:
     """The product's JSON schema and where it came from (a sentence for the page)."""
     if layer is not None:
         for key in product.keys:
             if key in layer:
-                return dict(layer[key]), f"the serialisation layer's schema (`{SCHEMA_MODULE}`)"
+                return dict(layer[key]), LAYER
     if product.typed:
         module_name, _, cls_name = product.typed.partition(":")
         cls = getattr(importlib.import_module(module_name), cls_name)
@@ -282,7 +303,9 @@ def page(product: Product, layer: Mapping[str, Any] | None, notes: Path | None) 
                   "```", ""]
     else:
         where = ""
-        if product.typed_at:
+        if source == LAYER:
+            pass
+        elif product.typed_at:
             where = (f" It describes each item of `{product.typed_at.rstrip('[]')}`"
                      if product.typed_at.endswith("[]") else
                      f" It describes each of the document's {product.typed_at}")
