@@ -36,9 +36,7 @@ by :mod:`core.heights`, points placed on the DEM's grid by :mod:`core.grid_point
 from __future__ import annotations
 
 import math
-from collections.abc import Mapping
 from dataclasses import dataclass
-from typing import Any
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
@@ -95,14 +93,6 @@ class StatsConfig:
 # ---------------------------------------------------------------------------- results
 
 
-def _num(v: float) -> float | None:
-    return None if not math.isfinite(v) else float(v)
-
-
-def _unnum(v: Any) -> float:
-    return math.nan if v is None else float(v)
-
-
 @dataclass(frozen=True)
 class DzStats:
     """Statistics of ``dz = DEM - reference`` for one class (metres; NaN when undefined).
@@ -128,28 +118,8 @@ class DzStats:
     method: str
     resolution_m: float
 
+    #: eval.json's keys of the ``*_m`` fields (:data:`tasks.io.products.EVALUATION`)
     KEYS = ("mean", "std", "rmse", "median", "nmad", "le68", "le90", "le95", "min", "max")
-
-    def to_dict(self) -> dict[str, Any]:
-        """JSON-ready, with the keys of eval.json (``count``, ``mean``, ``std``, ``rmse``,
-        ``nmad``, ``le68``, ``le90``...); NaN becomes null."""
-        d: dict[str, Any] = {"count": self.count}
-        d.update({k: _num(getattr(self, f"{k}_m")) for k in self.KEYS})
-        d["le68_ci"] = [_num(v) for v in self.le68_ci_m]
-        d.update(ci_level=self.ci_level, method=self.method, resolution_m=self.resolution_m,
-                 unit="m")
-        return d
-
-    @classmethod
-    def from_dict(cls, d: Mapping[str, Any]) -> DzStats:
-        try:
-            lo, hi = d["le68_ci"]
-            return cls(count=int(d["count"]), **{f"{k}_m": _unnum(d[k]) for k in cls.KEYS},
-                       le68_ci_m=(_unnum(lo), _unnum(hi)), ci_level=float(d["ci_level"]),
-                       method=str(d["method"]), resolution_m=float(d["resolution_m"]))
-        except (KeyError, TypeError, ValueError) as exc:
-            raise InputError(f"statistics record lacks or mistypes {exc}; give a dict written "
-                             "by DzStats.to_dict") from exc
 
 
 # ---------------------------------------------------------------------------- order statistics

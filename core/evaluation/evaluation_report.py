@@ -3,7 +3,7 @@ evaluation against lidar; the statistics themselves are :mod:`core.evaluation.ev
 
 - The report's schema: :class:`EvaluationReport` and its parts (the DEM, the lidar file and the
   land cover as read, :class:`PointCounts`, the optional mask and GCP checks), each a frozen
-  dataclass with its ``to_dict``/``from_dict``.
+  dataclass; :data:`tasks.io.products.EVALUATION` writes and reads them as eval.json.
 - The points: which are evaluated (:func:`select_points`), which a sound file cannot hold
   (:func:`refused_points`: outside the header's box, of a reserved class), where each went
   (:class:`PointTally`), the names of the classes (:func:`class_tables`), the mask raster's
@@ -15,17 +15,14 @@ No I/O here: ``tasks.evaluation.lidar`` reads the files and calls these function
 from __future__ import annotations
 
 from collections.abc import Iterable, Mapping, Sequence
-from dataclasses import MISSING, asdict, dataclass, fields
-from typing import Any
+from dataclasses import dataclass
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from core.errors import InputError
 from core.evaluation.evaluation import DzAccumulator, DzStats, StatsConfig
 from core.geoid import GeoidGrid
 from core.heights import HeightFrame, height_difference_m
-from core.jsonio import json_ready, to_json
 from core.points import GeoPoint
 
 #: ASPRS classes that are not a surface: 7 low point (noise), 18 high noise
@@ -60,17 +57,6 @@ REPORT_FORMAT = "gcpfree.evaluation"
 # ---------------------------------------------------------------------------- the report
 
 
-def _from_flat(cls: type, d: Mapping[str, Any]) -> Any:
-    """A flat dataclass from its ``asdict``; lists become tuples; a field with a default may be
-    missing (an eval.json written before the field existed)."""
-    try:
-        return cls(**{f.name: tuple(d[f.name]) if isinstance(d[f.name], list) else d[f.name]
-                      for f in fields(cls) if f.name in d or f.default is MISSING})
-    except (KeyError, TypeError) as exc:
-        raise InputError(f"{cls.__name__} record lacks or mistypes {exc}; give an eval.json "
-                         "written by gcpfree evaluate") from exc
-
-
 @dataclass(frozen=True)
 class CrsInfo:
     """A CRS as the report states it: name, authority code when known, WKT."""
@@ -99,11 +85,6 @@ class LidarInfo:
     point_format: int
     bounds: tuple[float, float, float, float]
 
-    @classmethod
-    def from_dict(cls, d: Mapping[str, Any]) -> LidarInfo:
-        return _from_flat(cls, {**d, "crs": _from_flat(CrsInfo, d["crs"])})
-
-
 @dataclass(frozen=True)
 class DemInfo:
     """The DEM and how its heights were read; ``transform`` the GDAL affine (a..f)."""
@@ -120,11 +101,6 @@ class DemInfo:
     transform: tuple[float, ...]
     bounds: tuple[float, float, float, float]
 
-    @classmethod
-    def from_dict(cls, d: Mapping[str, Any]) -> DemInfo:
-        return _from_flat(cls, {**d, "crs": _from_flat(CrsInfo, d["crs"])})
-
-
 @dataclass(frozen=True)
 class LandcoverInfo:
     """The land-cover raster sampled (nearest) at the points and the names of its codes."""
@@ -134,15 +110,6 @@ class LandcoverInfo:
     names: tuple[tuple[int, str], ...]
     names_source: str
     nodata: int | None
-
-    def to_dict(self) -> dict[str, Any]:
-        return {**asdict(self), "names": {str(c): n for c, n in self.names}}
-
-    @classmethod
-    def from_dict(cls, d: Mapping[str, Any]) -> LandcoverInfo:
-        names = tuple((int(c), str(n)) for c, n in d["names"].items())
-        return _from_flat(cls, {**d, "crs": _from_flat(CrsInfo, d["crs"]), "names": names})
-
 
 @dataclass(frozen=True)
 class PointCounts:
@@ -194,19 +161,10 @@ class GcpCheck:
     outside_dem: int
     stats: DzStats
 
-    def to_dict(self) -> dict[str, Any]:
-        return {"path": self.path, "points": self.points, "outside_dem": self.outside_dem,
-                "rms_m": json_ready(self.stats.rmse_m), "stats": self.stats.to_dict()}
-
-    @classmethod
-    def from_dict(cls, d: Mapping[str, Any]) -> GcpCheck:
-        return cls(str(d["path"]), int(d["points"]), int(d["outside_dem"]),
-                   DzStats.from_dict(d["stats"]))
-
-
 @dataclass(frozen=True)
 class EvaluationReport:
-    """Everything ``eval.json`` holds (:meth:`to_dict`): the statistics of ``dz = DEM - lidar``
+    """Everything ``eval.json`` holds (written and read by :data:`tasks.io.products.EVALUATION`,
+    which adds the file's format, version, ``dz`` and ``inputs``): the statistics of ``dz = DEM - lidar``
     per class (``classes``: LAS code as a string, or land-cover name) and overall (``all``),
     how the inputs were read, where the points went, and the optional mask and GCP checks."""
 
@@ -224,54 +182,6 @@ class EvaluationReport:
     stats_config: StatsConfig
     mask: MaskSummary | None = None
     gcps: GcpCheck | None = None
-
-    def to_dict(self) -> dict[str, Any]:
-        return {
-            "format": REPORT_FORMAT, "version": 1,
-            "dz": "DEM - lidar, metres; the DEM interpolated bilinearly at each lidar point",
-            "inputs": {"dem": self.dem.path, "lidar": self.lidar.path,
-                       "landcover": self.landcover.path if self.landcover else None,
-                       "mask": self.mask.path if self.mask else None,
-                       "gcps": self.gcps.path if self.gcps else None},
-            "heights_compared": self.heights_compared,
-            "transformation": self.transformation,
-            "dem": asdict(self.dem), "lidar": asdict(self.lidar),
-            "landcover": self.landcover.to_dict() if self.landcover else None,
-            "classes_from": self.classes_from,
-            "class_filter": list(self.class_filter) if self.class_filter else None,
-            "points": {**asdict(self.points), "refused_pct": self.points.refused_pct},
-            "classes": {k: v.to_dict() for k, v in self.classes.items()},
-            "class_labels": dict(self.class_labels),
-            "all": self.all.to_dict(),
-            "statistics": {**asdict(self.stats_config), "std": "sample (n - 1)",
-                           "percentiles": "numpy linear", "nmad": "1.4826 median |dz - median|",
-                           "le68_ci": "percentile bootstrap (order statistics), seeded"},
-            "mask": asdict(self.mask) if self.mask else None,
-            "gcps": self.gcps.to_dict() if self.gcps else None,
-        }
-
-    @classmethod
-    def from_dict(cls, d: Mapping[str, Any]) -> EvaluationReport:
-        if d.get("format") != REPORT_FORMAT:
-            raise InputError(f"not an evaluation report (format {d.get('format')!r}); give the "
-                             "eval.json written by gcpfree evaluate")
-        st = {f.name: d["statistics"][f.name] for f in fields(StatsConfig)}
-        return cls(
-            dem=DemInfo.from_dict(d["dem"]), lidar=LidarInfo.from_dict(d["lidar"]),
-            landcover=LandcoverInfo.from_dict(d["landcover"]) if d["landcover"] else None,
-            classes_from=d["classes_from"],
-            class_filter=tuple(d["class_filter"]) if d["class_filter"] else None,
-            heights_compared=d["heights_compared"], transformation=d["transformation"],
-            points=_from_flat(PointCounts, d["points"]),
-            classes={k: DzStats.from_dict(v) for k, v in d["classes"].items()},
-            class_labels=dict(d["class_labels"]), all=DzStats.from_dict(d["all"]),
-            stats_config=StatsConfig(**st),
-            mask=_from_flat(MaskSummary, d["mask"]) if d["mask"] else None,
-            gcps=GcpCheck.from_dict(d["gcps"]) if d["gcps"] else None,
-        )
-
-    def to_json(self) -> str:
-        return to_json(self.to_dict(), indent=1)
 
 
 # ---------------------------------------------------------------------------- classes and points

@@ -219,17 +219,13 @@ def read_evaluation_stats(path: Path):  # -> dict[str, DzStats] | None
     """The statistics of an ``eval.json`` of ``gcpfree evaluate``, per class and ``all``
     (:class:`core.evaluation.DzStats`, as the evaluation report writes them), or None when
     it is missing or not one."""
-    from core.evaluation.evaluation import DzStats
-    from core.evaluation.evaluation_report import REPORT_FORMAT
+    from tasks.io.products import EVALUATION
 
     try:
-        doc = _read_json(path)
-        if not isinstance(doc, dict) or doc.get("format") != REPORT_FORMAT:
-            return None
-        return {**{str(k): DzStats.from_dict(v) for k, v in doc["classes"].items()},
-                "all": DzStats.from_dict(doc["all"])}
-    except (GcpFreeError, KeyError, TypeError, ValueError, AttributeError):
+        report = EVALUATION.load(_read_json(path), str(path))
+    except GcpFreeError:
         return None
+    return {**report.classes, "all": report.all}
 
 
 def publish_artifacts(out: Path, pair_id: str) -> None:

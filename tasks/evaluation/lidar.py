@@ -56,10 +56,11 @@ from core.evaluation.evaluation_report import (
     select_points,
 )
 from core.heights import Z_UNITS, HeightFrame, height_difference_m
-from core.jsonio import parse_json
+from core.jsonio import parse_json, to_json
 from core.points import GeoPoint
 from tasks.io.geoid import load_geoid
 from tasks.io.lidar import LidarSource, inspect_lidar, lidar_chunks
+from tasks.io.products import EVALUATION
 from tasks.io.rasters import atomic_write_text
 from tasks.io.rasters_at_points import (
     RasterSource,
@@ -318,6 +319,6 @@ def evaluate_lidar(options: EvaluationOptions) -> EvaluationReport:
 def write_evaluation(report: EvaluationReport, out: Path) -> Path:
     """Write eval.json atomically."""
     try:
-        return atomic_write_text(out, report.to_json() + "\n")
+        return atomic_write_text(out, to_json(EVALUATION.dump(report), indent=1) + "\n")
     except OSError as exc:
         raise InputError(f"cannot write {out}: {exc.strerror}; choose another --out") from exc

@@ -34,6 +34,7 @@ from tasks.evaluation.lidar import (
 )
 from tasks.io.geoid import EGM96_GTX
 from tasks.io.lidar import inspect_lidar
+from tasks.io.products import EVALUATION
 from tasks.io.rasters_at_points import parse_landcover_names
 
 DATA = Path(__file__).resolve().parents[1] / "data"
@@ -325,7 +326,7 @@ def test_the_task_and_the_json(utm_scene, tmp_path):
     assert d["gcps"]["rms_m"] == pytest.approx(0.5, abs=1e-4)
     assert d["lidar"]["vertical"] == "egm96" and d["points"]["outside_dem"] == s["out"].sum()
     assert d["statistics"]["seed"] == 3
-    assert EvaluationReport.from_dict(d).classes["2"] == report.classes["2"]
+    assert EVALUATION.load(d).classes["2"] == report.classes["2"]
 
 
 def test_a_lidar_without_crs_asks_for_lidar_crs(utm_scene, tmp_path):

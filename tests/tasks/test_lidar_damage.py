@@ -30,11 +30,13 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
 from core.errors import GcpFreeError, InputError
-from core.evaluation.evaluation_report import MAX_REFUSED_SHARE, EvaluationReport, refused_points
+from core.evaluation.evaluation_report import MAX_REFUSED_SHARE, refused_points
+from core.jsonio import to_json
 from flows import cli
 from tasks.evaluation.lidar import EvaluationOptions, evaluate_plan, plan_evaluation
 from tasks.io import lidar as lidar_io
 from tasks.io.lidar import inspect_lidar, lidar_chunks
+from tasks.io.products import EVALUATION
 from tests.tasks.test_evaluate import AUTZEN, write_las, write_raster
 
 # (byte offset, XOR mask) in autzen_trim.laz (point data at byte 2144, chunk table at 603333)
@@ -333,7 +335,7 @@ def test_the_evaluation_reports_the_refused_share(tmp_path, capsys):
     assert (p.read, p.refused_bounds, p.refused_class, p.evaluated) == (n, 1, 1, n - 2)
     assert p.read == (p.refused + p.withheld + p.excluded_class + p.outside_dem + p.on_void
                       + p.evaluated)
-    d = report.to_dict()
+    d = EVALUATION.dump(report)
     assert d["points"]["refused_pct"] == pytest.approx(100 * 2 / n)
     err = capsys.readouterr().err.splitlines()
     assert err == [(f"lidar file {path}: 1 of {n} points (0.003 %) left out, outside the "
@@ -343,4 +345,4 @@ def test_the_evaluation_reports_the_refused_share(tmp_path, capsys):
     # an eval.json written before the refused counts existed still reads
     for key in ("refused_bounds", "refused_class", "refused_pct"):
         del d["points"][key]
-    assert EvaluationReport.from_dict(json.loads(json.dumps(d))).points.refused == 0
+    assert EVALUATION.load(json.loads(to_json(d))).points.refused == 0

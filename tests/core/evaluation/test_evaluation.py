@@ -264,14 +264,18 @@ def _report() -> EvaluationReport:
 
 
 def test_report_round_trips_through_json():
+    from core.jsonio import to_json
+    from tasks.io.products import EVALUATION
+
     report = _report()
-    d = json.loads(report.to_json())
+    d = json.loads(to_json(EVALUATION.dump(report)))
     assert set(d["classes"]) == {"2", "6"}
     for s in (*d["classes"].values(), d["all"]):
         assert {"count", "mean", "std", "rmse", "nmad", "le68", "le90", "le68_ci"} <= set(s)
     assert d["gcps"]["rms_m"] is None and d["gcps"]["stats"]["mean"] is None  # NaN -> null
-    back = EvaluationReport.from_dict(d)
-    assert json.loads(back.to_json()) == d
+    back = EVALUATION.load(d)
+    assert json.loads(to_json(EVALUATION.dump(back))) == d
     assert back.classes["2"] == report.classes["2"] and back.dem == report.dem
-    with pytest.raises(InputError, match="evaluation report"):
-        EvaluationReport.from_dict({"format": "other"})
+    assert back.landcover == report.landcover and back.class_filter == (2, 6)
+    with pytest.raises(InputError, match="eval.json: key 'format' is 'other'"):
+        EVALUATION.load({"format": "other"})
