@@ -29,6 +29,7 @@ exclude_patterns = ["_ext", "reference/notes", "validation/generated/*.md", "stu
 myst_enable_extensions = ["colon_fence", "deflist", "dollarmath", "fieldlist"]
 myst_heading_anchors = 3
 suppress_warnings: list[str] = []
+smartquotes = False  # "--out" stays two hyphens, as typed
 nitpicky = False
 
 html_theme = "furo"

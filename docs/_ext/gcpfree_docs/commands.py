@@ -116,12 +116,15 @@ def page(name: str, parser: argparse.ArgumentParser, summary: str, module_name: 
              "```text", usage(parser), "```", ""]
     if parser.description:
         lines += [" ".join(parser.description.split()), ""]
-    lines += ["## Options", "", "| option | values | default | what it does |", "|---|---|---|---|"]
-    for opt in options(parser):
-        flag = f"`{_cell(opt.flags)}`" + (" (required)" if opt.required else "")
-        values = f"`{_cell(opt.values)}`" if opt.values else ""
-        default = f"`{_cell(opt.default)}`" if opt.default else ""
-        lines.append(f"| {flag} | {values} | {default} | {_cell(opt.help)} |")
+    lines += ["## Options", ""]
+    for opt in options(parser):  # a definition list: narrow screens keep the flags whole
+        flags = ", ".join(f"`{f}`" for f in opt.flags.split(", "))
+        lines.append(flags + (" (required)" if opt.required else ""))
+        text = opt.help or "(no help text)"
+        extra = [f"one of `{opt.values}`" if opt.values else "",
+                 f"default `{opt.default}`" if opt.default else ""]
+        extra = "; ".join(e for e in extra if e)
+        lines += [f": {text}" + (f" ({extra})" if extra else ""), ""]
     lines += ["", "## In the code", "",
               f"`{module_name}` (`add_parser`, `run`), registered in `flows.cli.COMMAND_MODULES`.",
               "", module_docstring(module_name), ""]
