@@ -9,8 +9,14 @@ VERTICALS = ("auto", "ellipsoidal", "egm96")  # core.heights.VERTICAL_CHOICES (n
 # the parser is built without numpy, so --help answers at once)
 TIE_MEASURES = ("auto", "ncc", "orientation")  # tasks.io.pair.TIE_MEASURES, likewise
 VERTICAL_HELP = ("heights of REF: auto (default) reads its vertical_datum tag, then its CRS's "
-                 "vertical part, then an SRTM name (.hgt, N44E005.tif: EGM96); a DEM none of "
-                 "these describe is refused: say egm96 or ellipsoidal")
+                 "vertical part, then a product's name (SRTM .hgt, N44E005.tif, NASADEM: "
+                 "EGM96; Copernicus_DSM_*: EGM2008); a DEM none of these describe is refused: "
+                 "say egm96 or ellipsoidal, or name its geoid with --geoid")
+GEOID_HELP = ("the geoid grid the DEM's orthometric heights refer to when not EGM96, any grid "
+              "GDAL reads (GTX, or a GeoTIFF such as PROJ's us_nga_egm08_25.tif for "
+              "Copernicus DEM's EGM2008 heights: https://cdn.proj.org/us_nga_egm08_25.tif); "
+              "given for SRTM tiles it replaces the bundled EGM96 grid. Without it EGM2008 "
+              "heights go through PROJ's own grid when PROJ has it, else are refused")
 
 
 class OneLineParser(argparse.ArgumentParser):
@@ -51,16 +57,24 @@ def add_pair_arguments(p: argparse.ArgumentParser, *, right_help: str = "right i
                         "cross-correlation, the more precise on one date")
 
 
+DEM_DIR_HELP = ("folder of DEM tiles (SRTM, NASADEM, Copernicus GLO-30/GLO-90 as named when "
+                "distributed, or tagged lon/lat GeoTIFFs): a reference is prepared over the "
+                "pair on their own lattice (--srtm-dir is the same option)")
+
+
 def add_reference_arguments(p: argparse.ArgumentParser, *, use: str) -> None:
-    """``--reference | --srtm-dir`` and ``--reference-vertical``; ``use`` says what for."""
+    """``--reference | --dem-dir`` (alias ``--srtm-dir``), ``--reference-vertical`` and
+    ``--geoid``; ``use`` says what for."""
     ref = p.add_mutually_exclusive_group()
     ref.add_argument("--reference", type=Path, default=None, metavar="REF",
                      help="reference DEM in EPSG:4326 (prepare-reference output or SRTM .hgt)"
-                          f": {use}")
-    ref.add_argument("--srtm-dir", type=Path, default=None, metavar="DIR",
-                     help="folder of SRTM tiles: a reference is prepared over the pair")
+                          f": {use}; with --geoid, a reference is prepared from it over the "
+                          "pair")
+    ref.add_argument("--dem-dir", "--srtm-dir", dest="srtm_dir", type=Path, default=None,
+                     metavar="DIR", help=DEM_DIR_HELP)
     p.add_argument("--reference-vertical", choices=VERTICALS,
                    default="auto", help=VERTICAL_HELP)
+    p.add_argument("--geoid", type=Path, default=None, metavar="GRID", help=GEOID_HELP)
 
 
 def add_orientation_arguments(p: argparse.ArgumentParser) -> None:
@@ -134,8 +148,8 @@ def check_orientation_arguments(args: argparse.Namespace, command: str,
     from tasks.absolute.orientation import read_checkpoints
 
     if args.reference is None and args.srtm_dir is None:
-        raise InputError(f"gcpfree {command} needs a reference DEM: give --srtm-dir or "
-                         "--reference")
+        raise InputError(f"gcpfree {command} needs a reference DEM: give --dem-dir (or "
+                         "--srtm-dir) or --reference")
     if args.checkpoints is not None:
         read_checkpoints(args.checkpoints)
     if args.min_windows < 1:
@@ -165,12 +179,12 @@ def _check_scene_size(surface, pair, left, right) -> None:  # PairInputs, Loaded
 
         cell = read_reference(pair.reference, box, "ellipsoidal").cell_size_m()
     else:
-        from tasks.io.srtm import find_tiles
+        from tasks.io.dem_tiles import find_tiles
 
-        tiles = find_tiles(pair.srtm_dir, box, allow_missing=True)
+        tiles = find_tiles(pair.dem_source, box, allow_missing=True)
         m_lon, m_lat = metres_per_degree(0.5 * (box.lat_min + box.lat_max))
-        res = min(t.res_deg for t in tiles)
-        cell = float(min(res * m_lon, res * m_lat))
+        cell = float(min(min(t.res_lon_deg for t in tiles) * m_lon,
+                         min(t.res_lat_deg for t in tiles) * m_lat))
     areas = []
     for h in np.linspace(*ANY_TERRAIN_H_M, 20):
         try:
@@ -201,8 +215,9 @@ def check_pair(args: argparse.Namespace):  # -> tuple[PairInputs, LoadedModel, L
         # refused here in one line, or said before the long run starts
         print(f"reference      {pair.reference}: "
               f"{dem_datum(pair.reference, pair.reference_vertical).describe()}")
-    if pair.srtm_dir is not None and not pair.srtm_dir.is_dir():
-        raise InputError(f"SRTM directory {pair.srtm_dir} does not exist")
+    if pair.srtm_dir is not None and not pair.srtm_dir.exists():
+        raise InputError(f"DEM tile folder {pair.srtm_dir} does not exist; give --dem-dir (or "
+                         "--srtm-dir) a folder of tiles")
     from core.sensors.footprint import ANY_TERRAIN_H_M
     from tasks.relative.orientation import pair_box
 
@@ -212,14 +227,15 @@ def check_pair(args: argparse.Namespace):  # -> tuple[PairInputs, LoadedModel, L
         from tasks.io.dem import read_reference
 
         read_reference(pair.reference, pair_box(left, right, h_range), "ellipsoidal")
-    if pair.srtm_dir is not None:  # the tiles that would be used: EGM96 as SRTM is
-        from tasks.io.dem import check_srtm_tiles
-        from tasks.io.srtm import find_tiles
+    if pair.srtm_dir is not None:  # the tiles that would be used, their datum and geoid
+        from tasks.io.geoid import read_geoid
+        from tasks.io.reference import locate_tiles
 
-        check_srtm_tiles(find_tiles(pair.srtm_dir, pair_box(left, right, h_range),
-                                    allow_missing=True))
-        print(f"reference      prepared from the SRTM tiles of {pair.srtm_dir}: EGM96 "
-              "orthometric heights, converted with h = H + N")
+        box = pair_box(left, right, h_range)
+        tiles = locate_tiles.fn(pair.dem_source, box, True)
+        if tiles.datum.geoid is not None:  # type: ignore[union-attr]
+            read_geoid(tiles.datum.geoid, box)  # type: ignore[union-attr]
+        print(f"reference      prepared from {pair.srtm_dir}: {tiles.describe()}")
     return pair, left, right
 
 

@@ -1,12 +1,14 @@
 """Reference DEMs read as WGS84 ellipsoidal heights on a lon/lat grid (:class:`core.dem.GeoDEM`).
 
 A window of any lon/lat GeoTIFF or SRTM ``.hgt`` around an area, with the vertical datum
-resolved (EGM96 orthometric heights converted with ``h = H + N``) and voids as NaN. Plain
-functions (no Prefect): the CLI checks inputs with them before any flow starts.
+resolved (EGM96 orthometric heights converted with ``h = H + N``) and voids as NaN; the one
+datum rule applied to a file (:func:`dem_datum`) and to a set of tiles (:func:`tile_datum`).
+Plain functions (no Prefect): the CLI checks inputs with them before any flow starts.
 """
 
 from __future__ import annotations
 
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
@@ -18,58 +20,92 @@ from core.dem import GeoDEM
 from core.errors import CoverageError, InputError
 from core.geodesy import BBox
 from core.heights import VERTICAL_CHOICES, DatumDecision, decide_datum
-from tasks.io.geoid import load_geoid
+from tasks.io.dem_tiles import TileSet, named_datum
+from tasks.io.geoid import load_geoid, proj_grid
 from tasks.io.rasters import open_raster, read_window
-from tasks.io.srtm import SRTM_VOID, SrtmTile, parse_tile_name
 from tasks.io.vertical_crs import split_crs
 
 VERTICALS = VERTICAL_CHOICES
 HINT = "give a GeoTIFF or .hgt file"
-
-
-def srtm_name(path: Path) -> str | None:
-    """The file's name when it is an SRTM tile by its name (a ``.hgt``, or named after its
-    tile: ``N44E005.tif``, ``n44_e005_1arc_v3.tif``), else None."""
-    if path.suffix.lower() == ".hgt" or parse_tile_name(path.name) is not None:
-        return path.name
-    return None
+#: cells below this are voids when a DEM declares no nodata (SRTM -32768, Copernicus -32767)
+VOID_BELOW_M = -32000.0
 
 
 def dem_datum(path: str | Path, given: str = "auto", *, what: str = "reference DEM",
-              option: str = "--reference-vertical") -> DatumDecision:
+              option: str = "--reference-vertical", geoid: str | Path | None = None,
+              geoid_option: str | None = None) -> DatumDecision:
     """The vertical datum of a DEM file, by the one rule of :func:`core.heights.decide_datum`
-    (the option given, the ``vertical_datum`` tag, the CRS's vertical part, an SRTM name, else
-    refused). Every command that reads a DEM decides with this function; ``what`` and
-    ``option`` name the file and the command-line option in the messages.
+    (the option given, the ``vertical_datum`` tag, the CRS's vertical part, a product's name
+    (SRTM, NASADEM: EGM96; Copernicus: EGM2008), a geoid grid given, else refused), with the
+    geoid grid its orthometric heights go through. Every command that reads a DEM decides with
+    this function; ``what`` and ``option`` name the file and the command-line option in the
+    messages. A command that converts through a grid other than the bundled EGM96 names its
+    ``geoid_option`` (``--geoid``) and gives its ``geoid``; PROJ's own grid is then looked for
+    when the heights need one and none is given. Without ``geoid_option`` only EGM96 and
+    ellipsoidal heights are accepted.
 
     Raises:
         InputError: the file cannot be read, or its datum cannot be told or converted.
     """
     path = Path(path)
     label = f"{what} {path}"
+    grid = None if geoid is None else str(geoid)
+    proj = None
+    if geoid_option is not None and grid is None:
+        found = proj_grid("egm2008")
+        proj = None if found is None else str(found)
     if given != "auto":  # the option decides: no need to open the file
-        return decide_datum(label, option, given=given)
+        return decide_datum(label, option, given=given, geoid=grid, geoid_option=geoid_option)
     with open_raster(path, what, HINT) as src:
         tags = {k.lower(): v for k, v in src.tags().items()}
         crs = src.crs
     if crs is None:
         raise InputError(f"{label} has no CRS; give a georeferenced DEM (EPSG:4326 or a UTM "
                          "zone), e.g. gdal_edit.py -a_srs EPSG:4326")
-    vert = None
-    if crs is not None:
-        try:
-            _, vert = split_crs(pyproj.CRS.from_wkt(crs.to_wkt()))
-        except InputError as exc:
-            raise InputError(f"{label}: {exc}") from None
+    try:
+        _, vert = split_crs(pyproj.CRS.from_wkt(crs.to_wkt()))
+    except InputError as exc:
+        raise InputError(f"{label}: {exc}") from None
+    named = named_datum(path)
     return decide_datum(label, option, given=given, tag=tags.get("vertical_datum"),
                         crs_datum=None if vert is None else vert.datum,
                         crs_vertical_name=None if vert is None else vert.datum_name,
-                        srtm_name=srtm_name(path))
+                        srtm_name=path.name if named is None and path.suffix.lower() == ".hgt"
+                        else None, named=named, geoid=grid, proj_grid=proj,
+                        geoid_option=geoid_option)
 
 
-def check_srtm_tiles(tiles: list[SrtmTile]) -> None:
-    """SRTM tiles are converted with h = H + N: refuse a tile whose own tag or CRS says its
-    heights are ellipsoidal (the one rule, :func:`dem_datum`)."""
+def tile_datum(tiles: TileSet, option: str = "--reference-vertical") -> TileSet:
+    """The tiles with the vertical datum of their heights decided by the one rule, tile by
+    tile (:func:`dem_datum`, through the source's ``--geoid`` grid or PROJ's), into one
+    decision: the tiles of a named product as distributed (an SRTM or Copernicus tile that
+    says its heights are ellipsoidal is refused: it is no longer as distributed), every tile
+    in one datum through one grid. ``option`` is the command's ``--*-vertical`` option, which
+    speaks for a DEM file or a folder of unnamed DEMs (named tiles say their own datum)."""
+    src = tiles.source
+    given = src.vertical if (src.path.is_file() or tiles.product.datum is None) else "auto"
+    decisions = [dem_datum(t.path, given, what=f"{t.product.name} tile", option=option,
+                           geoid=src.geoid, geoid_option="--geoid") for t in tiles]
+    first = decisions[0]
+    for t, d in zip(tiles, decisions, strict=True):
+        if t.product.datum is not None and d.datum == "ellipsoidal":
+            raise InputError(f"{t.product.name} tile {t.path} holds ellipsoidal heights "
+                             f"({d.source}); tiles are read as distributed (heights above "
+                             f"their geoid): give them as distributed, or this DEM as "
+                             "--reference")
+        if (d.datum, d.geoid) != (first.datum, first.geoid):
+            raise InputError(f"{t.path}: {d.describe()}; but {tiles.tiles[0].path.name}: "
+                             f"{first.describe()}: give tiles whose heights share one datum")
+    if len(decisions) > 1:
+        first = replace(first, source=f"{first.source}, and {len(decisions) - 1} more "
+                                      "tile(s) alike")
+    return replace(tiles, datum=first)
+
+
+def check_srtm_tiles(tiles: TileSet | list) -> None:
+    """Tiles read as EGM96 through the bundled grid (a caller that converts no other geoid):
+    refuse a tile whose tag or CRS says its heights are ellipsoidal, or that are EGM2008
+    (Copernicus), in one line (the one rule, :func:`dem_datum`)."""
     for t in tiles:
         decision = dem_datum(t.path, what="SRTM tile", option="--reference-vertical")
         if decision.datum != "egm96":
@@ -119,7 +155,7 @@ def read_reference(path: str | Path, box: BBox, vertical: str) -> GeoDEM:
         heights = read_window(src, (c0, r0, c0 + int(win.width), r0 + int(win.height)),
                               nan_masked=True, what="reference DEM")
         tr = src.window_transform(win)
-    heights[heights <= SRTM_VOID + 0.5] = np.nan  # SRTM voids when no nodata is declared
+    heights[heights <= VOID_BELOW_M] = np.nan  # SRTM/Copernicus voids when no nodata is declared
     if vertical == "egm96":
         rows, cols = np.mgrid[0:heights.shape[0], 0:heights.shape[1]]
         lon = tr.c + (cols + 0.5) * tr.a
