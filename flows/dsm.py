@@ -88,7 +88,7 @@ def oriented_pair(params: DsmParams) -> OrientedPair:
     from tasks.relative.orientation import pair_box
 
     box = pair_box(left, right, params.height_range_m or ANY_TERRAIN_H_M)
-    tiles = locate_tiles(pair.srtm_dir, box, True)
+    tiles = locate_tiles(pair.dem_source, box, True)
     ref = build_reference(tiles, box, out.with_name(out.stem + ".reference.tif"))
     return OrientedPair(left, right, Path(ref.path), "auto")
 

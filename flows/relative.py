@@ -76,7 +76,7 @@ def relative_flow(params: RelativeParams) -> RelativeOutcome:
     first_range = params.height_range_m or ANY_TERRAIN_H_M
     if reference_path is None and pair.srtm_dir is not None:
         box = pair_box(left, right, first_range)
-        tiles = locate_tiles(pair.srtm_dir, box, True)
+        tiles = locate_tiles(pair.dem_source, box, True)
         reference_path = Path(build_reference(tiles, box, out.with_name(out.stem +
                                                                         ".reference.tif")).path)
         vertical = "auto"  # its own tag says ellipsoidal
