@@ -186,16 +186,12 @@ class WindowMatch:
         return self.status == WindowStatus.OK
 
     def to_dict(self) -> dict[str, Any]:
+        """The fields as a GCP's ``provenance`` holds them (status by name, NaN as None);
+        windows.json is written by :data:`tasks.absolute.surface_match.WINDOWS`."""
         d = dict(vars(self))
         d["status"] = self.status.name
         return {k: (None if isinstance(v, float) and not np.isfinite(v) else v)
                 for k, v in d.items()}
-
-    @classmethod
-    def from_dict(cls, d: dict[str, Any]) -> WindowMatch:
-        kw = {k: (float("nan") if v is None else v) for k, v in d.items()}
-        kw["status"] = WindowStatus[d["status"]]
-        return cls(**kw)
 
 
 def _valid_rho(cells: WindowCells, reference: GeoDEM, sx_arcsec: FloatArray,

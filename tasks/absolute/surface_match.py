@@ -9,7 +9,6 @@ from __future__ import annotations
 import sys
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any
 
 import dask
 import numpy as np
@@ -29,10 +28,12 @@ from core.matching.surface import (
     match_window,
     search_windows,
 )
-from core.points import ControlPoint, control_points_to_dict
+from core.matching.surface_file import WindowsFile
+from core.points import ControlPoint
 from core.sensors.base import SensorModel
 from tasks.io.crs import Projection
-from tasks.io.rasters import atomic_write_json, read_json
+from tasks.io.products import WINDOWS
+from tasks.io.rasters import read_json
 from tasks.scheduling import compute
 
 
@@ -126,10 +127,9 @@ class SurfaceMatchResult:
             out[m.status.name] = out.get(m.status.name, 0) + 1
         return out
 
-    def to_dict(self) -> dict[str, Any]:
-        return {"windows": [{"tie_point": int(c), **m.to_dict()}
-                            for c, m in zip(self.centres, self.matches, strict=True)],
-                "counts": self.counts(), "gcps": control_points_to_dict(self.gcps)}
+    def document(self) -> WindowsFile:
+        """What windows.json holds (:data:`tasks.io.products.WINDOWS`)."""
+        return WindowsFile.of(self.centres, self.matches, self.gcps)
 
 
 @task(name="surface-match", cache_policy=NO_CACHE)
@@ -167,5 +167,5 @@ def match_surfaces(dem_path: Path, ties: TieGround, reference: GeoDEM,
                              None if models is None else locate)
     result = SurfaceMatchResult(centres, matches, gcps)
     if out is not None:
-        atomic_write_json(out, result.to_dict())
+        WINDOWS.write(out, result.document())
     return result

@@ -195,6 +195,8 @@ def record(cls: type) -> Any:
     hints = typing.get_type_hints(cls)
     init = [f for f in dataclasses.fields(cls) if f.init]
     key = {f.name: lay.keys.get(f.name, f.name) for f in init}
+    for name in (*lay.inline, *([lay.spread] if lay.spread else [])):
+        key[name] = f"<{name}>"  # no key of the file: an error's path leaves it out
     defaults = {f.name: (f.default if f.default is not dataclasses.MISSING else f.default_factory())
                 for f in init if f.default is not dataclasses.MISSING
                 or f.default_factory is not dataclasses.MISSING}
@@ -266,7 +268,7 @@ def _equal(a: Any, b: Any) -> bool:
 def _loc(loc: tuple[Any, ...]) -> str:
     # pydantic puts the name of a function validator or union member in the path: keep keys
     parts = [str(p) for p in loc if not (isinstance(p, str) and ("[" in p or p.startswith(
-        ("function-", "nullable", "tuple", "list", "dict"))))]
+        ("function-", "nullable", "tuple", "list", "dict", "<"))))]
     return ".".join(parts)
 
 

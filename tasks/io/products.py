@@ -18,14 +18,21 @@ from core.evaluation.evaluation_report import (
     LandcoverInfo,
     PointCounts,
 )
+from core.matching.surface_file import WindowsFile, WindowTried
 from core.points import CheckPoint, CheckPointSet, ControlPoint, GcpSet
-from tasks.io.documents import Document, Integer, layout, shape
+from tasks.io.documents import Document, layout, shape
 
 # ------------------------------------------------------------------------------ gcps.json
 
 layout(ControlPoint, keys={"image_points": "images"})
 GCPS: Document[GcpSet] = Document("gcps.json", GcpSet,
                                   hint="give the gcps.json written by gcpfree orient")
+
+# ---------------------------------------------------------------------------- windows.json
+
+layout(WindowTried, inline=("match",))
+WINDOWS: Document[WindowsFile] = Document(
+    "windows.json", WindowsFile, hint="give the windows.json written by gcpfree orient")
 
 # ------------------------------------------------------------------------ checkpoints.json
 
@@ -75,4 +82,4 @@ EVALUATION: Document[EvaluationReport] = Document(
     "eval.json", EvaluationReport, format=REPORT_FORMAT,
     hint="give the eval.json written by gcpfree evaluate")
 
-__all__ = ["CHECKPOINTS", "EVALUATION", "GCPS", "Integer"]
+__all__ = ["CHECKPOINTS", "EVALUATION", "GCPS", "WINDOWS"]

@@ -214,7 +214,38 @@ def test_flat_terrain_is_refused_with_its_relief():
     w = match_window(lon, lat, h, (LON0, LAT0), r, SurfaceMatchConfig(max_precision_m=5.0))
     assert w.status == WindowStatus.LOW_RELIEF
     assert w.relief_m < 5.0 and w.predicted_precision_m > 5.0
-    assert WindowMatch.from_dict(w.to_dict()) == w or not np.isfinite(w.shift_h_m)
+    _round_trips_through_windows_json(w)
+
+
+def _round_trips_through_windows_json(*windows: WindowMatch) -> None:
+    """Each window written into windows.json and read back has every field it had: NaN
+    (written as null: a refused window's shifts) back as NaN, the status by name, the
+    integers as integers. Compares field by field with NaN equal to NaN: a dataclass's ``==``
+    is False on a NaN, which let the test this replaces pass whatever came back."""
+    from dataclasses import fields
+
+    from core.jsonio import parse_json, to_json
+    from core.matching.surface_file import WindowsFile
+    from tasks.io.products import WINDOWS
+
+    text = to_json(WINDOWS.dump(WindowsFile.of(range(len(windows)), windows, ())))
+    back = WINDOWS.load(parse_json(text, "windows.json"))
+    assert len(back.windows) == len(windows)
+    for w, got in zip(windows, back.windows, strict=True):
+        for f in fields(WindowMatch):
+            a, b = getattr(w, f.name), getattr(got.match, f.name)
+            assert type(b) is (float if isinstance(a, float) else type(a)), f.name
+            assert a == b or (np.isnan(a) and np.isnan(b)), f"{f.name}: {a!r} came back {b!r}"
+    nans = [f.name for w in windows for f in fields(w) if f.name != "status"
+            and np.isnan(getattr(w, f.name))]
+    assert text.count("null") == len(nans)
+
+
+def test_a_matched_window_round_trips_through_windows_json():
+    r = reference()
+    w = match_window(*relative_dem((3.0, 2.0, 5.0)), (LON0, LAT0), r)
+    assert w.ok and np.isfinite(w.shift_h_m)
+    _round_trips_through_windows_json(w, replace(w, status=WindowStatus.EDGE_PEAK))
 
 
 def test_window_outside_the_reference_is_refused():
