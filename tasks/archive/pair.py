@@ -20,9 +20,10 @@ from prefect import task
 from prefect.cache_policies import NO_CACHE
 
 from core.errors import GcpFreeError, InputError
+from tasks.io.products import PAIR, PAIR_FORMAT, PairManifest
 from tasks.io.rasters import read_json
 
-FORMAT = "gcpfree.pair"
+FORMAT = PAIR_FORMAT
 MANIFEST = "pair.json"
 
 # the orientation's products: manifest key -> file in OUT
@@ -113,19 +114,16 @@ def pair_complete(out: str | Path, params: Mapping[str, Any] | None = None) -> b
     goes (:data:`RUN_ONLY_PARAMS`) aside."""
     out = Path(out)
     try:
-        manifest = _read_json(out / MANIFEST)
+        manifest = PAIR.read(out / MANIFEST)
     except InputError:
         return False
-    if not isinstance(manifest, dict) or manifest.get("format") != FORMAT:
-        return False
-    had = manifest.get("params")
-    if params is not None and isinstance(had, dict) and any(
+    had = manifest.params
+    if params is not None and had is not None and any(
             had.get(k) != v for k, v in params.items() if k not in RUN_ONLY_PARAMS):
         return False
-    sizes = manifest.get("sizes", {})
-    for rel in manifest.get("products", {}).values():
+    for rel in manifest.products.values():
         path = out / rel
-        if not product_ok(path) or sizes.get(rel) != path.stat().st_size:
+        if not product_ok(path) or manifest.sizes.get(rel) != path.stat().st_size:
             return False
     return True
 
@@ -192,12 +190,9 @@ def complete_pairs(params: Mapping[str, Mapping[str, Any]], root: Path) -> froze
 def write_manifest(out: Path, pair_id: str, params: Mapping[str, Any],
                    products: Mapping[str, str]) -> Path:
     """``OUT/pair.json``: the run's parameters, its products and their sizes (written last)."""
-    from tasks.io.rasters import atomic_write_json
-
-    doc = {"format": FORMAT, "version": 1, "pair_id": pair_id, "params": dict(params),
-           "products": dict(products),
-           "sizes": {rel: (Path(out) / rel).stat().st_size for rel in products.values()}}
-    return atomic_write_json(Path(out) / MANIFEST, doc)
+    return PAIR.write(Path(out) / MANIFEST, PairManifest(
+        pair_id=pair_id, params=dict(params), products=dict(products),
+        sizes={rel: (Path(out) / rel).stat().st_size for rel in products.values()}))
 
 
 # ----------------------------------------------------------------------------- products

@@ -2,10 +2,13 @@
 :class:`~tasks.io.documents.Document` (gcps.json, eval.json, windows.json, checkpoints.json,
 pair.json). Keys, their order and the readers' checks are those the hand-written writers and
 readers had (``tests/tasks/io/test_documents.py`` reads the files today's code wrote, in
-``tests/data/products_v0_1/``, and writes them back byte for byte)."""
+``tests/data/products_v0_1/``, and writes them back byte for byte). The orientation's
+report.json has its own (:mod:`tasks.absolute.report`), to move onto this pattern."""
 
 from __future__ import annotations
 
+from collections.abc import Mapping
+from dataclasses import dataclass, field
 from typing import Annotated, Any
 
 from pydantic import AfterValidator, PlainSerializer
@@ -82,4 +85,28 @@ EVALUATION: Document[EvaluationReport] = Document(
     "eval.json", EvaluationReport, format=REPORT_FORMAT,
     hint="give the eval.json written by gcpfree evaluate")
 
-__all__ = ["CHECKPOINTS", "EVALUATION", "GCPS", "WINDOWS"]
+# ------------------------------------------------------------------------------ pair.json
+
+PAIR_FORMAT = "gcpfree.pair"
+
+
+@dataclass(frozen=True, kw_only=True)
+class PairManifest:
+    """``OUT/pair.json``, written last by ``gcpfree pair``: the run's parameters
+    (:meth:`flows.pair.PairParams.to_dict`, flat keys; None in a manifest that records none),
+    its products (manifest key -> path relative to OUT) and their sizes in bytes when the pair
+    finished (path -> size)."""
+
+    format: str = PAIR_FORMAT
+    version: int = 1
+    pair_id: str
+    params: Mapping[str, Any] | None = None
+    products: Mapping[str, str] = field(default_factory=dict)
+    sizes: Mapping[str, int] = field(default_factory=dict)
+
+
+PAIR: Document[PairManifest] = Document("pair.json", PairManifest, format=PAIR_FORMAT,
+                                        hint="give the pair.json written by gcpfree pair")
+
+__all__ = ["CHECKPOINTS", "EVALUATION", "GCPS", "PAIR", "PAIR_FORMAT", "WINDOWS",
+           "PairManifest"]
