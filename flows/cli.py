@@ -27,6 +27,7 @@ from flows.commands import prepare_reference as prepare_reference_command
 from flows.commands import project as project_command
 from flows.commands import relative as relative_command
 from flows.commands import report as report_command
+from flows.commands import scenes as scenes_command
 from flows.commands import serve as serve_command
 from flows.commands import simulate as simulate_command
 from flows.commands._pair import OneLineParser
@@ -54,7 +55,8 @@ COMMAND_MODULES = {"prepare-reference": prepare_reference_command,
                    "orient": orient_command, "pair": pair_command,
                    "report": report_command, "ortho": ortho_command,
                    "ortho-compare": ortho_compare_command, "fill-voids": fill_voids_command,
-                   "archive": archive_command, "serve": serve_command}
+                   "scenes": scenes_command, "archive": archive_command,
+                   "serve": serve_command}
 COMMANDS = {name: m.run for name, m in COMMAND_MODULES.items()}
 
 

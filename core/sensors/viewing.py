@@ -198,6 +198,31 @@ def point_geometry(model: SensorModel, col: ArrayLike, row: ArrayLike, h_m: Arra
     )
 
 
+def along_track_heading_deg(model: SensorModel, col: ArrayLike, row: ArrayLike,
+                            h_m: ArrayLike) -> FloatArray:
+    """Bearing (degrees clockwise from north, 0-360) of the ground direction of increasing
+    rows at image points (col, row) at heights h_m: the along-track direction of a pushbroom
+    image (its platform's ground track, Earth rotation included), the scan direction of any
+    image. Taken between the ground points of ``row -+ 0.5``, in the local East-North plane."""
+    c, r, h = np.broadcast_arrays(*(np.asarray(a, dtype=np.float64) for a in (col, row, h_m)))
+    shape, c, r, h = c.shape, c.ravel(), r.ravel(), h.ravel()
+    lon, lat = model.localize(np.concatenate([c, c]), np.concatenate([r - 0.5, r + 0.5]),
+                              np.concatenate([h, h]))
+    p = np.stack(geodetic_to_ecef(lon, lat, np.concatenate([h, h])), axis=-1)
+    d = p[c.size:] - p[:c.size]
+    lon0, lat0, _ = ecef_to_geodetic(*(0.5 * (p[c.size:] + p[:c.size])).T)
+    rot = enu_rotation(lon0, lat0)
+    east, north = np.einsum("nj,nj->n", rot[:, 0], d), np.einsum("nj,nj->n", rot[:, 1], d)
+    return (np.degrees(np.arctan2(east, north)) % 360.0).reshape(shape)
+
+
+def bearing_difference_deg(a_deg: ArrayLike, b_deg: ArrayLike) -> FloatArray:
+    """The smaller angle between two bearings (degrees, 0-180)."""
+    d = np.abs(np.asarray(a_deg, dtype=np.float64) - np.asarray(b_deg, dtype=np.float64))
+    d = d % 360.0
+    return np.minimum(d, 360.0 - d)
+
+
 def acquisition_time_utc(model: SensorModel, row: float) -> str | None:
     """UTC time (ISO 8601, microseconds, ``Z``) at which ``row`` was acquired, for a pushbroom
     model whose orbit has an ``epoch_utc`` (its epoch plus the row's line time), for a SAR

@@ -12,7 +12,12 @@ A catalog is one of:
   model ``sar.xml``/``sar.json`` beside it: SAR-optical GCPs, ``gcpfree orient --sar``);
 - a CSV file with a header ``id,left,right[,left_model,right_model,lidar,landcover,
   checkpoints,sar,sar_model]``, or a JSON list of objects with the same keys (or ``{"pairs": [...]}``). Relative
-  paths are relative to the catalog file.
+  paths are relative to the catalog file;
+- the JSON ``gcpfree scenes`` writes (``"format": "gcpfree.scenes"``): its ``pairs`` as above,
+  each also naming its two scenes, its block and its figures (:data:`SCENE_PAIR_KEYS`), and
+  the ``scenes`` (id, image, model), ``overlaps`` (every two overlapping scenes), ``blocks``
+  (the scenes and pairs of each connected component) and ``rejected`` files (path, reason),
+  read into :class:`Catalog` and checked against each other.
 
 Reading a catalog checks its form only: a pair whose images are missing is that pair's failure
 (:func:`check_pair_inputs`), not the catalog's. The summary (``ROOT/summary.csv`` and
@@ -35,6 +40,13 @@ from prefect.cache_policies import NO_CACHE
 
 from core.errors import GcpFreeError, InputError
 from core.jsonio import parse_json
+from tasks.archive.scene_catalog import (
+    SCENES_FORMAT,
+    BlockEntry,
+    RejectedEntry,
+    SceneEntry,
+    scene_parts,
+)
 from tasks.io.pair import PairInputs
 from tasks.io.rasters import atomic_write_json, atomic_write_text
 
@@ -46,6 +58,8 @@ IMAGE_SUFFIXES = (".tif", ".tiff", ".jp2")
 PAIR_ID = re.compile(r"[A-Za-z0-9_][A-Za-z0-9._-]*")
 STATUSES = ("done", "skipped", "failed")
 SUMMARY_FORMAT = "gcpfree.archive"
+#: a scenes catalog's pair keys beyond the columns: its two scenes, its block, its figures
+SCENE_PAIR_KEYS = ("left_scene", "right_scene", "block", "figures")
 FOLDER_LAYOUT = ("a pair folder holds left.tif and right.tif, or left/ and right/ folders with "
                  "one image each, e.g. IMAGERY.TIF beside METADATA.DIM")
 
@@ -75,10 +89,16 @@ class PairEntry:
 
 @dataclass(frozen=True)
 class Catalog:
-    """The pairs of an archive, in catalog order, and where they were read from."""
+    """The pairs of an archive, in catalog order, and where they were read from; for a
+    ``gcpfree scenes`` catalog also its scenes, overlaps (scene id couples), blocks and
+    rejected files."""
 
     source: Path
     pairs: tuple[PairEntry, ...]
+    scenes: tuple[SceneEntry, ...] = ()
+    overlaps: tuple[tuple[str, str], ...] = ()
+    blocks: tuple[BlockEntry, ...] = ()
+    rejected: tuple[RejectedEntry, ...] = ()
 
     @property
     def ids(self) -> tuple[str, ...]:
@@ -99,18 +119,21 @@ def read_catalog(path: str | Path) -> Catalog:
     if not path.exists():
         raise InputError(f"catalog {path} does not exist; give a folder of pair folders or a "
                          "CSV/JSON list of pairs")
+    extra: dict[str, Any] = {}
     if path.is_dir():
         pairs = _pairs_of_directory(path)
     elif path.suffix.lower() == ".csv":
         pairs = _pairs_of_rows(_csv_rows(path), path)
     elif path.suffix.lower() == ".json":
-        pairs = _pairs_of_rows(_json_rows(path), path)
+        pairs, extra = _json_catalog(path)
     else:
         raise InputError(f"catalog {path}: unknown kind; give a folder of pair folders, a .csv "
                          f"or a .json file with the columns {','.join(COLUMNS)}")
     if not pairs:
         raise InputError(f"catalog {path} lists no pair; "
                          + ("add pair folders (" + FOLDER_LAYOUT + ")" if path.is_dir()
+                            else "gcpfree scenes found no stereo pair among its scenes (see "
+                            "its overlaps' reasons; the thresholds are options)" if extra
                             else "add one row per pair"))
     seen: set[str] = set()
     for p in pairs:
@@ -118,7 +141,7 @@ def read_catalog(path: str | Path) -> Catalog:
             raise InputError(f"catalog {path}: pair id {p.id!r} appears twice; ids name the "
                              "output folders and must be unique")
         seen.add(p.id)
-    return Catalog(path, tuple(pairs))
+    return Catalog(path, tuple(pairs), **extra)
 
 
 def _transient(task: Any, task_run: Any, state: Any) -> bool:
@@ -168,11 +191,25 @@ def _csv_rows(path: Path) -> list[tuple[str, dict[str, Any]]]:
     return out
 
 
-def _json_rows(path: Path) -> list[tuple[str, dict[str, Any]]]:
+def _json_doc(path: Path) -> Any:
     try:
-        doc = parse_json(_read_text(path), f"catalog {path}")
+        return parse_json(_read_text(path), f"catalog {path}")
     except InputError as exc:
         raise InputError(f"{exc}; give a list of pairs") from None
+
+
+def _json_catalog(path: Path) -> tuple[list[PairEntry], dict[str, Any]]:
+    """A JSON catalog's pairs, and for a ``gcpfree scenes`` one its other parts."""
+    doc = _json_doc(path)
+    if isinstance(doc, dict) and doc.get("format") == SCENES_FORMAT:
+        return _scenes_catalog(doc, path)
+    return _pairs_of_rows(_json_rows(doc, path), path), {}
+
+
+def _json_rows(doc: Any, path: Path, extra_keys: tuple[str, ...] = ()
+               ) -> list[tuple[str, dict[str, Any]]]:
+    """The pair objects of a JSON catalog (``extra_keys``: allowed beyond the columns, not
+    read)."""
     if isinstance(doc, dict) and "pairs" in doc:
         doc = doc["pairs"]
     if not isinstance(doc, list):
@@ -183,9 +220,21 @@ def _json_rows(path: Path) -> list[tuple[str, dict[str, Any]]]:
         if not isinstance(item, dict):
             raise InputError(f"catalog {path}: pair {i} is a {type(item).__name__}, not an "
                              f"object with {', '.join(REQUIRED)}")
-        _check_columns(list(item), path)
-        out.append((f"pair {i}", item))
+        _check_columns([k for k in item if k not in extra_keys], path)
+        out.append((f"pair {i}", {k: v for k, v in item.items() if k not in extra_keys}))
     return out
+
+
+def _scenes_catalog(doc: dict[str, Any], path: Path) -> tuple[list[PairEntry], dict[str, Any]]:
+    """The pairs of a ``gcpfree scenes`` catalog and its other parts, checked against each
+    other (:func:`tasks.archive.scene_catalog.scene_parts`)."""
+    if doc.get("version") != 1:
+        raise InputError(f"catalog {path}: {SCENES_FORMAT} version {doc.get('version')!r} is "
+                         "not 1; write it again with this gcpfree's scenes command")
+    rows = doc.get("pairs", [])
+    pairs = _pairs_of_rows(_json_rows(rows, path, SCENE_PAIR_KEYS), path)
+    return pairs, scene_parts(doc, path, {p.id for p in pairs},
+                              lambda v: _resolve(v, path.parent), _checked_id)
 
 
 def _check_columns(names: list[str], path: Path) -> None:

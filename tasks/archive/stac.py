@@ -23,7 +23,7 @@ from pystac.extensions.projection import ProjectionExtension
 from rasterio.warp import transform_bounds, transform_geom
 
 from core.errors import InputError
-from tasks.io.rasters import read_json
+from tasks.io.rasters import atomic_write_json, read_json
 
 MEDIA_COG = pystac.MediaType.COG
 
@@ -110,3 +110,34 @@ def write_catalog(run_dir: str | Path, run_id: str, products: list[RasterProduct
     # the hrefs were computed for the temporary folder at the same depth: still valid
     read_json(final / "catalog.json", "STAC catalog")
     return final / "catalog.json"
+
+
+# ---------------------------------------------------------------------------- scenes
+
+
+def footprint_item(item_id: str, ring_lonlat: list[tuple[float, float]],
+                   when: dt.datetime | None, properties: Mapping[str, object] | None = None,
+                   assets: Mapping[str, pystac.Asset] | None = None) -> pystac.Item:
+    """A STAC item for a scene on the ground: its footprint polygon (lon, lat vertices,
+    closed here) and bbox, its acquisition time (None when unknown: the item's
+    ``start_datetime`` and ``end_datetime`` are then null too, as nothing states them)."""
+    ring = [[float(lon), float(lat)] for lon, lat in ring_lonlat]
+    if ring and ring[0] != ring[-1]:
+        ring.append(ring[0])
+    lons, lats = [p[0] for p in ring], [p[1] for p in ring]
+    props = dict(properties or {})
+    if when is None:
+        props.update(start_datetime=None, end_datetime=None)
+    item = pystac.Item(id=item_id, geometry={"type": "Polygon", "coordinates": [ring]},
+                       bbox=[min(lons), min(lats), max(lons), max(lats)], datetime=when,
+                       properties=props)
+    for key, asset in (assets or {}).items():
+        item.add_asset(key, asset)
+    return item
+
+
+def write_item_collection(items: list[pystac.Item], path: str | Path) -> Path:
+    """``path``: a STAC ItemCollection (GeoJSON FeatureCollection) of ``items``, written
+    atomically; asset hrefs as given (relative to ``path``'s folder for a movable folder)."""
+    doc = pystac.ItemCollection(items, clone_items=False).to_dict(transform_hrefs=False)
+    return atomic_write_json(Path(path), doc)

@@ -244,3 +244,38 @@ def test_centre_rays_meet_at_the_height_both_centres_see():
     assert h == pytest.approx(800.0, abs=1e-3) and miss < 1e-3
     with pytest.raises(GeometryError, match="parallel"):
         centre_rays_height_m(a, (N_PX, N_PX), a, (N_PX, N_PX), 0.0)
+
+
+# ------------------------------------------------------------------------- headings
+
+
+@pytest.mark.parametrize("ascending", [False, True])
+def test_along_track_heading_is_the_geodesic_azimuth_between_consecutive_rows(ascending):
+    """Against PROJ's geodesic azimuth (pyproj.Geod.inv) between the ground points of rows
+    r -+ 0.5: a descending SPOT-like pass at 44 N heads south-south-west of south (about 192
+    deg: 180 + asin(cos i / cos lat) = 192.1 with the inclination 98.7, Earth rotation aside),
+    an ascending one north-north-west."""
+    from pyproj import Geod
+
+    from core.sensors.viewing import along_track_heading_deg
+
+    m = synthetic_pushbroom(spec(incidence_deg=15.0, ascending=ascending))
+    c, r, h = grid()
+    got = along_track_heading_deg(m, c, r, h)
+    lon0, lat0 = m.localize(c.ravel(), r.ravel() - 0.5, h.ravel())
+    lon1, lat1 = m.localize(c.ravel(), r.ravel() + 0.5, h.ravel())
+    want, _, _ = Geod(ellps="WGS84").inv(lon0, lat0, lon1, lat1)
+    assert got.shape == c.shape
+    assert np.abs(((got.ravel() - want) + 180.0) % 360.0 - 180.0).max() < 0.05
+    centre = float(along_track_heading_deg(m, 299.5, 299.5, 0.0))
+    if ascending:
+        assert 330.0 < centre < 360.0
+    else:
+        assert 185.0 < centre < 200.0
+
+
+def test_bearing_difference_wraps_around_north():
+    from core.sensors.viewing import bearing_difference_deg
+
+    got = bearing_difference_deg([350.0, 10.0, 190.0, 0.0, 90.0], [10.0, 350.0, 10.0, 180.0, 90.0])
+    assert got.tolist() == pytest.approx([20.0, 20.0, 180.0, 180.0, 0.0])
