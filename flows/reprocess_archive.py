@@ -71,20 +71,24 @@ class ArchiveOutcome:
 
 
 def pair_params(entry: PairEntry, root: Path, srtm_dir: Path | None, reference: Path | None,
-                reference_vertical: str = "auto", self_calibrate: bool = False):  # -> PairParams
+                reference_vertical: str = "auto", self_calibrate: bool = False,
+                geoid: Path | None = None):  # -> PairParams
     """The ``pair`` flow's parameters for one pair of the archive into ``root/<id>`` (one
     worker: the archive's parallelism is over pairs). Raises InputError on bad inputs."""
+    from dataclasses import replace
+
     from flows.pair import PairParams
 
     return PairParams(
-        pair=entry.pair_inputs(reference, srtm_dir, reference_vertical),
+        pair=replace(entry.pair_inputs(reference, srtm_dir, reference_vertical), geoid=geoid),
         out=Path(root) / entry.id, lidar=entry.lidar, landcover=entry.landcover,
         checkpoints=entry.checkpoints, sar=entry.sar, sar_model=entry.sar_model,
         self_calibrate=self_calibrate, workers=1, progress=False, pair_id=entry.id)
 
 
 def run_pair(entry: PairEntry, root: Path, srtm_dir: Path | None, reference: Path | None,
-             reference_vertical: str = "auto", self_calibrate: bool = False) -> None:
+             reference_vertical: str = "auto", self_calibrate: bool = False,
+             geoid: Path | None = None) -> None:
     """One pair of the archive through the ``pair`` flow into ``root/<id>`` (one worker: the
     archive's parallelism is over pairs); what :func:`tasks.archive.runs.process_pair` runs
     in a Dask worker. A pair found complete is left as it is; otherwise the temporary files an
@@ -97,7 +101,7 @@ def run_pair(entry: PairEntry, root: Path, srtm_dir: Path | None, reference: Pat
     out = Path(root) / entry.id
     with one_line_errors():
         params = pair_params(entry, root, srtm_dir, reference, reference_vertical,
-                             self_calibrate)
+                             self_calibrate, geoid)
     # an earlier attempt finished it with the same inputs and options, then its worker died
     if pair_complete(out, params.to_dict()):
         print(f"pair {entry.id} already complete in {out}")
@@ -121,8 +125,8 @@ def _dashboard_link() -> str | None:
 @flow(name="archive-pairs")
 def run_pairs(entries: list[PairEntry], root: Path, srtm_dir: Path | None = None,
               reference: Path | None = None, self_calibrate: bool = False,
-              progress: bool = False, reference_vertical: str = "auto"
-              ) -> tuple[list[PairResult], str | None]:
+              progress: bool = False, reference_vertical: str = "auto",
+              geoid: Path | None = None) -> tuple[list[PairResult], str | None]:
     """The pairs submitted to the flow's Dask task runner; (results in entry order, the Dask
     dashboard link)."""
     from prefect.futures import as_completed
@@ -136,7 +140,7 @@ def run_pairs(entries: list[PairEntry], root: Path, srtm_dir: Path | None = None
                              description="the Dask cluster running the pairs")
     run = functools.partial(run_pair, root=Path(root), srtm_dir=srtm_dir, reference=reference,
                             reference_vertical=reference_vertical,
-                            self_calibrate=self_calibrate)
+                            self_calibrate=self_calibrate, geoid=geoid)
     futures = {process_pair.submit(e, run): e for e in entries}
     results: dict[str, PairResult] = {}
     with _PairProgress(len(entries), progress) as bar:
@@ -193,13 +197,14 @@ def reprocess_archive(catalog: Path, out: Path, srtm_dir: Path | None = None,
                       reference: Path | None = None, dask_address: str | None = None,
                       workers: int | None = None, processes: bool = True,
                       dashboard_address: str = DEFAULT_DASHBOARD, self_calibrate: bool = False,
-                      progress: bool = False, reference_vertical: str = "auto"
-                      ) -> ArchiveOutcome:
+                      progress: bool = False, reference_vertical: str = "auto",
+                      geoid: Path | None = None) -> ArchiveOutcome:
     """Catalog -> skip complete pairs -> the rest on Dask -> summary.csv/json + artifacts.
 
     ``catalog``: a folder of pair folders or a CSV/JSON list (``tasks.archive.catalog``);
     ``out``: ROOT, one folder per pair id. ``srtm_dir`` or ``reference`` (its heights
-    ``reference_vertical``): the ground every pair is oriented to.
+    ``reference_vertical``): the ground every pair is oriented to, ``geoid`` the grid its
+    orthometric heights refer to when not EGM96 (``--geoid``).
     ``dask_address``: an existing scheduler (``tcp://HOST:PORT``), else a LocalCluster of
     ``workers`` (default: one per core, at most one per pair) single-threaded workers, in
     processes unless ``processes`` is False.
@@ -218,7 +223,7 @@ def reprocess_archive(catalog: Path, out: Path, srtm_dir: Path | None = None,
     for e in cat.pairs:
         try:
             wanted[e.id] = pair_params(e, root, srtm_dir, reference, reference_vertical,
-                                       self_calibrate).to_dict()
+                                       self_calibrate, geoid).to_dict()
         except InputError:
             pass  # not complete: its run reports the bad input
     done_before = complete_pairs(wanted, root)
@@ -230,7 +235,7 @@ def reprocess_archive(catalog: Path, out: Path, srtm_dir: Path | None = None,
                                      dashboard_address)
         found, link = run_pairs.with_options(task_runner=runner)(
             todo, root, srtm_dir, reference, self_calibrate, progress,
-            reference_vertical=reference_vertical)
+            reference_vertical=reference_vertical, geoid=geoid)
         results = {r.id: r for r in found}
     rows = tuple(
         pair_row(e.id, "skipped", root / e.id) if e.id in done_before
