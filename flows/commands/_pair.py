@@ -213,8 +213,13 @@ def check_pair(args: argparse.Namespace):  # -> tuple[PairInputs, LoadedModel, L
     if pair.reference is not None:
         check_reference(pair.reference)
         # refused here in one line, or said before the long run starts
-        print(f"reference      {pair.reference}: "
-              f"{dem_datum(pair.reference, pair.reference_vertical).describe()}")
+        decision = dem_datum(pair.reference, pair.reference_vertical, geoid_option="--geoid")
+        if decision.geoid is not None:  # EGM2008 through PROJ's grid: prepared through it
+            from dataclasses import replace
+
+            pair = replace(pair, reference=None, srtm_dir=pair.reference)
+        else:
+            print(f"reference      {pair.reference}: {decision.describe()}")
     if pair.srtm_dir is not None and not pair.srtm_dir.exists():
         raise InputError(f"DEM tile folder {pair.srtm_dir} does not exist; give --dem-dir (or "
                          "--srtm-dir) a folder of tiles")

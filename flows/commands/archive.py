@@ -7,7 +7,7 @@ import sys
 from pathlib import Path
 from typing import TYPE_CHECKING
 
-from flows.commands._pair import VERTICAL_HELP, VERTICALS
+from flows.commands._pair import DEM_DIR_HELP, GEOID_HELP, VERTICAL_HELP, VERTICALS
 
 if TYPE_CHECKING:
     from tasks.archive.catalog import Catalog
@@ -25,13 +25,14 @@ def add_archive_arguments(p: argparse.ArgumentParser) -> None:
                    help="output folder: ROOT/<pair id>/ per pair, ROOT/summary.csv and "
                         "ROOT/summary.json")
     ref = p.add_mutually_exclusive_group(required=True)
-    ref.add_argument("--srtm-dir", type=Path, default=None, metavar="DIR",
-                     help="folder of SRTM tiles: a reference is prepared over each pair")
+    ref.add_argument("--dem-dir", "--srtm-dir", dest="srtm_dir", type=Path, default=None,
+                     metavar="DIR", help=DEM_DIR_HELP.replace("the pair", "each pair"))
     ref.add_argument("--reference", type=Path, default=None, metavar="REF",
                      help="one reference DEM in EPSG:4326 for every pair (prepare-reference "
                           "output or SRTM .hgt)")
     p.add_argument("--reference-vertical", choices=VERTICALS, default="auto",
                    help=VERTICAL_HELP)
+    p.add_argument("--geoid", type=Path, default=None, metavar="GRID", help=GEOID_HELP)
     p.add_argument("--dask-address", default=None, metavar="tcp://HOST:PORT",
                    help="scheduler of an existing Dask cluster (its workers must see the same "
                         "paths and have gcpfree installed); default: a LocalCluster")
@@ -76,10 +77,18 @@ def check_archive_args(args: argparse.Namespace) -> Catalog:
     catalog = read_catalog(args.catalog)
     if args.reference is not None:
         check_reference(args.reference)
-        print(f"reference      {args.reference}: "
-              f"{dem_datum(args.reference, args.reference_vertical).describe()}")
+        decision = dem_datum(args.reference, args.reference_vertical, geoid=args.geoid,
+                             geoid_option="--geoid")
+        print(f"reference      {args.reference}: {decision.describe()}")
+        if decision.geoid is not None and args.geoid is None:  # through PROJ's grid: every
+            args.srtm_dir, args.reference = args.reference, None  # pair's is prepared from it
     if args.srtm_dir is not None and not Path(args.srtm_dir).is_dir():
-        raise InputError(f"SRTM directory {args.srtm_dir} does not exist")
+        raise InputError(f"DEM tile folder {args.srtm_dir} does not exist; give --dem-dir (or "
+                         "--srtm-dir) a folder of tiles")
+    if args.geoid is not None:
+        from tasks.io.geoid import check_geoid
+
+        check_geoid(args.geoid)
     if args.workers is not None and args.workers < 1:
         raise InputError(f"--workers must be at least 1 (got {args.workers})")
     if args.dask_address is not None and "://" not in args.dask_address:
@@ -95,7 +104,7 @@ def flow_parameters(args: argparse.Namespace) -> dict:
 
     return {"catalog": path(args.catalog), "out": path(args.out),
             "srtm_dir": path(args.srtm_dir), "reference": path(args.reference),
-            "reference_vertical": args.reference_vertical,
+            "reference_vertical": args.reference_vertical, "geoid": path(args.geoid),
             "dask_address": args.dask_address, "workers": args.workers,
             "processes": not args.threads, "dashboard_address": args.dashboard_address,
             "self_calibrate": args.self_calibrate}

@@ -83,6 +83,20 @@ def read_geoid(path: str | Path, box: BBox | None = None) -> GeoidGrid:
     return GeoidGrid(values[::-1].copy(), lat_south, lon0, -wt.e, wt.a, name=path.name)
 
 
+def check_geoid(path: str | Path) -> None:
+    """InputError in one line unless ``path`` is a geoid grid :func:`read_geoid` reads (its
+    header and georeferencing checked, its values not read)."""
+    path = Path(path)
+    if path.suffix.lower() == ".gtx":
+        read_gtx(path)  # a few MB: the bundled 15' grid reads in milliseconds
+        return
+    with open_raster(path, "geoid grid", GRID_HINT) as src:
+        tr = src.transform
+        if (src.crs is not None and not src.crs.is_geographic) or tr.b != 0 or tr.a <= 0 \
+                or tr.e >= 0:
+            raise InputError(f"geoid grid {path} is not a north-up lon/lat grid; {GRID_HINT}")
+
+
 def _grid_window(width: int, height: int, tr, box: BBox | None) -> Window:
     """The grid's nodes around ``box`` (two beyond each side), whole rows of a global grid
     when the box crosses its longitude seam; all of it without a box."""

@@ -90,7 +90,7 @@ def test_serve_registers_the_deployment_with_its_cron(prefect_harness, tmp_path:
     assert dep.parameters == {
         "catalog": str(tmp_path / "cat.csv"), "out": str(tmp_path / "root"),
         "srtm_dir": str(tmp_path), "reference": None, "reference_vertical": "auto",
-        "dask_address": None, "workers": 2,
+        "geoid": None, "dask_address": None, "workers": 2,
         "processes": True, "dashboard_address": ":8787", "self_calibrate": False}
     assert {"gcpfree", "archive"} <= set(dep.tags)
     assert "serving" in log.read_text() and CRON in log.read_text()
