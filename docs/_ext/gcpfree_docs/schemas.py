@@ -260,12 +260,17 @@ def _cell(text: str) -> str:
 
 
 def _table(schema: Mapping[str, Any], prefix: str) -> list[str]:
+    """The keys of an object schema, a row each; the description column only when some key
+    has one."""
     required = set(schema.get("required", ()))
-    rows = ["| key | type | required | description |", "|---|---|---|---|"]
-    for key, sub in schema.get("properties", {}).items():
+    props = schema.get("properties", {})
+    described = any(isinstance(s, Mapping) and s.get("description") for s in props.values())
+    rows = ["| key | type | required |" + (" description |" if described else ""),
+            "|---|---|---|" + ("---|" if described else "")]
+    for key, sub in props.items():
         desc = sub.get("description", "") if isinstance(sub, Mapping) else ""
-        rows.append(f"| `{key}` | {_cell(type_text(sub, prefix))} | {'yes' if key in required else ''} "
-                    f"| {_cell(desc)} |")
+        row = f"| `{key}` | {_cell(type_text(sub, prefix))} | {'yes' if key in required else ''} |"
+        rows.append(row + (f" {_cell(desc)} |" if described else ""))
     return rows
 
 
