@@ -41,7 +41,7 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     c = p.add_argument_group("stereo-pair thresholds (inclusive; see the defaults' reasons "
                              "in tasks/archive/stereo.py)")
     c.add_argument("--min-overlap", type=float, default=30.0, metavar="PCT",
-                   help="least overlap, % of the smaller footprint (default 30)")
+                   help="least overlap, %% of the smaller footprint (default 30)")
     c.add_argument("--bh", type=float, nargs=2, default=None, metavar=("MIN", "MAX"),
                    help="B/H range for every pair (default: 0.1-0.8 when the coarser GSD is "
                         "at most --vhr-gsd, else 0.3-1.2)")
@@ -61,7 +61,7 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     c.add_argument("--any-band-family", action="store_true",
                    help="pair panchromatic with multispectral scenes too")
     c.add_argument("--min-link-overlap", type=float, default=1.0, metavar="PCT",
-                   help="least overlap (% of the smaller footprint) that ties two scenes into "
+                   help="least overlap (%% of the smaller footprint) that ties two scenes into "
                         "one block (default 1)")
 
 
