@@ -677,6 +677,8 @@ CLI_CASES = [
     ("scenes-csv-out", ["scenes", str(VENTOUX), "--out", "{out}/s.csv"], "a .json file"),
     ("scenes-empty-bh", ["scenes", str(VENTOUX), "--bh", "0.8", "0.2", "--out",
                          "{out}/s.json"], "B/H range 0.8..0.2 is empty"),
+    ("scenes-no-dem-dir", ["scenes", str(VENTOUX), "--dem-dir", "{dir}/none", "--out",
+                           "{out}/s.json"], "does not exist"),
     ("scenes-utm-reference", ["scenes", str(VENTOUX), "--reference", "{utm}", "--out",
                               "{out}/s.json"], "not in geographic coordinates"),
     ("archive-missing-catalog", ["archive", "--catalog", "{missing}", "--srtm-dir",

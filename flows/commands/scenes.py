@@ -23,7 +23,8 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
             "Read every scene image under DIR with the model found beside it (SPOT .DIM, "
             "gcpfree .json, RPC .geom or RPC_*.XML or RPC tags; a simulated scene's truth/ and "
             "work/ are skipped), compute its footprint at the mean terrain height under it "
-            "(--reference or --srtm-dir; without them at the model's own mean height), and "
+            "(--reference, or the DEM tiles of --dem-dir/--srtm-dir; without them at the "
+            "model's own mean height), and "
             "propose the stereo pairs (overlap, B/H from the two view vectors at the overlap's "
             "centre, incidence and heading differences, date gap, GSD ratio, band family) and "
             "the blocks (connected components of overlapping scenes). Writes CATALOG (JSON: "
@@ -89,7 +90,7 @@ def run(args: argparse.Namespace) -> int:
     if args.out.suffix.lower() != ".json" or args.out.is_dir():
         raise InputError(f"--out {args.out}: the catalog is a .json file (e.g. scenes.json)")
     criteria = criteria_of(args)
-    ground = GroundHeights(args.reference, args.reference_vertical, args.srtm_dir)
+    ground = GroundHeights(args.reference, args.reference_vertical, args.srtm_dir, args.geoid)
     scenes, rejected = read_scenes(args.directory, ground)
     catalog = propose(args.directory, scenes, rejected, criteria, ground)
     out, items = write_scene_catalog(catalog, args.out)

@@ -13,7 +13,9 @@ before it proposes pairs and blocks (:mod:`tasks.archive.stereo`).
   cover is a :class:`Rejection` with its one-line reason.
 - **Heights.** A footprint is the ground of the image's corner pixels at the scene's height:
   the mean terrain height under the image from the reference DEM (``--reference``, its datum
-  by the one rule) or from the SRTM tiles of ``--srtm-dir`` (EGM96, converted with h = H + N),
+  by the one rule) or from the DEM tiles of ``--dem-dir``/``--srtm-dir`` (SRTM, NASADEM,
+  Copernicus, tagged DEMs: their datum by the one rule, converted through ``--geoid`` or the
+  grid the rule names),
   found by :func:`core.sensors.viewing.footprint_mean_height_m` over the box that
   :func:`core.sensors.footprint.footprint_box` gives for the heights the model may see;
   without either, the model's own mean height (an RPC's height offset; 0 for a SPOT
@@ -48,10 +50,11 @@ from core.sensors.viewing import (
     scene_geometry,
 )
 from tasks.io.acquisition import Acquisition, acquisition_of
-from tasks.io.dem import check_reference, check_srtm_tiles, dem_datum, read_reference
+from tasks.io.dem import check_reference, dem_datum, read_reference, tile_datum
+from tasks.io.dem_tiles import DemSource, build_vrt, find_tiles, mosaic_grid
 from tasks.io.rasters import open_raster
+from tasks.io.reference import reference_geoid
 from tasks.io.sensors import LoadedModel, load_model, model_beside
-from tasks.io.srtm import build_vrt, find_tiles, mosaic_grid
 
 IMAGE_SUFFIXES = (".tif", ".tiff", ".jp2")
 #: model files that describe one scene on their own (a gcpfree .json may be any product)
@@ -210,58 +213,74 @@ def scene_ids(images: tuple[Path, ...], root: Path) -> dict[Path, str]:
 
 @dataclass
 class GroundHeights:
-    """Where the scenes' heights come from: a reference DEM (its datum decided once), the
-    SRTM tiles of a folder, or neither (each model's own mean height)."""
+    """Where the scenes' heights come from: a reference DEM (its datum decided once by the
+    one rule), DEM tiles (``dem_dir``: a folder of SRTM, NASADEM or Copernicus tiles, or of
+    tagged DEMs, as ``--dem-dir``/``--srtm-dir`` take it; a reference given with a ``geoid``
+    is read the same way, as :class:`tasks.io.pair.PairInputs` does), or neither (each
+    model's own mean height)."""
 
     reference: Path | None = None
     reference_vertical: str = "auto"
-    srtm_dir: Path | None = None
+    dem_dir: Path | None = None
+    geoid: Path | None = None
     _datum: DatumDecision | None = field(default=None, repr=False)
-    _checked_tiles: set[Path] = field(default_factory=set, repr=False)
+    _tiles: str | None = field(default=None, repr=False)
+    product: str = field(default="DEM", repr=False)  # the last tiles' product name
 
     def __post_init__(self) -> None:
-        if self.reference is not None and self.srtm_dir is not None:
-            raise InputError("give the reference DEM (--reference) or the SRTM tiles "
-                             "(--srtm-dir), not both")
+        if self.reference is not None and self.dem_dir is not None:
+            raise InputError("give the reference DEM (--reference) or the DEM tiles "
+                             "(--dem-dir, --srtm-dir), not both")
+        if self.reference is not None and self.geoid is not None:
+            self.dem_dir, self.reference = Path(self.reference), None  # through the geoid
         if self.reference is not None:
             self.reference = Path(self.reference)
             check_reference(self.reference)
             self._datum = dem_datum(self.reference, self.reference_vertical)
-        if self.srtm_dir is not None:
-            self.srtm_dir = Path(self.srtm_dir)
-            if not self.srtm_dir.is_dir():
-                raise InputError(f"SRTM directory {self.srtm_dir} does not exist; give "
-                                 "--srtm-dir a folder of tiles")
+        if self.dem_dir is not None:
+            self.dem_dir = Path(self.dem_dir)
+            if not self.dem_dir.exists():
+                raise InputError(f"DEM folder {self.dem_dir} does not exist; give --dem-dir a "
+                                 "folder of tiles")
+
+    @property
+    def given(self) -> bool:
+        return self.reference is not None or self.dem_dir is not None
 
     def describe(self) -> str:
         if self.reference is not None and self._datum is not None:
             return f"{self.reference}: {self._datum.describe()}"
-        if self.srtm_dir is not None:
-            return (f"the SRTM tiles of {self.srtm_dir}: EGM96 orthometric heights, converted "
-                    "with h = H + N")
+        if self.dem_dir is not None:
+            return f"the DEM tiles of {self.dem_dir}" + (f" ({self._tiles})" if self._tiles
+                                                         else "")
         return ("none: each footprint at its model's own mean height (an RPC's height offset, "
                 "else 0)")
 
     def dem(self, loaded: LoadedModel) -> GeoDEM | None:
-        """The heights under the scene's footprint (None without a source).
+        """The ellipsoidal heights under the scene's footprint (None without a source).
 
         Raises:
             CoverageError: the reference or the tiles do not reach the footprint.
+            InputError: the tiles' datum cannot be told (the one rule).
         """
         box = footprint_box([(loaded.model, (0, 0, *loaded.size))],
                             scene_height_range_m([loaded.model]))
         if self.reference is not None and self._datum is not None:
             return read_reference(self.reference, box, self._datum.datum)
-        if self.srtm_dir is None:
+        if self.dem_dir is None:
             return None
-        tiles = find_tiles(self.srtm_dir, box, allow_missing=True)
-        new = [t for t in tiles if t.path not in self._checked_tiles]
-        check_srtm_tiles(new)
-        self._checked_tiles.update(t.path for t in new)
+        source = DemSource(self.dem_dir, self.reference_vertical, self.geoid)
+        tiles = tile_datum(find_tiles(source, box, allow_missing=True))
+        self._tiles, self.product = tiles.describe(), tiles.product.name
         with tempfile.TemporaryDirectory(prefix="gcpfree-scenes-") as tmp:
-            vrt = Path(tmp) / "srtm.vrt"
+            vrt = Path(tmp) / "tiles.vrt"
             vrt.write_text(build_vrt(tiles, mosaic_grid(tiles, box)))
-            return read_reference(vrt, box, "egm96")
+            stored = read_reference(vrt, box, "ellipsoidal")  # the tiles' heights as stored
+        geoid = reference_geoid(tiles.datum, box)  # type: ignore[arg-type]
+        if geoid is None:
+            return stored
+        lon, lat = stored.nodes()
+        return stored.with_values(geoid.orthometric_to_ellipsoidal(lon, lat, stored.h_m))
 
 
 def own_height_m(loaded: LoadedModel) -> tuple[float, str]:
@@ -280,7 +299,7 @@ def scene_height_m(loaded: LoadedModel, ground: GroundHeights) -> tuple[float, s
     if dem is None:
         return h0, why
     terrain = footprint_mean_height_m(loaded.model, *loaded.size, dem, h0_m=h0)
-    what = "the reference's" if ground.reference is not None else "SRTM's"
+    what = "the reference's" if ground.reference is not None else f"the {ground.product} tiles'"
     return terrain.mean_h_m, (f"{what} mean height under the footprint "
                               f"({terrain.covered_pct:.0f} % of it covered)")
 

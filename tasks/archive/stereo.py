@@ -358,9 +358,9 @@ def propose(root: Path, scenes: tuple[Scene, ...], rejected: tuple[Rejection, ..
     lonely = {s.id for s in scenes if s.id in alone}
     reason = (f"overlaps no other scene (at least {criteria.min_link_overlap_pct:g} % of the "
               "smaller footprint, at their mean height)")
-    if ground.reference is None and ground.srtm_dir is None:
+    if not ground.given:
         reason += ("; at the models' own mean heights small crops can miss each other: give "
-                   "--reference or --srtm-dir")
+                   "--reference or --dem-dir")
     out_rejected = rejected + tuple(Rejection(s.image, reason) for s in scenes
                                     if s.id in lonely)
     kept = tuple(s for s in scenes if s.id not in lonely)

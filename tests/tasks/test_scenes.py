@@ -269,6 +269,21 @@ def test_a_flat_reference_sets_every_height(folder, tmp_path):
                if Path(r["path"]).name == "img_01.tif")
 
 
+def test_dem_tiles_give_the_heights_where_they_cover(folder, tmp_path):
+    """The bundled SRTM tile as --dem-dir: the synthetic scenes' heights are SRTM's (EGM96
+    converted) under them, within the tile's range; the Reunion crops are off the tiles."""
+    from tasks.io.geoid import BUNDLED_SRTM_DIR
+
+    doc = run_scenes(folder, tmp_path / "dem.json", "--dem-dir", str(BUNDLED_SRTM_DIR))
+    with rasterio.open(BUNDLED_SRTM_DIR / "N44E005.hgt") as src:
+        H = src.read(1)
+    a25 = next(s for s in doc["scenes"] if s["id"] == "a25")
+    assert H.min() + 40 < a25["h_m"] < H.max() + 60  # h = H + N, N about +50 m here
+    assert "SRTM tiles' mean height" in a25["height_source"] and "SRTM" in doc["heights"]
+    off = {Path(r["path"]).name: r["reason"] for r in doc["rejected"]}
+    assert "missing tile(s) S22E055" in off["img_01.tif"]
+
+
 @pytest.mark.parametrize(("change", "fragment"), [
     (lambda d: d["blocks"][0]["scenes"].append("nowhere"), "names scene nowhere"),
     (lambda d: d["pairs"][0].update(left_scene="nowhere"), "names scene nowhere"),
