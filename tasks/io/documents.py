@@ -20,7 +20,11 @@ The pattern, to move a document onto it:
    field whose keys are written at this level), ``spread`` (a mapping field whose items are
    written at this level, and read back from the keys that are no field's), ``types`` (a
    field's pydantic-ready type when its hint does not say how the file holds it), ``order``
-   (the file's order of the keys, when it is not the fields'). Register it with
+   (the file's order of the keys, when it is not the fields'), ``tag`` (key, value: written
+   first, and what tells the members of a union of dataclasses apart on read; with
+   ``tag_default`` the key may be absent, meaning this class; ``tag_written`` False: the key
+   is not written), ``finite``
+   (its numbers must be finite: null, NaN and infinities refused). Register it with
    :func:`layout` before the first :func:`record` of the class.
 2. The document is a :class:`Document`: its file name, the dataclass of the whole file (the
    envelope too: ``format``, ``version`` and constant keys are fields with their defaults),
@@ -49,14 +53,26 @@ from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field
 from functools import cache
 from pathlib import Path
-from typing import Annotated, Any, Generic, NotRequired, TypeVar, Union, get_args, get_origin
+from typing import (
+    Annotated,
+    Any,
+    Generic,
+    Literal,
+    NotRequired,
+    TypeVar,
+    Union,
+    get_args,
+    get_origin,
+)
 
 import numpy as np
 from pydantic import (
     AfterValidator,
     BeforeValidator,
+    Discriminator,
     PlainSerializer,
     PlainValidator,
+    Tag,
     TypeAdapter,
     ValidationError,
     WithJsonSchema,
@@ -78,6 +94,12 @@ def _number(v: Any) -> float:
         return math.nan
     if isinstance(v, bool) or not isinstance(v, (int, float)):
         raise ValueError("must be a number")  # noqa: TRY004 - pydantic reports ValueErrors
+    return float(v)
+
+
+def _finite(v: Any) -> float:
+    if isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v):
+        raise ValueError("must be a finite number")
     return float(v)
 
 
@@ -107,6 +129,7 @@ def _array(v: Any) -> np.ndarray:
 NUMBER_SCHEMA = {"anyOf": [{"type": "number"}, {"type": "null"}],
                  "description": "null stands for NaN"}
 Number = Annotated[float, PlainValidator(_number), WithJsonSchema(NUMBER_SCHEMA)]
+Finite = Annotated[float, PlainValidator(_finite), WithJsonSchema({"type": "number"})]
 Integer = Annotated[int, PlainValidator(_integer), WithJsonSchema({"type": "integer"})]
 Array = Annotated[np.ndarray, PlainValidator(_array),
                   PlainSerializer(lambda a: np.asarray(a).tolist()),
@@ -139,6 +162,10 @@ class Layout:
     spread: str | None = None
     types: Mapping[str, Any] = field(default_factory=dict)
     order: tuple[str, ...] = ()
+    tag: tuple[str, str] | None = None
+    tag_default: bool = False
+    tag_written: bool = True
+    finite: bool = False
 
 
 _LAYOUTS: dict[type, Layout] = {}
@@ -154,11 +181,11 @@ def layout(cls: type, **kw: Any) -> None:
 _RECORDED: set[type] = set()
 
 
-def shape(tp: Any) -> Any:
-    """The pydantic-ready type of a field's type hint ``tp``."""
+def shape(tp: Any, finite: bool = False) -> Any:
+    """The pydantic-ready type of a field's type hint ``tp`` (``finite``: its floats)."""
     origin, args = get_origin(tp), get_args(tp)
     if tp is float:
-        return Number
+        return Finite if finite else Number
     if tp is int:
         return Integer
     if tp is np.ndarray or origin is np.ndarray:
@@ -168,17 +195,17 @@ def shape(tp: Any) -> Any:
     if dataclasses.is_dataclass(tp):
         return record(tp)
     if origin in (Union, types.UnionType):
-        return Union[tuple(shape(a) for a in args)]  # noqa: UP007
+        return _tagged(args) or Union[tuple(shape(a, finite) for a in args)]  # noqa: UP007
     if origin is tuple:
         if len(args) == 2 and args[1] is Ellipsis:
-            return tuple[shape(args[0]), ...]
-        return tuple[tuple(shape(a) for a in args)] if args else tuple
+            return tuple[shape(args[0], finite), ...]
+        return tuple[tuple(shape(a, finite) for a in args)] if args else tuple
     if origin in (Mapping, dict, typing.Mapping):
-        return dict[shape(args[0]), shape(args[1])] if args else dict
+        return dict[shape(args[0]), shape(args[1], finite)] if args else dict
     if origin is list:
-        return list[shape(args[0])]
+        return list[shape(args[0], finite)]
     if origin is Annotated:
-        return shape(args[0])
+        return shape(args[0], finite)
     return tp  # str, bool, Any, Literal[...]
 
 
@@ -202,17 +229,20 @@ def record(cls: type) -> Any:
                 or f.default_factory is not dataclasses.MISSING}
     items = {}
     for f in init:
-        tp = lay.types.get(f.name) or shape(hints[f.name])
+        tp = lay.types.get(f.name) or shape(hints[f.name], lay.finite)
         items[key[f.name]] = NotRequired[tp] if f.name in defaults else tp
     for k in lay.computed:
         items[k] = NotRequired[Any]
+    if lay.tag:
+        tag_type = Literal[lay.tag[1]]  # type: ignore[valid-type]
+        items = {lay.tag[0]: NotRequired[tag_type] if lay.tag_default else tag_type, **items}
     body = TypedDict(cls.__name__, items)  # type: ignore[operator]
     # the keys of this level of the file: an inlined field's own, a spread field's none
     inlined = {key[n]: _KEYS[hints[n]] if hints[n] in _KEYS else _keys_of(hints[n])
                for n in lay.inline}
     spread = key[lay.spread] if lay.spread else None
     own = tuple(k for f in init for k in inlined.get(key[f.name], (key[f.name],))
-                if k != spread) + tuple(lay.computed)
+                if k != spread) + tuple(lay.computed) + ((lay.tag[0],) if lay.tag else ())
     _KEYS[cls] = own
 
     def gather(d: Any) -> Any:
@@ -237,7 +267,11 @@ def record(cls: type) -> Any:
         d = {key[f.name]: getattr(obj, f.name) for f in init
              if not (f.name in lay.omit_default
                      and _equal(getattr(obj, f.name), defaults[f.name]))}
+        if lay.tag:  # the union's serialiser checks it
+            d = {lay.tag[0]: lay.tag[1], **d}
         out = handler(d)
+        if lay.tag and not lay.tag_written:
+            out.pop(lay.tag[0])
         flat: dict[str, Any] = {}
         for k, v in out.items():
             if k in inlined or k == spread:
@@ -248,6 +282,29 @@ def record(cls: type) -> Any:
         return {k: flat[k] for k in lay.order if k in flat} | flat if lay.order else flat
 
     return Annotated[body, BeforeValidator(gather), AfterValidator(build), WrapSerializer(write)]
+
+
+def _tagged(members: tuple[Any, ...]) -> Any:
+    """A union of dataclasses told apart by their :class:`Layout`'s ``tag`` (None when they
+    have none): pydantic's discriminated union, the tag read from the file's key."""
+    lays = [_LAYOUTS.get(m) if dataclasses.is_dataclass(m) else None for m in members]
+    if not all(lay is not None and lay.tag for lay in lays):
+        return None
+    key = lays[0].tag[0]  # type: ignore[union-attr, index]
+    by_tag = {lay.tag[1]: m for lay, m in zip(lays, members, strict=True)}  # type: ignore
+    default = next((lay.tag[1] for lay in lays if lay.tag_default), None)  # type: ignore
+
+    def which(v: Any) -> str | None:
+        if isinstance(v, dict):
+            t = v.get(key, default)
+            return t if isinstance(t, str) else None
+        return next((t for t, m in by_tag.items() if isinstance(v, m)), None)
+
+    return Annotated[Union[tuple(Annotated[record(m), Tag(t)]  # noqa: UP007
+                                 for t, m in by_tag.items())],
+                     Discriminator(which, custom_error_type="tag",
+                                   custom_error_message=f"must have '{key}' among "
+                                                        f"{sorted(by_tag)}")]
 
 
 def _keys_of(cls: type) -> tuple[str, ...]:
@@ -357,4 +414,5 @@ def _adapter(value_type: Any) -> TypeAdapter:
     return TypeAdapter(shape(value_type))
 
 
-__all__ = ["Array", "Document", "Integer", "Layout", "Number", "layout", "record", "shape"]
+__all__ = ["Array", "Document", "Finite", "Integer", "Layout", "Number", "layout", "record",
+           "shape"]

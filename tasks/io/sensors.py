@@ -24,7 +24,6 @@ raster's own pixels (0-based, pixel centres at integers), whichever way the mode
 
 from __future__ import annotations
 
-import math
 import re
 from collections.abc import Callable
 from dataclasses import dataclass
@@ -35,11 +34,11 @@ from core.jsonio import parse_json
 from core.sensors.base import SensorModel
 from core.sensors.pushbroom import PushbroomModel
 from core.sensors.rpc import RPCModel
-from core.sensors.sar import FORMAT as SAR_FORMAT
 from core.sensors.sar import SarModel
 from core.sensors.sentinel1 import Annotation
 from core.sensors.spot import SpotScene, spot_pushbroom
 from tasks.io.dimap import dimap_beside, read_dimap
+from tasks.io.model_files import SUN_KEY, family_of, read_model_document
 from tasks.io.rasters import open_raster
 from tasks.io.sentinel1 import annotation_beside, is_annotation_file, read_annotation
 
@@ -188,34 +187,13 @@ class FileModel:
     sun_deg: tuple[float, float] | None = None
 
 
-#: the key of a gcpfree model file that carries the sun of the metadata it was made from:
-#: ``{"azimuth_deg": ..., "elevation_deg": ...}`` (what chooses the tie points' measure)
-SUN_KEY = "sun"
-
-
 def sun_to_dict(sun: tuple[float, float] | None) -> dict[str, dict[str, float]]:
-    """``{SUN_KEY: ...}`` to add to a model file's dict, or nothing when there is no sun."""
+    """``{SUN_KEY: ...}`` to add to a model file's dict (the sun of the metadata it was made
+    from, which chooses the tie points' measure), or nothing when there is no sun; a model
+    file with its sun is :func:`tasks.io.model_files.model_document`."""
     if sun is None:
         return {}
     return {SUN_KEY: {"azimuth_deg": float(sun[0]), "elevation_deg": float(sun[1])}}
-
-
-def _sun_from_dict(d: object) -> tuple[float, float] | None:
-    """A model file's sun, None without the key; InputError (without the file's name, which
-    :func:`_from_json` puts before it) when the key holds something else."""
-    sun = d.get(SUN_KEY) if isinstance(d, dict) else None
-    if sun is None:
-        return None
-    try:
-        az, el = float(sun["azimuth_deg"]), float(sun["elevation_deg"])
-    except (KeyError, TypeError, ValueError):
-        raise InputError(f"key '{SUN_KEY}' must hold numbers 'azimuth_deg' and "
-                         f"'elevation_deg', got {sun!r:.80}; remove it or give the file "
-                         "gcpfree wrote") from None
-    if not (math.isfinite(az) and -90.0 <= el <= 90.0):
-        raise InputError(f"key '{SUN_KEY}' has azimuth {az} and elevation {el} deg "
-                         "(need a finite azimuth and an elevation within -90..90)")
-    return az, el
 
 
 def _from_dimap(path: Path, band: int | None) -> FileModel:
@@ -225,24 +203,14 @@ def _from_dimap(path: Path, band: int | None) -> FileModel:
 
 
 def _from_json(path: Path) -> FileModel:
+    """A gcpfree model file (:mod:`tasks.io.model_files`)."""
     d = parse_json(_read_text(path, "model JSON file"), str(path))
-    rpc = isinstance(d, dict) and d.get("type") == "rpc"
-    family = "rpc" if rpc else ("sar" if isinstance(d, dict) and d.get("format") == SAR_FORMAT
-                                else "pushbroom")
-    try:
-        if rpc:
-            return FileModel(RPCModel.from_dict(d), "rpc", path, "raster")
-        model = SarModel.from_dict(d) if family == "sar" else PushbroomModel.from_dict(d)
-        return FileModel(model, family, path, "product", (model.n_cols, model.n_rows),
-                         sun_deg=_sun_from_dict(d))
-    except InputError as exc:
-        raise InputError(f"{path}: {exc}") from None
-    except (KeyError, IndexError, TypeError, ValueError, AttributeError, OverflowError) as exc:
-        # the model classes check the keys they expect, not every damaged value
-        what = {"rpc": "RPC", "sar": "SAR"}.get(family, family)
-        raise InputError(f"{path} is not a valid gcpfree {what} model "
-                         f"({type(exc).__name__}: {str(exc).splitlines()[0] if str(exc) else ''})"
-                         "; give the model file gcpfree wrote") from None
+    family = family_of(d)
+    model, sun = read_model_document(d, str(path))
+    if family == "rpc":
+        return FileModel(model, "rpc", path, "raster")
+    size = (model.n_cols, model.n_rows)  # type: ignore[union-attr]
+    return FileModel(model, family, path, "product", size, sun_deg=sun)
 
 
 def _from_tiff(path: Path) -> FileModel:

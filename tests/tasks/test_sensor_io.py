@@ -231,6 +231,6 @@ def test_a_model_file_carries_the_sun_of_its_metadata(spot_scene_files, tmp_path
     assert load_model(path).sun is None and sun_to_dict(None) == {}
     for bad in ({"azimuth_deg": 140.0}, {"azimuth_deg": 1.0, "elevation_deg": 95.0}, "east"):
         path.write_text(json.dumps({**m.to_dict(), SUN_KEY: bad}))
-        with pytest.raises(InputError, match=f"{path}: key 'sun'") as err:
+        with pytest.raises(InputError, match=f"{path}: pushbroom model: key 'sun") as err:
             load_model(path)
         assert "\n" not in str(err.value) and str(err.value).count(str(path)) == 1
