@@ -167,8 +167,14 @@ def find_scene_files(root: str | Path) -> SceneFiles:
         raise InputError(f"{root} is not a folder; give the folder holding the scenes")
     images: list[Path] = []
     alone: list[Path] = []
+    seen: set[str] = set()  # folders linked twice (or into themselves) are read once
     for here, dirs, files in os.walk(root, followlinks=True):
         folder = Path(here)
+        real = os.path.realpath(folder)
+        if real in seen:
+            dirs[:] = []
+            continue
+        seen.add(real)
         skip = set(SIMULATOR_FOLDERS) if _is_simulated(folder) else set()
         dirs[:] = sorted(d for d in dirs if not d.startswith(".") and d not in skip)
         found = sorted(folder / f for f in files if not f.startswith("."))

@@ -75,6 +75,7 @@ def folder(tmp_path_factory) -> Path:
     blank_image(root / "sim" / "truth" / "dsm.tif", 10)
     blank_image(root / "sim" / "work" / "radiance_left.tif", 10)
     blank_image(root / ".hidden" / "x.tif", 10)
+    (root / "pass1" / "again").symlink_to(root, target_is_directory=True)  # read once
     return root
 
 
