@@ -286,6 +286,23 @@ def _pyplot() -> Any:
     return plt
 
 
+def _finish(plt: Any, fig: Any, ax: Any, path: Path, labels: tuple[str, str, str],
+            legend: dict[str, Any] | None = None) -> bool:
+    """Axis labels and title, a legend with ``legend``'s options (none when None), a light
+    grid; the figure written to ``path`` and closed."""
+    xlabel, ylabel, title = labels
+    ax.set_xlabel(xlabel)
+    ax.set_ylabel(ylabel)
+    ax.set_title(title)
+    if legend is not None:
+        ax.legend(**legend)
+    ax.grid(alpha=0.3)
+    fig.tight_layout()
+    fig.savefig(path)
+    plt.close(fig)
+    return True
+
+
 def relief_figure(path: Path) -> bool:
     sweeps = {n: _load(n) for n in ("relief_sweep.json", "relief_sweep_simple.json")}
     if not any(sweeps.values()):
@@ -305,15 +322,8 @@ def relief_figure(path: Path) -> bool:
                             xytext=(4, 6), fontsize=8)
     ax.axhline(0.5, color="0.6", lw=0.8, ls=":")
     ax.set_xscale("log")
-    ax.set_xlabel("median window relief (m)")
-    ax.set_ylabel("check points, worst RMS (px)")
-    ax.set_title("GCP-free orientation against relief (simulated tiny pair, 40 m pixels)")
-    ax.legend()
-    ax.grid(alpha=0.3)
-    fig.tight_layout()
-    fig.savefig(path)
-    plt.close(fig)
-    return True
+    return _finish(plt, fig, ax, path, ("median window relief (m)", "check points, worst RMS (px)",
+                   "GCP-free orientation against relief (simulated tiny pair, 40 m pixels)"), {})
 
 
 def prediction_figure(path: Path) -> bool:
@@ -336,15 +346,10 @@ def prediction_figure(path: Path) -> bool:
                     label="0.7-1.5", zorder=0)
     ax.set_xlim(0, top)
     ax.set_ylim(0, top)
-    ax.set_xlabel("predicted check-point RMS beyond the GCPs' common error (px)")
-    ax.set_ylabel("measured, beyond the GCPs' common error (px)")
-    ax.set_title("Stated against measured accuracy, 19 simulated scenes")
-    ax.legend(fontsize=7, ncol=2)
-    ax.grid(alpha=0.3)
-    fig.tight_layout()
-    fig.savefig(path)
-    plt.close(fig)
-    return True
+    return _finish(plt, fig, ax, path, (
+        "predicted check-point RMS beyond the GCPs' common error (px)",
+        "measured, beyond the GCPs' common error (px)",
+        "Stated against measured accuracy, 19 simulated scenes"), {"fontsize": 7, "ncol": 2})
 
 
 def speed_figure(path: Path) -> bool:
@@ -368,13 +373,8 @@ def speed_figure(path: Path) -> bool:
     for i, (_, seconds, _) in enumerate(bars[::-1]):
         ax.annotate(f"{seconds:.1f} s", (seconds, i), xytext=(3, -3),
                     textcoords="offset points", fontsize=8)
-    ax.set_xlabel("wall time on 2 cores (s)")
-    ax.set_title("Speed, from the shell as a user waits")
-    ax.grid(axis="x", alpha=0.3)
-    fig.tight_layout()
-    fig.savefig(path)
-    plt.close(fig)
-    return True
+    return _finish(plt, fig, ax, path, ("wall time on 2 cores (s)", "",
+                                         "Speed, from the shell as a user waits"))
 
 
 SNIPPETS: dict[str, Callable[[], list[str]]] = {
