@@ -237,6 +237,7 @@ def record(cls: type) -> Any:
         tag_type = Literal[lay.tag[1]]  # type: ignore[valid-type]
         items = {lay.tag[0]: NotRequired[tag_type] if lay.tag_default else tag_type, **items}
     body = TypedDict(cls.__name__, items)  # type: ignore[operator]
+    body.__doc__ = cls.__doc__  # the schema's description
     # the keys of this level of the file: an inlined field's own, a spread field's none
     inlined = {key[n]: _KEYS[hints[n]] if hints[n] in _KEYS else _keys_of(hints[n])
                for n in lay.inline}
@@ -396,7 +397,8 @@ class Document(Generic[T]):
 
     def json_schema(self) -> dict[str, Any]:
         """The JSON Schema of the document."""
-        return {"title": self.name, **self.adapter.json_schema()}
+        return {**self.adapter.json_schema(), "title": self.name,
+                "x-class": f"{self.value_type.__module__}.{self.value_type.__qualname__}"}
 
 
 def _plain(v: Any) -> Any:
