@@ -126,12 +126,16 @@ class DatumDecision:
 
     @property
     def geoid_label(self) -> str:
-        """The geoid N comes from, for tags and lines (``EGM96``, ``EGM2008 (grid x.tif)``)."""
-        name = GEOID_DATUMS.get(self.datum, "")
+        """The geoid N comes from, for tags and lines: ``EGM96`` (the bundled grid),
+        ``EGM2008, grid us_nga_egm08_25.tif``, ``geoid of grid x.gtx``; empty for ellipsoidal
+        heights."""
+        if not self.orthometric:
+            return ""
         if self.geoid is None:
-            return name
+            return GEOID_DATUMS[self.datum]
         grid = f"grid {_file_name(self.geoid)}"
-        return grid if self.datum == "orthometric" else f"{name} ({grid})"
+        return f"geoid of {grid}" if self.datum == "orthometric" else \
+            f"{GEOID_DATUMS[self.datum]}, {grid}"
 
     def describe(self) -> str:
         """One line for the terminal: the datum, why, and what gcpfree does with it."""

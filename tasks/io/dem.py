@@ -56,6 +56,9 @@ def dem_datum(path: str | Path, given: str = "auto", *, what: str = "reference D
         proj = None if found is None else str(found)
     if given != "auto":  # the option decides: no need to open the file
         return decide_datum(label, option, given=given, geoid=grid, geoid_option=geoid_option)
+    if path.suffix.lower() == ".zip":  # a NASADEM zip as distributed: its name says
+        return decide_datum(label, option, named=named_datum(path), geoid=grid,
+                            proj_grid=proj, geoid_option=geoid_option)
     with open_raster(path, what, HINT) as src:
         tags = {k.lower(): v for k, v in src.tags().items()}
         crs = src.crs

@@ -6,8 +6,9 @@ The products, by the names they are distributed under:
 - SRTM: ``N44E005.hgt``, ``N44E005.SRTMGL1.hgt``, ``n44_e005_1arc_v3.tif``, ``N44E005.tif``;
   1201 (3") or 3601 (1") nodes a side, on whole multiples of the spacing, both edges of the
   degree included (shared with the neighbours); EGM96 heights, -32768 voids.
-- NASADEM: ``NASADEM_HGT_n44e005.hgt`` (or ``.tif``; the ``n44e005.hgt`` inside its zip is an
-  SRTM name): SRTM's 1" lattice, EGM96 heights.
+- NASADEM: ``NASADEM_HGT_n44e005.zip`` as distributed (its ``n44e005.hgt`` read inside it;
+  unzipped, that is an SRTM name, read as SRTM) or ``NASADEM_HGT_n44e005.tif``: SRTM's 1"
+  lattice, EGM96 heights.
 - Copernicus DEM GLO-30 / GLO-90: ``Copernicus_DSM_COG_10_N54_00_W165_00_DEM.tif`` (AWS) or
   ``Copernicus_DSM_10_N54_00_W165_00_DEM.tif`` (ESA), in the folder or in the layouts of
   their distributions (``<tile>/DEM/<tile>_DEM.tif``, ``<tile>_DEM/<tile>_DEM.tif``); 3600
@@ -49,7 +50,7 @@ MASKS = {"WBM": ("Byte", 255), "HEM": ("Float32", "nan"), "EDM": ("Byte", 255)}
 MAX_HEIGHT_ERROR_M = 10.0
 _COP_RE = re.compile(r"^Copernicus_DSM_(?:COG_)?(10|30)_([NS])(\d{2})_00_([EW])(\d{3})_00"
                      r"(?:_DEM)?\.tiff?$", re.IGNORECASE)
-_NASADEM_RE = re.compile(r"^NASADEM_HGT_([ns])(\d{2})([ew])(\d{3})\.(?:hgt|tiff?)$",
+_NASADEM_RE = re.compile(r"^NASADEM_HGT_([ns])(\d{2})([ew])(\d{3})\.(?:hgt|zip|tiff?)$",
                          re.IGNORECASE)
 _SRTM_SUFFIXES = (".hgt", ".tif", ".tiff")
 _EDGE_DEG = 1e-7  # a node this close inside a degree's open edge belongs to the next tile
@@ -145,6 +146,11 @@ class DemTile:
     extent: tuple[float, float, float, float]
     void: float | None = None
     masks: tuple[tuple[str, Path], ...] = ()
+
+    @property
+    def gdal_path(self) -> str:
+        """What GDAL opens: the file, or the ``.hgt`` inside a NASADEM zip."""
+        return zip_member(self.path) or str(self.path)
 
     @property
     def res_deg(self) -> float:
@@ -250,12 +256,37 @@ def _named_files(d: Path) -> dict[Product, dict[tuple[int, int], Path]]:
     return out
 
 
+def zip_member(path: Path) -> str | None:
+    """GDAL's path of the ``.hgt`` inside a NASADEM zip (``NASADEM_HGT_n44e005.zip`` holds
+    ``n44e005.hgt``), None for any other file."""
+    if path.suffix.lower() != ".zip":
+        return None
+    return f"/vsizip/{path.resolve()}/{path.stem[len('NASADEM_HGT_'):].lower()}.hgt"
+
+
 def check_named(path: Path, product: Product, corner: tuple[int, int]) -> DemTile:
     """Validate one named tile against its product's lattice; InputError says what is wrong."""
-    if product in (SRTM, NASADEM):
-        check_tile(path, *corner)  # sizes of .hgt and SRTM GeoTIFFs
     what = f"{product.name} tile"
-    with open_raster(path, what, "replace the file") as src:
+    member = zip_member(path)
+    if product is NASADEM and path.suffix.lower() == ".hgt":
+        raise InputError(f"{what} {path}: GDAL reads a .hgt by its SRTM name; keep the zip as "
+                         f"distributed or name the file {path.stem[len('NASADEM_HGT_'):]}.hgt")
+    if product in (SRTM, NASADEM) and member is None:
+        check_tile(path, *corner)  # sizes of .hgt and SRTM GeoTIFFs
+    if member is not None:
+        import rasterio
+
+        try:
+            src = rasterio.open(member)
+        except rasterio.errors.RasterioIOError as exc:
+            raise InputError(f"cannot read {what} {path}: {exc}; download it again") from exc
+        if (src.width, src.height) != (3601, 3601):
+            src.close()
+            raise InputError(f"{what} {path} holds {src.width}x{src.height} heights, not "
+                             "NASADEM's 3601x3601; download it again")
+    else:
+        src = open_raster(path, what, "replace the file")
+    with src:
         tile = _tile_of(src, path, product, corner, what)
     if product in (GLO30, GLO90):
         _check_copernicus_lattice(tile, corner)
@@ -453,17 +484,20 @@ def _vrt(grid: MosaicGrid, sources: list[str], data_type: str, nodata: float | s
 """
 
 
-def _source(path: Path, grid: MosaicGrid, resampling: str | None, nodata: float | str | None
+def _source(path: str, grid: MosaicGrid, resampling: str | None, nodata: float | str | None
             ) -> str:
-    """A ComplexSource placing the raster at ``path`` on ``grid`` by its own transform."""
-    with open_raster(path, "DEM tile") as src:
+    """A ComplexSource placing the raster GDAL opens at ``path`` on ``grid`` by its own
+    transform."""
+    import rasterio
+
+    with rasterio.open(path) as src:
         st, w, h = src.transform, src.width, src.height
     a, _, c, _, e, f = grid.transform
     same = abs(st.a - a) < 1e-12 and abs(st.e - e) < 1e-12
     resamp = "" if same and resampling is None else f' resampling="{resampling or "bilinear"}"'
     nd = "" if nodata is None else f"\n      <NODATA>{nodata}</NODATA>"
     return f"""    <ComplexSource{resamp}>
-      <SourceFilename relativeToVRT="0">{escape(str(path.resolve()))}</SourceFilename>
+      <SourceFilename relativeToVRT="0">{escape(path)}</SourceFilename>
       <SourceBand>1</SourceBand>
       <SrcRect xOff="0" yOff="0" xSize="{w}" ySize="{h}"/>
       <DstRect xOff="{_offset((st.c - c) / a)!r}" yOff="{_offset((st.f - f) / e)!r}" xSize="{_offset(w * st.a / a)!r}" ySize="{_offset(h * st.e / e)!r}"/>{nd}
@@ -473,7 +507,8 @@ def _source(path: Path, grid: MosaicGrid, resampling: str | None, nodata: float 
 def build_vrt(tiles: TileSet, grid: MosaicGrid) -> str:
     """GDAL VRT XML mosaicking the tiles' heights onto ``grid`` (bilinear where a tile is
     coarser), each tile's void value as its nodata."""
-    sources = [_source(t.path, grid, None, t.void) for t in tiles]
+    sources = [_source(t.gdal_path if zip_member(t.path) else str(t.path.resolve()), grid,
+                       None, t.void) for t in tiles]
     return _vrt(grid, sources, "Float32", SRTM_VOID)
 
 
@@ -481,7 +516,8 @@ def build_mask_vrt(tiles: TileSet, grid: MosaicGrid, kind: str) -> str | None:
     """GDAL VRT XML of the tiles' ``kind`` masks (``WBM``, ``HEM``, ``EDM``) on ``grid``,
     nearest cell; None when no tile has that mask."""
     data_type, nodata = MASKS[kind]
-    sources = [_source(p, grid, "nearest", None) for t in tiles for k, p in t.masks if k == kind]
+    sources = [_source(str(p.resolve()), grid, "nearest", None) for t in tiles
+               for k, p in t.masks if k == kind]
     return _vrt(grid, sources, data_type, nodata) if sources else None
 
 

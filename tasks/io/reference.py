@@ -78,11 +78,11 @@ class ReferenceSummary:
 
     def lines(self) -> list[str]:
         lat = self.res_arcsec if self.res_lat_arcsec is None else self.res_lat_arcsec
-        cells = (f"{self.res_arcsec:g}" if lat == self.res_arcsec
-                 else f"{self.res_arcsec:g}\" x {lat:g}")
+        cells = (f"{self.res_arcsec:g} arcsec" if lat == self.res_arcsec
+                 else f"{self.res_arcsec:g}\" x {lat:g}\" (lon x lat)")
         out = [
             f"reference DEM  {self.path}",
-            (f"grid           {self.width} x {self.height} px at {cells} arcsec, "
+            (f"grid           {self.width} x {self.height} px at {cells}, "
              f"{len(self.tiles)} {self.product} tile(s): {', '.join(self.tiles)}"),
             f"coverage       {self.coverage_pct:.2f} % of the box has {self.product} tiles",
             f"voids          {self.void_pct:.3f} % of covered pixels (mask: {self.void_mask_path})",
@@ -92,7 +92,7 @@ class ReferenceSummary:
                        f"height error > {self.max_height_error_m:g} m (the product's own masks)")
         geoid = DatumDecision(**_decision_args(self.heights)).geoid_label if self.heights else "EGM96"
         out.append(f"height range   h {self.h_min_m:.1f} .. {self.h_max_m:.1f} m (WGS84 ellipsoid), "
-                   f"H {self.H_min_m:.1f} .. {self.H_max_m:.1f} m ({geoid or 'as the tiles say'})")
+                   f"H {self.H_min_m:.1f} .. {self.H_max_m:.1f} m ({geoid or 'ellipsoidal tiles: H is h'})")
         return out
 
 
@@ -184,7 +184,9 @@ def heights_tag(tiles: TileSet) -> str:
     d = tiles.datum
     if d is None or not d.orthometric:
         return f"WGS84 ellipsoid ({tiles.product.name} heights as they are)"
-    return f"WGS84 ellipsoid (h = {tiles.product.name} H + {d.geoid_label} N)"
+    if d.geoid is None:
+        return f"WGS84 ellipsoid (h = {tiles.product.name} H + {d.geoid_label} N)"
+    return f"WGS84 ellipsoid (h = {tiles.product.name} H + N, {d.geoid_label})"
 
 
 @task(name="build-ellipsoidal-reference")

@@ -64,3 +64,46 @@ def test_the_one_datum_rule_order_and_refusal():
         decide_datum(**kw, tag="Normal Null")
     with pytest.raises(InputError, match="unknown"):
         decide_datum(**kw, given="navd88")
+
+
+def test_egm2008_and_other_geoids_through_the_one_rule():
+    """EGM2008 is learnt from a tag, a CRS's vertical part and a Copernicus name; its heights
+    go through the grid given, else PROJ's, else are refused in one line naming --geoid; never
+    read as EGM96. A grid given replaces EGM96's, names the geoid of heights nothing else
+    describes (or a datum gcpfree does not know), and is refused for ellipsoidal heights."""
+    from core.heights import decide_datum
+
+    kw = {"what": "DEM x.tif", "option": "--reference-vertical", "geoid_option": "--geoid"}
+    named = ("egm2008", "Copernicus GLO-30 file c.tif: EGM2008")
+    for says in ({"tag": "EGM2008 geoid"}, {"crs_vertical_name": "EGM2008 height"},
+                 {"named": named}):
+        with pytest.raises(InputError, match="give it with --geoid GRID.*never read as EGM96"):
+            decide_datum(**kw, **says)
+        d = decide_datum(**kw, **says, geoid="/g/egm08.gtx")
+        assert (d.datum, d.geoid, d.geoid_source) == ("egm2008", "/g/egm08.gtx", "given: --geoid")
+        assert "EGM2008 orthometric heights, converted with h = H + N, N from egm08.gtx" in \
+            d.describe()
+        d = decide_datum(**kw, **says, proj_grid="/proj/us_nga_egm08_25.tif")
+        assert (d.geoid, d.geoid_source) == ("/proj/us_nga_egm08_25.tif", "PROJ's grid")
+        assert d.to_dict()["geoid"] == "/proj/us_nga_egm08_25.tif"
+        # a command that converts EGM96 only refuses it, saying how to convert it first
+        with pytest.raises(InputError, match="prepare-reference --dem-dir DIR --geoid GRID"):
+            decide_datum("DEM x.tif", "--dem-vertical", **says, proj_grid="/p.tif")
+    # EGM96 keeps the bundled grid unless one is given (today's prepare-reference --geoid)
+    d = decide_datum(**kw, srtm_name="N44E005.hgt")
+    assert (d.datum, d.geoid) == ("egm96", None) and d.to_dict() == {
+        "vertical": "egm96", "vertical_source": "SRTM file N44E005.hgt: EGM96"}
+    assert decide_datum(**kw, srtm_name="N44E005.hgt", geoid="/g/e96.tif").geoid == "/g/e96.tif"
+    # the grid names the geoid of heights nothing else describes, or of a datum not known
+    d = decide_datum(**kw, geoid="/g/national.tif")
+    assert (d.datum, d.source) == ("orthometric", "given: --geoid national.tif")
+    assert decide_datum(**kw, crs_vertical_name="NAVD88 height", geoid="/g/g18.tif").datum == \
+        "orthometric"
+    with pytest.raises(InputError, match="NAVD88.*give the geoid grid they refer to with --geoid"):
+        decide_datum(**kw, crs_vertical_name="NAVD88 height")
+    with pytest.raises(InputError, match="ellipsoidal.*drop --geoid"):
+        decide_datum(**kw, tag="WGS84 ellipsoid", geoid="/g/egm08.gtx")
+    with pytest.raises(InputError, match="need the geoid grid"):
+        from core.heights import DatumDecision
+
+        DatumDecision("egm2008", "tag")
