@@ -9,7 +9,7 @@ of its metadata (``sun``, :data:`SUN_KEY`).
 
 :func:`model_document` and :func:`read_model_document` are the one writer and reader of the
 three; the files they write are byte for byte those of the models' own ``to_dict``
-(``tests/tasks/io/test_documents.py``), which stay until their last callers move here.
+(``tests/tasks/test_documents.py``), which stay until their last callers move here.
 """
 
 from __future__ import annotations
@@ -127,6 +127,8 @@ class PushbroomFile:
             correction_centre=self.correction_centre, harmonic_span=self.harmonic_span_s)
 
 
+layout(ImageSize, finite=True)
+layout(PushbroomTiming, finite=True)
 layout(PushbroomFile, finite=True, omit_default=("sun",))
 PUSHBROOM: Document[PushbroomFile] = Document(
     "pushbroom model", PushbroomFile, format=PUSHBROOM_FORMAT,

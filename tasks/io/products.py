@@ -1,7 +1,7 @@
 """The products' JSON documents on :mod:`tasks.io.documents`: each one's layout and its
 :class:`~tasks.io.documents.Document` (gcps.json, eval.json, windows.json, checkpoints.json,
 pair.json). Keys, their order and the readers' checks are those the hand-written writers and
-readers had (``tests/tasks/io/test_documents.py`` reads the files today's code wrote, in
+readers had (``tests/tasks/test_documents.py`` reads the files today's code wrote, in
 ``tests/data/products_v0_1/``, and writes them back byte for byte). The orientation's
 report.json has its own (:mod:`tasks.absolute.report`), to move onto this pattern."""
 
@@ -85,6 +85,21 @@ EVALUATION: Document[EvaluationReport] = Document(
     "eval.json", EvaluationReport, format=REPORT_FORMAT,
     hint="give the eval.json written by gcpfree evaluate")
 
+
+
+@dataclass(frozen=True)
+class EvaluationStats:
+    """The statistics of an eval.json alone, per class and over ``all`` (what the archive's
+    summary and artifacts read: they need no more of the file)."""
+
+    classes: Mapping[str, DzStats]
+    all: DzStats
+
+
+EVALUATION_STATS: Document[EvaluationStats] = Document(
+    "eval.json", EvaluationStats, format=REPORT_FORMAT,
+    hint="give the eval.json written by gcpfree evaluate")
+
 # ------------------------------------------------------------------------------ pair.json
 
 PAIR_FORMAT = "gcpfree.pair"
@@ -108,5 +123,5 @@ class PairManifest:
 PAIR: Document[PairManifest] = Document("pair.json", PairManifest, format=PAIR_FORMAT,
                                         hint="give the pair.json written by gcpfree pair")
 
-__all__ = ["CHECKPOINTS", "EVALUATION", "GCPS", "PAIR", "PAIR_FORMAT", "WINDOWS",
-           "PairManifest"]
+__all__ = ["CHECKPOINTS", "EVALUATION", "EVALUATION_STATS", "GCPS", "PAIR", "PAIR_FORMAT", "WINDOWS",
+           "EvaluationStats", "PairManifest"]
