@@ -43,6 +43,26 @@ from core.sensors.footprint import PixelBox
 
 FloatArray = NDArray[np.float64]
 BoolArray = NDArray[np.bool_]
+DEFAULT_MATCHING = MatchingConfig()
+
+
+@dataclass(frozen=True, eq=False)
+class SensorWindow:
+    """One image's part of a tile: the pixels ``image`` read from the full-image pixel
+    ``origin`` (col0, row0), the image's ``nodata`` value (None: none), its ``model`` and the
+    whole image's ``size`` (cols, rows), beyond which nothing is valid."""
+
+    image: NDArray
+    origin: tuple[int, int]
+    model: SensorModel
+    size: tuple[int, int]
+    nodata: float | None = None
+
+    def warp(self, affine: FloatArray, window: tuple[int, int, int, int], order: int = 3
+             ) -> tuple[NDArray[np.float32], BoolArray]:
+        """The window resampled into rectified geometry (:func:`warp_to_window`)."""
+        return warp_to_window(self.image, self.origin, affine, window, self.size, self.nodata,
+                              order)
 
 
 @dataclass(frozen=True)
@@ -134,25 +154,19 @@ def retriangulate(matches: TileMatches, left: SensorModel, right: SensorModel, t
     return g2g(uu[core], vv[core], matches.d_px.astype(np.float64))
 
 
-def dense_tile(
-    plan: TilePlan, left_image: NDArray, left_origin: tuple[int, int], right_image: NDArray,
-    right_origin: tuple[int, int], left: SensorModel, right: SensorModel,
-    left_size: tuple[int, int], right_size: tuple[int, int], to_xy: ToXY, *,
-    left_nodata: float | None = None, right_nodata: float | None = None,
-    geoid: GeoidGrid | None = None, cfg: MatchingConfig = MatchingConfig(),
-) -> TileResult:
+def dense_tile(plan: TilePlan, left: SensorWindow, right: SensorWindow, to_xy: ToXY, *,
+               geoid: GeoidGrid | None = None, cfg: MatchingConfig = DEFAULT_MATCHING,
+               ) -> TileResult:
     """One tile from its sensor windows to ground points (see the module docstring).
 
-    ``left_image``/``right_image`` hold the sensor windows ``plan.left_read``/``right_read``
-    from their ``origin`` ``(col0, row0)``; ``*_size`` are the whole images' ``(cols, rows)``.
-    Heights are ellipsoidal, or EGM96 orthometric with ``geoid``.
+    ``left``/``right`` hold the sensor windows ``plan.left_read``/``right_read`` with their
+    models (the right one oriented to the left). Heights are ellipsoidal, or EGM96
+    orthometric with ``geoid``.
     """
     def warp(p: TilePlan, order: int = 3) -> tuple[NDArray[np.float32], BoolArray,
                                                    NDArray[np.float32], BoolArray]:
-        return (*warp_to_window(left_image, left_origin, p.rect.left_affine, p.window,
-                                left_size, left_nodata, order),
-                *warp_to_window(right_image, right_origin, p.rect.right_affine, p.window,
-                                right_size, right_nodata, order))
+        return (*left.warp(p.rect.left_affine, p.window, order),
+                *right.warp(p.rect.right_affine, p.window, order))
 
     pc = PointingCorrection(0.0, 0, math.nan, False)
     if cfg.pointing_correction or cfg.narrow_search:
@@ -201,8 +215,8 @@ def dense_tile(
                       status).astype(np.uint8)
     d_lo = float(min(np.min(d), 0.0)) if d.size else 0.0
     d_hi = float(max(np.max(d), plan.n_disp - 1)) if d.size else float(plan.n_disp - 1)
-    g2g = fit_disparity_to_ground(rect, left, right, plan.window, (d_lo, d_hi), to_xy,
-                                  geoid=geoid)
+    g2g = fit_disparity_to_ground(rect, left.model, right.model, plan.window, (d_lo, d_hi),
+                                  to_xy, geoid=geoid)
     pts = g2g(u, v, d)
     valid = status == PixelStatus.VALID
     h_m = np.where(valid, pts.h_m, np.nan).astype(np.float32)

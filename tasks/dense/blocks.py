@@ -11,7 +11,7 @@ from __future__ import annotations
 
 import ctypes
 import math
-from dataclasses import replace
+from dataclasses import dataclass, replace
 from pathlib import Path
 
 import cv2
@@ -21,7 +21,13 @@ from core.errors import InputError
 from core.geoid import GeoidGrid
 from core.jsonio import parse_json, to_json
 from core.matching.dense import MatchingConfig, PixelStatus
-from core.matching.dense_tile import TileMatches, TileStats, dense_tile, retriangulate
+from core.matching.dense_tile import (
+    SensorWindow,
+    TileMatches,
+    TileStats,
+    dense_tile,
+    retriangulate,
+)
 from core.matching.grid import GridSpec, grid_dem
 from core.matching.rectify import TilePlan, TileRectification
 from core.sensors.base import SensorModel
@@ -40,6 +46,21 @@ def read_window(path: str | Path, box: PixelBox) -> tuple[np.ndarray, float | No
     with open_raster(path, "image") as src:
         nodata = src.nodata
         return read_raster_window(src, box, what="image").astype(np.float32), nodata
+
+
+@dataclass(frozen=True, eq=False)
+class SensorImage:
+    """An image of the pair as the tiles read it: its raster, its model (the right one
+    oriented) and its size (cols, rows)."""
+
+    path: str
+    model: SensorModel
+    size: tuple[int, int]
+
+    def window(self, box: PixelBox) -> SensorWindow:
+        """The sensor pixels ``box`` (:func:`read_window`) with the model."""
+        image, nodata = read_window(self.path, box)
+        return SensorWindow(image, (int(box[0]), int(box[1])), self.model, self.size, nodata)
 
 
 # ---------------------------------------------------------------------------- tiles
@@ -92,18 +113,14 @@ def _trim_heap() -> None:
 # ---------------------------------------------------------------------------- blocks
 
 
-def dense_block(plan: TilePlan, left_path: str, right_path: str, left: SensorModel,
-                right: SensorModel, left_size: tuple[int, int], right_size: tuple[int, int],
-                epsg: int, origin_m: tuple[float, float], geoid: GeoidGrid | None,
-                cfg: MatchingConfig, out: str) -> TileStats:
+def dense_block(plan: TilePlan, left: SensorImage, right: SensorImage, epsg: int,
+                origin_m: tuple[float, float], geoid: GeoidGrid | None, cfg: MatchingConfig,
+                out: str) -> TileStats:
     """One tile: read both sensor windows, :func:`dense_tile`, save the points (float32
     offsets from ``origin_m``, heights, status) to ``out``; return the tile's figures."""
     cv2.setNumThreads(1)
-    lw, l_nodata = read_window(left_path, plan.left_read)
-    rw, r_nodata = read_window(right_path, plan.right_read)
-    res = dense_tile(plan, lw, plan.left_read[:2], rw, plan.right_read[:2], left, right,
-                     left_size, right_size, Projection(epsg).to_xy, left_nodata=l_nodata,
-                     right_nodata=r_nodata, geoid=geoid, cfg=cfg)
+    lw, rw = left.window(plan.left_read), right.window(plan.right_read)
+    res = dense_tile(plan, lw, rw, Projection(epsg).to_xy, geoid=geoid, cfg=cfg)
     m = res.matches
     np.savez(out, dx=(res.x_m - origin_m[0]).astype(np.float32),
              dy=(res.y_m - origin_m[1]).astype(np.float32), h=res.h_m, status=res.status,

@@ -50,6 +50,7 @@ from core.sensors.base import SensorModel
 from core.sensors.footprint import PixelBox, footprint_box, scene_height_range_m
 from core.sensors.viewing import point_geometry
 from tasks.dense.blocks import (
+    SensorImage,
     check_roi,
     dense_block,
     grid_block,
@@ -286,11 +287,10 @@ def match_tiles(plan: DensePlan, left: LoadedModel, right: LoadedModel, work: Pa
     shutil.rmtree(work, ignore_errors=True)  # no point file of an earlier run stays
     work.mkdir(parents=True)
     geoid = load_geoid() if cfg.vertical == "egm96" else None
-    left_path, right_path = str(left.image or left.source), str(right.image or right.source)
+    images = [SensorImage(str(m.image or m.source), m.model, m.size) for m in (left, right)]
     parts = [dask.delayed(dense_block)(
-        t, left_path, right_path, left.model, right.model, left.size, right.size, plan.epsg,
-        plan.origin_m, geoid, cfg.matching, str(tile_points_path(work, t.index)))
-        for t in plan.tiles]
+        t, *images, plan.epsg, plan.origin_m, geoid, cfg.matching,
+        str(tile_points_path(work, t.index))) for t in plan.tiles]
     stats = tuple(_compute(parts, cfg, "dense matching"))
     check_match_rate(stats, cfg.min_match_rate)
     return stats

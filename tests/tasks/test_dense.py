@@ -134,12 +134,31 @@ def test_no_overlap_and_an_roi_outside_the_image(tiny_clean_scene, data_dir):
     assert check_roi((-10, 500, 100, 200), (600, 600)) == (0, 500, 90, 600)
 
 
-def test_tiles_cover_the_roi_once():
-    boxes = tile_boxes((10, 20, 2510, 1020), 1000)
-    assert len(boxes) == 2 * 1 or len(boxes) == 3
-    area = sum((c1 - c0) * (r1 - r0) for c0, r0, c1, r1 in boxes)
-    assert area == 2500 * 1000
-    assert min(c1 - c0 for c0, _, c1, _ in boxes) >= 500
+@pytest.mark.parametrize(("roi", "tile_px", "grid"), [
+    ((10, 20, 2510, 1020), 1000, (2, 1)),  # 2.5 tiles across: rounded to 2
+    ((0, 0, 600, 600), 300, (2, 2)),
+    ((5, 7, 1642, 1107), 500, (3, 2)),  # uneven sizes: 545-546 by 550 px
+    ((3, 4, 120, 90), 1000, (1, 1)),  # smaller than a tile
+])
+def test_tiles_cover_the_roi_once(roi, tile_px, grid):
+    """Every pixel of the ROI is in exactly one tile, none outside it; as many tiles as the
+    ROI holds rounded, of equal sizes to a pixel (painted, not summed: an overlap and a gap
+    of the same size would sum to the right area)."""
+    boxes = tile_boxes(roi, tile_px)
+    assert len(boxes) == grid[0] * grid[1]
+    c0, r0, c1, r1 = roi
+    count = np.zeros((r1 + 5, c1 + 5), dtype=int)
+    for b0, a0, b1, a1 in boxes:
+        assert b0 < b1 and a0 < a1
+        count[a0:a1, b0:b1] += 1
+    inside = np.zeros_like(count, dtype=bool)
+    inside[r0:r1, c0:c1] = True
+    assert (count[inside] == 1).all() and (count[~inside] == 0).all()
+    widths = {b1 - b0 for b0, _, b1, _ in boxes}
+    heights = {a1 - a0 for _, a0, _, a1 in boxes}
+    assert max(widths) - min(widths) <= 1 and max(heights) - min(heights) <= 1
+    assert len({b0 for b0, _, _, _ in boxes}) == grid[0]  # columns x rows as expected
+    assert len({a0 for _, a0, _, _ in boxes}) == grid[1]
 
 
 def test_tiles_in_processes_give_what_threads_give(tiny_clean_scene, tmp_path):
