@@ -20,7 +20,7 @@ from prefect import task
 from prefect.cache_policies import NO_CACHE
 
 from core.errors import GcpFreeError, InputError
-from tasks.io.products import PAIR, PAIR_FORMAT, PairManifest
+from tasks.io.products import EVALUATION_STATS, PAIR, PAIR_FORMAT, PairManifest
 from tasks.io.rasters import read_json
 
 FORMAT = PAIR_FORMAT
@@ -214,13 +214,11 @@ def read_evaluation_stats(path: Path):  # -> dict[str, DzStats] | None
     """The statistics of an ``eval.json`` of ``gcpfree evaluate``, per class and ``all``
     (:class:`core.evaluation.DzStats`, as the evaluation report writes them), or None when
     it is missing or not one."""
-    from tasks.io.products import EVALUATION
-
     try:
-        report = EVALUATION.load(_read_json(path), str(path))
+        stats = EVALUATION_STATS.load(_read_json(path), str(path))
     except GcpFreeError:
         return None
-    return {**report.classes, "all": report.all}
+    return {**stats.classes, "all": stats.all}
 
 
 def publish_artifacts(out: Path, pair_id: str) -> None:

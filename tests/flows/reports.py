@@ -20,6 +20,7 @@ from tasks.absolute.report import (
     SurfaceMatching,
 )
 from tasks.dense.dem import DemSummary
+from tasks.io.products import EVALUATION_STATS, EvaluationStats
 
 SIDES = ("left", "right")
 
@@ -64,5 +65,5 @@ def finished_evaluation(le68_m: float, count: int = 100) -> dict[str, Any]:
     nan = math.nan
     stats = DzStats(count, 0.1, 1.0, 1.0, 0.0, 1.0, le68_m, 2.0, 3.0, -5.0, 5.0, (nan, nan),
                     0.95, "exact", 0.0)
-    return {"format": "gcpfree.evaluation", "version": 1, "all": stats.to_dict(),
-            "classes": {}}
+    return {"format": "gcpfree.evaluation", "version": 1,
+            **EVALUATION_STATS.dump(EvaluationStats(classes={}, all=stats))}
