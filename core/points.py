@@ -152,20 +152,6 @@ class ControlPoint:
             "provenance": dict(self.provenance),
         }
 
-    @classmethod
-    def from_dict(cls, d: Mapping[str, Any]) -> ControlPoint:
-        try:
-            return cls(
-                id=int(d["id"]), lon_deg=float(d["lon_deg"]), lat_deg=float(d["lat_deg"]),
-                h_m=float(d["h_m"]),
-                image_points={str(n): ImagePoint.from_dict(p) for n, p in d["images"].items()},
-                sigma_xy_m=float(d["sigma_xy_m"]), sigma_h_m=float(d["sigma_h_m"]),
-                source=str(d.get("source", "")), provenance=dict(d.get("provenance", {})),
-            )
-        except (KeyError, TypeError, ValueError, AttributeError) as exc:
-            raise InputError(f"control point record {dict(d)!r:.120} lacks or mistypes {exc}; "
-                             "give the gcps.json written by gcpfree orient") from exc
-
     def __eq__(self, other: object) -> bool:
         if not isinstance(other, ControlPoint):
             return NotImplemented
@@ -187,16 +173,10 @@ class GcpSet:
 
 
 def control_points_to_dict(points: tuple[ControlPoint, ...]) -> dict[str, Any]:
-    """The gcps.json document."""
+    """The gcps.json document as ``tasks.absolute.orientation`` writes it today; the one
+    reader (and the writer to move to) is :data:`tasks.io.products.GCPS`, which writes the
+    same (``tests/tasks/test_documents.py``)."""
     return {"format": "gcpfree.gcps", "version": 1,
             "heights": "h_m WGS84 ellipsoidal",
             "image_coordinates": "0-based, pixel centres at integers, (col, row)",
             "points": [p.to_dict() for p in points]}
-
-
-def control_points_from_dict(d: Mapping[str, Any]) -> tuple[ControlPoint, ...]:
-    try:
-        return tuple(ControlPoint.from_dict(p) for p in d["points"])
-    except (KeyError, TypeError) as exc:
-        raise InputError(f"gcps document lacks {exc}; give the gcps.json written by gcpfree "
-                         "orient") from exc

@@ -20,11 +20,12 @@ from core.dem import GeoDEM
 from core.errors import InputError
 from core.geodesy import ARCSEC, BBox
 from core.matching.surface import SurfaceMatchConfig
-from core.points import ControlPoint, control_points_from_dict
+from core.points import ControlPoint
 from tasks.absolute.report import OrientReport
 from tasks.absolute.surface_match import TieGround
 from tasks.io.crs import Projection
 from tasks.io.dem import dem_datum, read_reference
+from tasks.io.products import GCPS
 from tasks.io.rasters import read_json
 
 log = logging.getLogger(__name__)
@@ -76,7 +77,7 @@ def read_inputs(out: Path, reference: Path | None, vertical: str, surface: Surfa
     ties = (_attempt(missing, "the tie points", lambda: TieGround.from_tiepoints_json(tie_path))
             if tie_doc is not None else None)
     gdoc = read_optional_json(out / gcps_file)
-    gcps = (_attempt(missing, gcps_file, lambda: control_points_from_dict(gdoc))
+    gcps = (_attempt(missing, gcps_file, lambda: GCPS.load(gdoc, gcps_file).points)
             if gdoc is not None else None)
     ref = None
     if reference is not None and (out / "relative_dem.tif").is_file():

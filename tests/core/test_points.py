@@ -46,7 +46,8 @@ def test_bad_records_name_the_problem():
 
 
 def test_control_points_round_trip():
-    from core.points import ControlPoint, control_points_from_dict, control_points_to_dict
+    from core.points import ControlPoint, GcpSet, control_points_to_dict
+    from tasks.io.products import GCPS
 
     pts = tuple(ControlPoint(i, 5.2 + i * 1e-3, 44.1, 812.5 + i,
                              {"left": ImagePoint(10.5, 20.25), "right": ImagePoint(30.0, 41.0)},
@@ -54,7 +55,7 @@ def test_control_points_round_trip():
                              {"correlation": 0.97, "relief_m": 120.0, "status": "OK"})
                 for i in range(3))
     text = json.dumps(control_points_to_dict(pts))
-    back = control_points_from_dict(json.loads(text))
-    assert back == pts and json.dumps(control_points_to_dict(back)) == text
+    back = GCPS.load(json.loads(text)).points
+    assert back == pts and json.dumps(GCPS.dump(GcpSet(points=back))) == text
     with pytest.raises(InputError, match="gcps.json"):
-        control_points_from_dict({"points": [{"id": 1}]})
+        GCPS.load({"points": [{"id": 1}]})

@@ -20,11 +20,11 @@ from core.geodesy import geodetic_to_enu
 from core.intersection import triangulate
 from core.matching.relief import relief_sufficiency
 from core.matching.surface import SurfaceMatchConfig, WindowMatch, WindowStatus
-from core.points import control_points_from_dict
 from flows.commands import orient as orient_command
 from tasks.absolute.orientation import read_checkpoints
 from tasks.absolute.report import OrientReport
 from tasks.io.pair import PairInputs
+from tasks.io.products import GCPS
 from tasks.io.sensors import load_model
 from tests.scenes import dsm_against_truth
 
@@ -85,7 +85,7 @@ def test_products_are_what_the_report_says(oriented):
         cp = outcome.report.check_points[name]
         assert np.sqrt(np.mean(dc**2)) == pytest.approx(cp.rms_col_px, rel=1e-9)
         assert np.sqrt(np.mean(dr**2)) == pytest.approx(cp.rms_row_px, rel=1e-9)
-    gcps = control_points_from_dict(json.loads((out / "gcps.json").read_text()))
+    gcps = GCPS.read(out / "gcps.json").points
     assert len(gcps) == outcome.report.gcps.given
     assert all(p.source == "srtm_surface_match" and p.sigma_xy_m > 0 for p in gcps)
     windows = json.loads((out / "windows.json").read_text())["windows"]
@@ -97,7 +97,7 @@ def test_simulated_gcps_sit_where_the_true_models_put_their_image_points(oriente
     """The GCPs' ground against the intersection of their image points by the true models:
     the error of the local surface matching itself (40 m pixels, 3" reference)."""
     scene, out, _ = oriented
-    gcps = control_points_from_dict(json.loads((out / "gcps.json").read_text()))
+    gcps = GCPS.read(out / "gcps.json").points
     truth = [load_model(scene / "truth" / f"{n}_truth.json").model for n in ("left", "right")]
     cols = [np.array([g.image_points[n].col for g in gcps]) for n in ("left", "right")]
     rows = [np.array([g.image_points[n].row for g in gcps]) for n in ("left", "right")]
