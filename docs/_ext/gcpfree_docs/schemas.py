@@ -5,8 +5,9 @@ generated at build time.
 Where the schema comes from, first found wins:
 
 1. the serialisation layer's own JSON schemas, :data:`SCHEMA_MODULE` (``tasks.io.schemas``),
-   when it exists: a mapping ``SCHEMAS`` or a function ``schemas()`` giving ``name -> JSON
-   schema``, looked up under any of :attr:`Product.keys`;
+   when it exists: a mapping ``SCHEMAS`` or a function ``product_schemas()`` (or
+   ``schemas()``) giving ``name -> JSON schema``, looked up under any of :attr:`Product.keys`;
+   the documents it has beyond :data:`PRODUCTS` get a page too;
 2. else the layer's documents themselves, the objects of :data:`DOCUMENT_MODULE`
    (``tasks.io.products``) with a ``name`` (the file's) and a ``json_schema()``;
 3. else the typed value the code reads the document into (:attr:`Product.typed`, a frozen
@@ -26,6 +27,7 @@ import dataclasses
 import enum
 import importlib
 import inspect
+import re
 import types
 import typing
 from collections.abc import Mapping, Sequence
@@ -58,7 +60,7 @@ class Product:
 
     @property
     def slug(self) -> str:
-        return self.name.replace(".", "-")
+        return re.sub(r"[^a-z0-9]+", "-", self.name.lower()).strip("-")
 
 
 PRODUCTS = (
@@ -107,15 +109,17 @@ def layer_schemas() -> Mapping[str, Any] | None:
                 found[value.name] = value.json_schema()
         return found or None
     found = getattr(module, "SCHEMAS", None)
-    if found is None and callable(getattr(module, "schemas", None)):
-        found = module.schemas()
+    for name in ("product_schemas", "schemas"):
+        if found is None and callable(getattr(module, name, None)):
+            found = getattr(module, name)()
     if not isinstance(found, Mapping):
-        raise TypeError(f"{SCHEMA_MODULE} has neither SCHEMAS nor schemas(): see "
-                           "docs/_ext/gcpfree_docs/schemas.py")
+        raise TypeError(f"{SCHEMA_MODULE} has neither SCHEMAS nor product_schemas(): see "
+                        "docs/_ext/gcpfree_docs/schemas.py")
     return found
 
 
-LAYER = "the serialisation layer's JSON schema of the document (`tasks.io.documents`)"
+LAYER = ("the serialisation layer's JSON schema of the document (`tasks.io.schemas`, on "
+         "`tasks.io.documents`)")
 
 
 def schema_of(product: Product, layer: Mapping[str, Any] | None) -> tuple[dict | None, str]:
@@ -278,8 +282,14 @@ def render(schema: Mapping[str, Any], prefix: str) -> list[str]:
     """A JSON schema as Markdown: the document's keys, then each definition it refers to
     (labelled ``prefix-name``: labels are global to the site)."""
     lines = []
+    if schema.get("x-not-moved"):
+        lines += ["```{note}", f"Not on the serialisation layer yet: {schema['x-not-moved']}.",
+                  "```", ""]
     if schema.get("description"):
-        lines += [schema["description"], ""]
+        lines += [_cell(schema["description"]), ""]
+    if schema.get("x-columns"):
+        lines += ["Columns, in order: " + ", ".join(f"`{c}`" for c in schema["x-columns"]) + ".",
+                  ""]
     if schema.get("properties"):
         lines += _table(schema, prefix) + [""]
     for name, sub in schema.get("$defs", {}).items():
@@ -295,7 +305,9 @@ def render(schema: Mapping[str, Any], prefix: str) -> list[str]:
 
 def page(product: Product, layer: Mapping[str, Any] | None, notes: Path | None) -> str:
     schema, source = schema_of(product, layer)
-    lines = [f"# `{product.name}`", "", f"Written by {product.written_by}."]
+    lines = [f"# `{product.name}`", ""]
+    if product.written_by:
+        lines += [f"Written by {product.written_by}."]
     if product.format:
         lines += ["", (f"Its `format` is `\"{product.format}\"`; a reader refuses another "
                   "format, and a `version` newer than its own.")]
@@ -328,31 +340,41 @@ def page(product: Product, layer: Mapping[str, Any] | None, notes: Path | None) 
     return "\n".join(lines)
 
 
-def index_page() -> str:
+def index_page(every: tuple[Product, ...]) -> str:
     lines = ["# Products", "",
              ("What a run writes, one page per document, with its schema generated from the "
              "code at build time."), "",
              "| document | written by | format |", "|---|---|---|"]
     lines += [f"| [`{p.name}`]({p.slug}.md) | {p.written_by} | "
-              f"{f'`{p.format}`' if p.format else ''} |" for p in PRODUCTS]
-    lines += ["", "```{toctree}", ":hidden:", "", *(p.slug for p in PRODUCTS), "```", ""]
+              f"{f'`{p.format}`' if p.format else ''} |" for p in every]
+    lines += ["", "```{toctree}", ":hidden:", "", *(p.slug for p in every), "```", ""]
     return "\n".join(lines)
+
+
+def products(layer: Mapping[str, Any] | None) -> tuple[Product, ...]:
+    """:data:`PRODUCTS`, then the layer's other documents (checkpoints, model files...)."""
+    covered = {k for p in PRODUCTS for k in p.keys}
+    extra = tuple(Product(name, "", str(s.get("properties", {}).get("format", {})
+                                         .get("const", "")))
+                  for name, s in (layer or {}).items() if name not in covered)
+    return PRODUCTS + extra
 
 
 def write_pages(out: Path, notes_dir: Path) -> list[str]:
     """The product pages into ``out``; the slugs written."""
     layer = layer_schemas()
+    every = products(layer)
     out.mkdir(parents=True, exist_ok=True)
-    known = {p.slug for p in PRODUCTS}
+    known = {p.slug for p in every}
     orphans = sorted(n.stem for n in notes_dir.glob("*.md") if n.stem not in known)
     if orphans:
         raise RuntimeError(f"docs/reference/notes/products/ has notes of no product: {orphans}")
-    for product in PRODUCTS:
+    for product in every:
         notes = notes_dir / f"{product.slug}.md"
         _write_if_changed(out / f"{product.slug}.md",
                           page(product, layer, notes if notes.exists() else None))
-    _write_if_changed(out / "index.md", index_page())
-    return [p.slug for p in PRODUCTS]
+    _write_if_changed(out / "index.md", index_page(every))
+    return [p.slug for p in every]
 
 
 def _write_if_changed(path: Path, text: str) -> None:

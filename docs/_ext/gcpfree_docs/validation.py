@@ -248,6 +248,12 @@ STATED = [
      "0.0004 px against xdem's 0.0035 px"), "python bench/bench_coregister.py"),
 ]
 
+# the same, as gcpfree's time over the peer's (what, peer, ratio)
+STATED_RATIOS = [("ortho, 4000x4000 crop", "GDAL", 2.7 / 7.1),
+                 ("ortho, whole spot scene", "GDAL", 7.0 / 23.1),
+                 ("coregistration fit, SRTM tile", "xdem", 0.49),
+                 ("RPC projection, 1 M points", "rpcm", 1 / 16.9)]
+
 
 def speed_snippet() -> list[str]:
     out = _missing("dsm_wall.txt", "bench_pair_spot.txt")
@@ -377,6 +383,31 @@ def speed_figure(path: Path) -> bool:
                                          "Speed, from the shell as a user waits"))
 
 
+def peers_figure(path: Path) -> bool:
+    """gcpfree's time as a share of each peer's: CARS from ``bench/results/``, the others as
+    stated (hatched)."""
+    plt = _pyplot()
+    bars: list[tuple[str, float, bool]] = []
+    wall = _load("dsm_wall.txt")
+    if wall is not None:
+        w = dsm_wall(wall)
+        bars.append(("DSM, Reunion ROI (CARS)", w["gcpfree_later_s"] / w["cars_s"], False))
+    bars += [(f"{what} ({peer})", ratio, True) for what, peer, ratio in STATED_RATIOS]
+    fig, ax = plt.subplots(figsize=(7, 3.0), dpi=110)
+    rows = bars[::-1]
+    for i, (_, ratio, stated) in enumerate(rows):
+        ax.barh(i, ratio, color="tab:blue", alpha=0.55 if stated else 0.9,
+                hatch="//" if stated else None, edgecolor="tab:blue")
+        ax.annotate(f"{ratio:.2f}x", (ratio, i), xytext=(3, -3), textcoords="offset points",
+                    fontsize=8)
+    ax.set_yticks(range(len(rows)), [r[0] for r in rows])
+    ax.axvline(1.0, color="0.4", lw=0.8, ls=":")
+    ax.set_xlim(0, 1.1)
+    return _finish(plt, fig, ax, path, (
+        "gcpfree's time over the peer's (1 = as fast; hatched: as stated, no results file)", "",
+        "Speed against the peers, 2 cores"))
+
+
 SNIPPETS: dict[str, Callable[[], list[str]]] = {
     "relief.md": relief_snippet, "realistic.md": realistic_snippet,
     "independent.md": independent_snippet, "prediction.md": prediction_snippet,
@@ -384,7 +415,7 @@ SNIPPETS: dict[str, Callable[[], list[str]]] = {
 }
 FIGURES: dict[str, Callable[[Path], bool]] = {
     "relief_sweep.png": relief_figure, "predicted_vs_measured.png": prediction_figure,
-    "speed.png": speed_figure,
+    "speed.png": speed_figure, "peers.png": peers_figure,
 }
 
 
