@@ -404,7 +404,7 @@ def peers_figure(path: Path) -> bool:
     ax.axvline(1.0, color="0.4", lw=0.8, ls=":")
     ax.set_xlim(0, 1.1)
     return _finish(plt, fig, ax, path, (
-        "gcpfree's time over the peer's (1 = as fast; hatched: as stated, no results file)", "",
+        "gcpfree's time over the peer's (hatched: as stated, no results file)", "",
         "Speed against the peers, 2 cores"))
 
 
