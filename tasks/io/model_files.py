@@ -72,12 +72,16 @@ layout(Sun, finite=True)
 
 @dataclass(frozen=True)
 class ImageSize:
+    """``image``: the image's size, pixels (n_cols is the camera's)."""
+
     n_cols: int
     n_rows: int
 
 
 @dataclass(frozen=True)
 class PushbroomTiming:
+    """``timing``: the first line's time (s since the orbit's epoch) and the line period (s)."""
+
     t0_s: float
     line_period_s: float
 
@@ -139,6 +143,8 @@ PUSHBROOM: Document[PushbroomFile] = Document(
 
 @dataclass(frozen=True)
 class SarImage:
+    """``image``: the size and, for a crop, its first pixel in the product's (pixels)."""
+
     n_cols: int
     n_rows: int
     col0_px: float = 0.0
@@ -147,6 +153,8 @@ class SarImage:
 
 @dataclass(frozen=True)
 class SarTiming:
+    """``timing``: azimuth and two-way slant-range times, sampling (seconds, hertz, metres)."""
+
     first_line_time_s: float
     line_interval_s: float
     slant_range_time_s: float
@@ -156,6 +164,8 @@ class SarTiming:
 
 @dataclass(frozen=True)
 class SarGrd:
+    """``grd``: the slant-to-ground-range polynomials (times, sr0 and coefficients)."""
+
     srgr_times_s: FloatArray
     srgr_sr0_m: FloatArray
     srgr_coeffs: FloatArray
@@ -163,6 +173,8 @@ class SarGrd:
 
 @dataclass(frozen=True)
 class SarTops:
+    """``tops``: the bursts' first times (s) and lines per burst."""
+
     burst_times_s: FloatArray
     lines_per_burst: int
 
