@@ -171,7 +171,7 @@ def test_bad_arguments_are_one_line_before_prefect(tmp_path: Path):
         with pytest.raises(InputError, match=message):
             archive_command.run(parse("--catalog", str(tmp_path / "cat.csv"), "--out",
                                       str(tmp_path / "o"), "--srtm-dir", str(tmp_path), *extra))
-    with pytest.raises(InputError, match="SRTM directory .* does not exist"):
+    with pytest.raises(InputError, match="DEM tile folder .* does not exist"):
         archive_command.run(parse("--catalog", str(tmp_path / "cat.csv"), "--out",
                                   str(tmp_path / "o"), "--srtm-dir", str(tmp_path / "none")))
     with pytest.raises(SystemExit):  # the ground is required: --srtm-dir or --reference
