@@ -32,7 +32,7 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     )
     add_pair_arguments(p)
     add_reference_arguments(p, use="the ground the pair is oriented to (required, or "
-                                   "--srtm-dir)")
+                                   "--dem-dir)")
     add_orientation_arguments(p)
     add_reference_sigma_argument(p)
     p.add_argument("--lidar", type=Path, default=None, metavar="LAS",
