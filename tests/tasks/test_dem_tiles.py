@@ -317,3 +317,21 @@ def test_glo30_without_a_grid_is_refused_in_one_line_naming_geoid(crop, tmp_path
         assert "EGM2008" in lines[0] and "--geoid GRID" in lines[0], lines[0]
         assert "never read as EGM96" in lines[0]
         assert not (tmp_path / "out").exists()
+
+
+def test_a_geoid_given_for_srtm_tiles_replaces_egm96(tmp_path):
+    """Today's ``prepare-reference --geoid``: SRTM's EGM96 heights through the grid given
+    instead of the bundled one (the reference is the tile + N of that grid, by PROJ)."""
+    grid = write_gtx(tmp_path / "other.gtx", 4.0, 43.0, 61)
+    box = BBox(5.1, 44.1, 5.3, 44.3)
+    s = build(DemSource(BUNDLED_SRTM_DIR, geoid=grid), box, tmp_path / "ref.tif")
+    h, t = read(Path(s.path))
+    H = np.fromfile(HGT, ">i2").reshape(1201, 1201).astype(np.float64)
+    i0, j0 = round((45.0 - (t.f + t.e / 2)) * 1200), round((t.c + t.a / 2 - 5.0) * 1200)
+    ii, jj = np.mgrid[0:h.shape[0], 0:h.shape[1]]
+    expected = H[i0:i0 + h.shape[0], j0:j0 + h.shape[1]] + proj_n(
+        grid, 5.0 + (jj + j0) / 1200, 45.0 - (ii + i0) / 1200)
+    ok = np.isfinite(h)
+    assert ok.mean() > 0.99 and np.abs(h - expected)[ok].max() < 1e-3
+    assert s.heights == {"vertical": "egm96", "vertical_source": "SRTM file N44E005.hgt: EGM96",
+                         "geoid": str(grid), "geoid_source": "given: --geoid"}
