@@ -24,8 +24,9 @@ The pattern, to move a document onto it:
    first, and what tells the members of a union of dataclasses apart on read; with
    ``tag_default`` the key may be absent, meaning this class; ``tag_written`` False: the key
    is not written), ``finite``
-   (its numbers must be finite: null, NaN and infinities refused). Register it with
-   :func:`layout` before the first :func:`record` of the class.
+   (its numbers must be finite: null, NaN and infinities refused), ``as_list`` (written as
+   the list of its values in the fields' order: a box, a point). Register it with
+   :func:`layout`, once per class, where the document is defined.
 2. The document is a :class:`Document`: its file name, the dataclass of the whole file (the
    envelope too: ``format``, ``version`` and constant keys are fields with their defaults),
    what to give instead of a bad file (the message's hint), and the ``format``/``version``
@@ -166,6 +167,7 @@ class Layout:
     tag_default: bool = False
     tag_written: bool = True
     finite: bool = False
+    as_list: bool = False
 
 
 _LAYOUTS: dict[type, Layout] = {}
@@ -173,9 +175,14 @@ _LAYOUTS: dict[type, Layout] = {}
 
 def layout(cls: type, **kw: Any) -> None:
     """Register the :class:`Layout` of ``cls`` (before its first :func:`record`)."""
-    if cls in _LAYOUTS or cls in _RECORDED:
-        raise RuntimeError(f"{cls.__name__}'s layout is registered once, before its record")
+    if cls in _LAYOUTS:
+        raise RuntimeError(f"{cls.__name__}'s layout is registered twice")
     _LAYOUTS[cls] = Layout(**kw)
+    if cls in _RECORDED:  # a record made before (without it) is made again
+        record.cache_clear()
+        _adapter.cache_clear()
+        _RECORDED.clear()
+        _KEYS.clear()
 
 
 _RECORDED: set[type] = set()
@@ -248,7 +255,12 @@ def record(cls: type) -> Any:
 
     def gather(d: Any) -> Any:
         """The file's level as the TypedDict's: inlined keys into their field, the keys that
-        are no field's into the spread field."""
+        are no field's into the spread field, a list's values to their fields."""
+        if lay.as_list:
+            if not isinstance(d, (list, tuple)) or len(d) != len(init):
+                raise ValueError(f"must be a list of {len(init)} values "
+                                 f"({', '.join(key[f.name] for f in init)})")
+            return dict(zip((key[f.name] for f in init), d, strict=True))
         if not isinstance(d, dict) or not (inlined or spread):
             return d
         out = {k: v for k, v in d.items() if not any(k in ks for ks in inlined.values())}
@@ -280,9 +292,18 @@ def record(cls: type) -> Any:
             else:
                 flat[k] = v
         flat.update({k: fn(obj) for k, fn in lay.computed.items()})
+        if lay.as_list:
+            return list(flat.values())
         return {k: flat[k] for k in lay.order if k in flat} | flat if lay.order else flat
 
-    return Annotated[body, BeforeValidator(gather), AfterValidator(build), WrapSerializer(write)]
+    extra: tuple[Any, ...] = ()
+    if lay.as_list:
+        as_tuple = tuple[tuple(shape(hints[f.name], lay.finite) for f in init)]  # type: ignore
+        extra = (WithJsonSchema({**TypeAdapter(as_tuple).json_schema(),
+                                 "description": f"{cls.__name__}: "
+                                                f"{', '.join(key[f.name] for f in init)}"}),)
+    return Annotated[body, BeforeValidator(gather), AfterValidator(build), WrapSerializer(write),
+                     *extra]
 
 
 def _tagged(members: tuple[Any, ...]) -> Any:

@@ -2,7 +2,8 @@
 :class:`~tasks.io.documents.Document` (gcps.json, eval.json, windows.json, checkpoints.json,
 pair.json). Keys, their order and the readers' checks are those the hand-written writers and
 readers had (``tests/tasks/test_documents.py`` reads the files today's code wrote, in
-``tests/data/products_v0_1/``, and writes them back byte for byte). The orientation's
+``tests/data/products_v0_1/``, and writes them back byte for byte), and the simulator's
+checkpoints.json and truth/scene.json, which ``tasks.simulate`` writes itself. The orientation's
 report.json has its own (:mod:`tasks.absolute.report`), to move onto this pattern."""
 
 from __future__ import annotations
@@ -21,8 +22,10 @@ from core.evaluation.evaluation_report import (
     LandcoverInfo,
     PointCounts,
 )
+from core.geodesy import BBox
 from core.matching.surface_file import WindowsFile, WindowTried
-from core.points import CheckPoint, CheckPointSet, ControlPoint, GcpSet
+from core.points import CheckPoint, CheckPointSet, ControlPoint, GcpSet, GeoPoint
+from core.simulation.scene import InjectedErrors, SceneDef, TruthGrid
 from tasks.io.documents import Document, layout, shape
 
 # ------------------------------------------------------------------------------ gcps.json
@@ -100,6 +103,16 @@ EVALUATION_STATS: Document[EvaluationStats] = Document(
     "eval.json", EvaluationStats, format=REPORT_FORMAT,
     hint="give the eval.json written by gcpfree evaluate")
 
+# ---------------------------------------------------------------------- truth/scene.json
+
+layout(BBox, as_list=True)
+layout(GeoPoint, as_list=True)
+layout(TruthGrid, as_list=True)
+layout(InjectedErrors, omit_default=("realistic",))
+#: the simulator's truth/scene.json (written by ``tasks.simulate``; read here)
+SCENE: Document[SceneDef] = Document(
+    "scene.json", SceneDef, hint="give the truth/scene.json written by gcpfree simulate")
+
 # ------------------------------------------------------------------------------ pair.json
 
 PAIR_FORMAT = "gcpfree.pair"
@@ -123,5 +136,6 @@ class PairManifest:
 PAIR: Document[PairManifest] = Document("pair.json", PairManifest, format=PAIR_FORMAT,
                                         hint="give the pair.json written by gcpfree pair")
 
-__all__ = ["CHECKPOINTS", "EVALUATION", "EVALUATION_STATS", "GCPS", "PAIR", "PAIR_FORMAT", "WINDOWS",
+__all__ = ["CHECKPOINTS", "EVALUATION", "EVALUATION_STATS", "GCPS", "PAIR", "PAIR_FORMAT", "SCENE",
+           "WINDOWS",
            "EvaluationStats", "PairManifest"]

@@ -22,12 +22,12 @@ from pydantic import TypeAdapter
 
 from tasks.io.documents import Document, record
 from tasks.io.model_files import PUSHBROOM, RPC, SAR
-from tasks.io.products import CHECKPOINTS, EVALUATION, GCPS, PAIR, WINDOWS
+from tasks.io.products import CHECKPOINTS, EVALUATION, GCPS, PAIR, SCENE, WINDOWS
 
 #: the products moved onto :mod:`tasks.io.documents`, by the name of their page
 DOCUMENTS: dict[str, Document[Any]] = {
     "gcps.json": GCPS, "windows.json": WINDOWS, "eval.json": EVALUATION, "pair.json": PAIR,
-    "checkpoints.json": CHECKPOINTS, "model (gcpfree.pushbroom)": PUSHBROOM,
+    "checkpoints.json": CHECKPOINTS, "scene.json": SCENE, "model (gcpfree.pushbroom)": PUSHBROOM,
     "model (gcpfree.sar)": SAR, "model (rpc)": RPC,
 }
 NOT_MOVED = ("report.json", "rel.json", "dsm.json")

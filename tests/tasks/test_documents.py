@@ -28,6 +28,7 @@ from tasks.io.products import (
     EVALUATION_STATS,
     GCPS,
     PAIR,
+    SCENE,
     WINDOWS,
     EvaluationStats,
 )
@@ -38,7 +39,7 @@ V01 = Path(__file__).resolve().parents[1] / "data" / "products_v0_1"
 # file -> (its document, what follows the JSON text: eval.json ends with a newline)
 WRITTEN = {"gcps.json": (GCPS, ""), "windows.json": (WINDOWS, ""),
            "checkpoints.json": (CHECKPOINTS, ""), "eval.json": (EVALUATION, "\n"),
-           "pair.json": (PAIR, ""), "archive_pair.json": (PAIR, "")}
+           "pair.json": (PAIR, ""), "archive_pair.json": (PAIR, ""), "scene.json": (SCENE, "")}
 MODELS = ("delivered_left.json", "left.json")
 
 
@@ -126,6 +127,25 @@ def test_old_pair_manifests_read_into_their_values():
                                                     raw["pair_id"])
         assert m.params == raw["params"] and m.products == raw["products"]
         assert m.sizes == raw["sizes"]
+
+
+def test_an_old_scene_json_reads_into_its_values():
+    from core.simulation.scene import SceneDef
+
+    raw = _raw("scene.json")
+    scene = SCENE.read(V01 / "scene.json")
+    assert scene.dem_window.as_tuple() == tuple(raw["dem_window"])
+    assert scene.centre.to_list() == raw["centre"] and scene.grid.to_list() == raw["grid"]
+    assert scene.errors.centre_error_m == tuple(raw["errors"]["centre_error_m"])
+    assert scene.image_names == ("left", "right") and scene.dsm_range_m == tuple(
+        raw["dsm_range_m"])
+    for name, inj in scene.injected.items():
+        r = raw["injected"][name]
+        assert inj.roll_bias_rad == r["roll_bias_rad"] and inj.jitter == tuple(r["jitter"])
+        assert inj.distortion.k1 == r["distortion"]["k1"] and inj.realistic is None
+    assert SceneDef.from_dict(raw) == scene  # the simulator's own reader agrees
+    with pytest.raises(InputError, match="key 'grid' must be a list of 5 values"):
+        SCENE.load(_broken("scene.json", ("grid",), [1.0, 2.0]))
 
 
 def test_an_oriented_model_reads_with_its_sampled_attitude_and_sun():
