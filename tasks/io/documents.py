@@ -23,10 +23,9 @@ The pattern, to move a document onto it:
    (the file's order of the keys, when it is not the fields'), ``tag`` (key, value: written
    first, and what tells the members of a union of dataclasses apart on read; with
    ``tag_default`` the key may be absent, meaning this class; ``tag_written`` False: the key
-   is not written), ``finite``
-   (its numbers must be finite: null, NaN and infinities refused), ``as_list`` (written as
-   the list of its values in the fields' order: a box, a point). Register it with
-   :func:`layout`, once per class, where the document is defined.
+   is not written), ``finite`` (its numbers must be finite: null, NaN and infinities
+   refused), ``as_list`` (written as the list of its values in the fields' order: a box, a
+   point). Register it with :func:`layout`, once per class, where the document is defined.
 2. The document is a :class:`Document`: its file name, the dataclass of the whole file (the
    envelope too: ``format``, ``version`` and constant keys are fields with their defaults),
    what to give instead of a bad file (the message's hint), and the ``format``/``version``
