@@ -20,7 +20,8 @@ from core.dem import GeoDEM
 from core.errors import CoverageError, InputError
 from core.geodesy import BBox
 from core.heights import VERTICAL_CHOICES, DatumDecision, decide_datum
-from tasks.io.dem_tiles import TileSet, named_datum
+from tasks.io.dem_products import named_datum
+from tasks.io.dem_tiles import TileSet
 from tasks.io.geoid import load_geoid, proj_grid
 from tasks.io.rasters import open_raster, read_window
 from tasks.io.vertical_crs import split_crs

@@ -71,15 +71,3 @@ def check_tile(path: Path, lon0: int, lat0: int) -> SrtmTile:
         )
     return SrtmTile(path, lon0, lat0, w)
 
-
-#: moved to :mod:`tasks.io.dem_tiles` (every product's tiles, not only SRTM's): still
-#: importable from here
-_MOVED = ("find_tiles", "required_tiles", "mosaic_grid", "MosaicGrid", "build_vrt", "covered")
-
-
-def __getattr__(name: str):  # the moved names, imported when asked (dem_tiles imports this)
-    if name in _MOVED:
-        from tasks.io import dem_tiles
-
-        return getattr(dem_tiles, name)
-    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
