@@ -59,7 +59,7 @@ from tasks.io.sensors import (
     rpc_from_dimap_file,
     rpc_from_geom_file,
 )
-from tasks.io.srtm import find_tiles
+from tasks.io.dem_tiles import find_tiles
 
 DATA = Path(__file__).resolve().parent / "data"
 HGT = Path(__file__).resolve().parents[1] / "tasks" / "data" / "N44E005.hgt"
