@@ -218,67 +218,50 @@ def shape(tp: Any, finite: bool = False) -> Any:
 _KEYS: dict[type, tuple[str, ...]] = {}
 
 
-@cache
-def record(cls: type) -> Any:
-    """The pydantic-ready type of the dataclass ``cls``: a TypedDict of its init fields (keys
-    and presence as its :class:`Layout` says) read into ``cls(**fields)`` and written from the
-    instance."""
-    _RECORDED.add(cls)
-    lay = _LAYOUTS.get(cls, Layout())
-    hints = typing.get_type_hints(cls)
-    init = [f for f in dataclasses.fields(cls) if f.init]
-    key = {f.name: lay.keys.get(f.name, f.name) for f in init}
-    for name in (*lay.inline, *([lay.spread] if lay.spread else [])):
-        key[name] = f"<{name}>"  # no key of the file: an error's path leaves it out
-    defaults = {f.name: (f.default if f.default is not dataclasses.MISSING else f.default_factory())
-                for f in init if f.default is not dataclasses.MISSING
-                or f.default_factory is not dataclasses.MISSING}
-    items = {}
-    for f in init:
-        tp = lay.types.get(f.name) or shape(hints[f.name], lay.finite)
-        items[key[f.name]] = NotRequired[tp] if f.name in defaults else tp
-    for k in lay.computed:
-        items[k] = NotRequired[Any]
-    if lay.tag:
-        tag_type = Literal[lay.tag[1]]  # type: ignore[valid-type]
-        items = {lay.tag[0]: NotRequired[tag_type] if lay.tag_default else tag_type, **items}
-    body = TypedDict(cls.__name__, items)  # type: ignore[operator]
-    body.__doc__ = cls.__doc__  # the schema's description
-    # the keys of this level of the file: an inlined field's own, a spread field's none
-    inlined = {key[n]: _KEYS[hints[n]] if hints[n] in _KEYS else _keys_of(hints[n])
-               for n in lay.inline}
-    spread = key[lay.spread] if lay.spread else None
-    own = tuple(k for f in init for k in inlined.get(key[f.name], (key[f.name],))
-                if k != spread) + tuple(lay.computed) + ((lay.tag[0],) if lay.tag else ())
-    _KEYS[cls] = own
+@dataclass(frozen=True)
+class _Record:
+    """How one dataclass meets its JSON: its init fields, their keys, the keys of the file's
+    level (an inlined field's own, a spread field's none) and the defaults."""
 
-    def gather(d: Any) -> Any:
+    cls: type
+    lay: Layout
+    fields: tuple[dataclasses.Field, ...]
+    key: Mapping[str, str]
+    defaults: Mapping[str, Any]
+    inlined: Mapping[str, tuple[str, ...]]
+    spread: str | None
+    own: tuple[str, ...]
+
+    def gather(self, d: Any) -> Any:
         """The file's level as the TypedDict's: inlined keys into their field, the keys that
         are no field's into the spread field, a list's values to their fields."""
-        if lay.as_list:
-            if not isinstance(d, (list, tuple)) or len(d) != len(init):
-                raise ValueError(f"must be a list of {len(init)} values "
-                                 f"({', '.join(key[f.name] for f in init)})")
-            return dict(zip((key[f.name] for f in init), d, strict=True))
-        if not isinstance(d, dict) or not (inlined or spread):
+        if self.lay.as_list:
+            names = [self.key[f.name] for f in self.fields]
+            if not isinstance(d, (list, tuple)) or len(d) != len(names):
+                raise ValueError(f"must be a list of {len(names)} values ({', '.join(names)})")
+            return dict(zip(names, d, strict=True))
+        if not isinstance(d, dict) or not (self.inlined or self.spread):
             return d
-        out = {k: v for k, v in d.items() if not any(k in ks for ks in inlined.values())}
-        for f_key, ks in inlined.items():
+        out = {k: v for k, v in d.items()
+               if not any(k in ks for ks in self.inlined.values())}
+        for f_key, ks in self.inlined.items():
             out[f_key] = {k: d[k] for k in ks if k in d}
-        if spread:
-            out = {k: v for k, v in out.items() if k in own or k in inlined}
-            out[spread] = {k: v for k, v in d.items() if k not in own}
+        if self.spread:
+            out = {k: v for k, v in out.items() if k in self.own or k in self.inlined}
+            out[self.spread] = {k: v for k, v in d.items() if k not in self.own}
         return out
 
-    def build(d: Mapping[str, Any]) -> Any:
-        return cls(**{f.name: d[key[f.name]] for f in init if key[f.name] in d})
+    def build(self, d: Mapping[str, Any]) -> Any:
+        return self.cls(**{f.name: d[self.key[f.name]] for f in self.fields
+                           if self.key[f.name] in d})
 
-    def write(obj: Any, handler: Callable[[Any], Any]) -> Any:
-        if not isinstance(obj, cls):
+    def write(self, obj: Any, handler: Callable[[Any], Any]) -> Any:
+        if not isinstance(obj, self.cls):
             return handler(obj)
-        d = {key[f.name]: getattr(obj, f.name) for f in init
+        lay = self.lay
+        d = {self.key[f.name]: getattr(obj, f.name) for f in self.fields
              if not (f.name in lay.omit_default
-                     and _equal(getattr(obj, f.name), defaults[f.name]))}
+                     and _equal(getattr(obj, f.name), self.defaults[f.name]))}
         if lay.tag:  # the union's serialiser checks it
             d = {lay.tag[0]: lay.tag[1], **d}
         out = handler(d)
@@ -286,7 +269,7 @@ def record(cls: type) -> Any:
             out.pop(lay.tag[0])
         flat: dict[str, Any] = {}
         for k, v in out.items():
-            if k in inlined or k == spread:
+            if k in self.inlined or k == self.spread:
                 flat.update(v)
             else:
                 flat[k] = v
@@ -295,14 +278,51 @@ def record(cls: type) -> Any:
             return list(flat.values())
         return {k: flat[k] for k in lay.order if k in flat} | flat if lay.order else flat
 
+
+def _record_of(cls: type, lay: Layout, hints: Mapping[str, Any]) -> _Record:
+    init = tuple(f for f in dataclasses.fields(cls) if f.init)
+    key = {f.name: lay.keys.get(f.name, f.name) for f in init}
+    for name in (*lay.inline, *([lay.spread] if lay.spread else [])):
+        key[name] = f"<{name}>"  # no key of the file: an error's path leaves it out
+    defaults = {f.name: (f.default if f.default is not dataclasses.MISSING
+                         else f.default_factory())  # type: ignore[misc]
+                for f in init if f.default is not dataclasses.MISSING
+                or f.default_factory is not dataclasses.MISSING}
+    inlined = {key[n]: _keys_of(hints[n]) for n in lay.inline}
+    spread = key[lay.spread] if lay.spread else None
+    own = tuple(k for f in init for k in inlined.get(key[f.name], (key[f.name],))
+                if k != spread) + tuple(lay.computed) + ((lay.tag[0],) if lay.tag else ())
+    return _Record(cls, lay, init, key, defaults, inlined, spread, own)
+
+
+@cache
+def record(cls: type) -> Any:
+    """The pydantic-ready type of the dataclass ``cls``: a TypedDict of its init fields (keys
+    and presence as its :class:`Layout` says) read into ``cls(**fields)`` and written from the
+    instance."""
+    _RECORDED.add(cls)
+    lay = _LAYOUTS.get(cls, Layout())
+    hints = typing.get_type_hints(cls)
+    rec = _record_of(cls, lay, hints)
+    _KEYS[cls] = rec.own
+    items = {}
+    for f in rec.fields:
+        tp = lay.types.get(f.name) or shape(hints[f.name], lay.finite)
+        items[rec.key[f.name]] = NotRequired[tp] if f.name in rec.defaults else tp
+    for k in lay.computed:
+        items[k] = NotRequired[Any]
+    if lay.tag:
+        tag_type = Literal[lay.tag[1]]  # type: ignore[valid-type]
+        items = {lay.tag[0]: NotRequired[tag_type] if lay.tag_default else tag_type, **items}
+    body = TypedDict(cls.__name__, items)  # type: ignore[operator]
+    body.__doc__ = cls.__doc__  # the schema's description
     extra: tuple[Any, ...] = ()
     if lay.as_list:
-        as_tuple = tuple[tuple(shape(hints[f.name], lay.finite) for f in init)]  # type: ignore
-        extra = (WithJsonSchema({**TypeAdapter(as_tuple).json_schema(),
-                                 "description": f"{cls.__name__}: "
-                                                f"{', '.join(key[f.name] for f in init)}"}),)
-    return Annotated[body, BeforeValidator(gather), AfterValidator(build), WrapSerializer(write),
-                     *extra]
+        as_tuple = tuple[tuple(shape(hints[f.name], lay.finite) for f in rec.fields)]  # type: ignore
+        extra = (WithJsonSchema({**TypeAdapter(as_tuple).json_schema(), "description": (
+            f"{cls.__name__}: {', '.join(rec.key[f.name] for f in rec.fields)}")}),)
+    return Annotated[body, BeforeValidator(rec.gather), AfterValidator(rec.build),
+                     WrapSerializer(rec.write), *extra]
 
 
 def _tagged(members: tuple[Any, ...]) -> Any:
