@@ -22,7 +22,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from core.errors import InputError
-from core.simulation.hashing import derive_seed, hash_u64, hash_uniform
+from core.simulation.hashing import derive_seed, hash_state, hash_uniform
 
 __all__ = [
     "broadcast_xy",
@@ -33,14 +33,6 @@ __all__ = [
     "fractal_detail_m",
     "gradient_noise",
 ]
-
-_N_GRAD = 16
-_ANGLES = (np.arange(_N_GRAD) + 0.5) * (2.0 * np.pi / _N_GRAD)
-_GX = np.cos(_ANGLES)
-_GY = np.sin(_ANGLES)
-_S60 = np.uint64(60)
-_CORNERS = ((0, 0), (1, 0), (0, 1), (1, 1))
-_SQRT2 = float(np.sqrt(2.0))
 
 
 def broadcast_xy(x_m: ArrayLike, y_m: ArrayLike) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
@@ -67,67 +59,21 @@ def floor_index(v: NDArray[np.float64]) -> NDArray[np.int64]:
         return np.floor(v).astype(np.int64)
 
 
-def _fade(t: NDArray[np.float64]) -> NDArray[np.float64]:
-    """Quintic fade 6t^5 - 15t^4 + 10t^3 (zero first and second derivative at 0 and 1)."""
-    return t * t * t * (t * (t * 6.0 - 15.0) + 10.0)
+def _octaves(x: NDArray[np.float64], y: NDArray[np.float64], seeds: list[int],
+             wavelengths_m: list[float], coefs: list[float] | None) -> NDArray[np.float64]:
+    """``sum_k coefs[k] * gradient_noise(x, y, seeds[k], wavelengths_m[k])``, added from 0 in
+    the octaves' order, in one compiled pass (:func:`core.simulation.field_kernels.noise_sum`);
+    ``coefs`` None: the single octave's noise itself."""
+    from core.simulation import field_kernels as K
 
-
-def _node_gradients(seed: int, i: NDArray[np.int64],
-                    j: NDArray[np.int64]) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
-    """Unit gradient (gx, gy) of lattice node (i, j): one of 16 directions, chosen by the hash."""
-    k = (hash_u64(seed, i, j) >> _S60).astype(np.intp)
-    return _GX[k], _GY[k]
-
-
-def _corner_gradients(seed: int, i0: NDArray[np.int64], j0: NDArray[np.int64]
-                      ) -> list[tuple[NDArray[np.float64], NDArray[np.float64]]]:
-    """Gradients at the four corners (00, 10, 01, 11) of the cells whose low corner is (i0, j0).
-
-    When the cells share nodes (coarse octaves), the nodes of the bounding box
-    are hashed once and looked up; the values are the same hashes either way.
-    """
-    if i0.size == 0:
-        empty = np.zeros(i0.shape)
-        return [(empty, empty)] * 4
-    imin, imax = int(i0.min()), int(i0.max()) + 1
-    jmin, jmax = int(j0.min()), int(j0.max()) + 1
-    ni, nj = imax - imin + 1, jmax - jmin + 1
-    if ni * nj > 2 * i0.size:
-        return [_node_gradients(seed, i0 + di, j0 + dj) for di, dj in _CORNERS]
-    gi = np.arange(imin, imax + 1, dtype=np.int64)
-    gj = np.arange(jmin, jmax + 1, dtype=np.int64)
-    gx, gy = _node_gradients(seed, gi[None, :], gj[:, None])
-    gx = gx.reshape(-1)
-    gy = gy.reshape(-1)
-    lin = (j0 - jmin) * ni + (i0 - imin)
-    return [(gx.take(lin + (dj * ni + di)), gy.take(lin + (dj * ni + di)))
-            for di, dj in _CORNERS]
-
-
-def _lattice_noise(u: NDArray[np.float64], v: NDArray[np.float64],
-                   seed: int) -> NDArray[np.float64]:
-    """Gradient noise at lattice coordinates (u, v); values in [-1, 1], NaN where not finite."""
-    bad = ~(np.isfinite(u) & np.isfinite(v))
-    if bad.any():
-        u = np.where(bad, np.nan, u)
-        v = np.where(bad, np.nan, v)
-    fu = np.floor(u)
-    fv = np.floor(v)
-    xf = u - fu
-    yf = v - fv
-    (gx00, gy00), (gx10, gy10), (gx01, gy01), (gx11, gy11) = _corner_gradients(
-        seed, floor_index(fu), floor_index(fv))
-    xf1 = xf - 1.0
-    yf1 = yf - 1.0
-    n00 = gx00 * xf + gy00 * yf
-    n10 = gx10 * xf1 + gy10 * yf
-    n01 = gx01 * xf + gy01 * yf1
-    n11 = gx11 * xf1 + gy11 * yf1
-    sx = _fade(xf)
-    sy = _fade(yf)
-    a = n00 + sx * (n10 - n00)
-    b = n01 + sx * (n11 - n01)
-    return (a + sy * (b - a)) * _SQRT2
+    states = np.array([hash_state(s) for s in seeds], dtype=np.uint64)
+    off_x = np.array([hash_uniform(derive_seed(s, "offset-x")) for s in seeds])
+    off_y = np.array([hash_uniform(derive_seed(s, "offset-y")) for s in seeds])
+    out = K.noise_sum(np.ascontiguousarray(x).reshape(-1), np.ascontiguousarray(y).reshape(-1),
+                      states, np.array(wavelengths_m, dtype=np.float64), off_x, off_y,
+                      np.array(coefs if coefs is not None else [1.0], dtype=np.float64),
+                      coefs is None, K.GX, K.GY)
+    return out.reshape(x.shape)
 
 
 def gradient_noise(x_m: ArrayLike, y_m: ArrayLike, seed: int,
@@ -145,9 +91,7 @@ def gradient_noise(x_m: ArrayLike, y_m: ArrayLike, seed: int,
     """
     _check_positive(wavelength_m=wavelength_m)
     x, y = broadcast_xy(x_m, y_m)
-    ox = float(hash_uniform(derive_seed(seed, "offset-x")))
-    oy = float(hash_uniform(derive_seed(seed, "offset-y")))
-    return _lattice_noise(x / wavelength_m + ox, y / wavelength_m + oy, seed)
+    return _octaves(x, y, [seed], [wavelength_m], None)
 
 
 def _check_octaves(octaves: int, persistence: float, lacunarity: float) -> None:
@@ -179,12 +123,11 @@ def fbm(x_m: ArrayLike, y_m: ArrayLike, seed: int, base_wavelength_m: float, oct
     _check_positive(base_wavelength_m=base_wavelength_m)
     _check_octaves(octaves, persistence, lacunarity)
     x, y = broadcast_xy(x_m, y_m)
-    total = np.zeros(x.shape, dtype=np.float64)
+    weights = [persistence**k for k in range(int(octaves))]
+    total = _octaves(x, y, [derive_seed(seed, "fbm-octave", k) for k in range(int(octaves))],
+                     [base_wavelength_m / lacunarity**k for k in range(int(octaves))], weights)
     weight_sum = 0.0
-    for k in range(int(octaves)):
-        w = persistence**k
-        total += w * gradient_noise(x, y, derive_seed(seed, "fbm-octave", k),
-                                    base_wavelength_m / lacunarity**k)
+    for w in weights:
         weight_sum += w
     return total / weight_sum
 
@@ -262,10 +205,8 @@ def fractal_detail_m(x_m: ArrayLike, y_m: ArrayLike, seed: int, amplitude_m: flo
         wavelengths.append(wavelengths[-1] / 2.0)
     weights = [(wl / max_wavelength_m) ** hurst for wl in wavelengths]
     norm = amplitude_m / (_unit_noise_std() * float(np.sqrt(sum(w * w for w in weights))))
-    total = np.zeros(x.shape, dtype=np.float64)
-    for k, (wl, w) in enumerate(zip(wavelengths, weights, strict=True)):
-        total += (w * norm) * gradient_noise(x, y, derive_seed(seed, "detail-octave", k), wl)
-    return total
+    return _octaves(x, y, [derive_seed(seed, "detail-octave", k) for k in range(len(wavelengths))],
+                    wavelengths, [w * norm for w in weights])
 
 
 def cell_uniform(x_m: ArrayLike, y_m: ArrayLike, seed: int, cell_m: float) -> NDArray[np.float64]:
@@ -273,7 +214,10 @@ def cell_uniform(x_m: ArrayLike, y_m: ArrayLike, seed: int, cell_m: float) -> ND
 
     Cells are ``[i*cell_m, (i+1)*cell_m) x [j*cell_m, (j+1)*cell_m)`` in the ground frame.
     """
+    from core.simulation import field_kernels as K
+
     _check_positive(cell_m=cell_m)
     x, y = broadcast_xy(x_m, y_m)
-    u = hash_uniform(seed, floor_index(x / cell_m), floor_index(y / cell_m))
-    return np.where(np.isfinite(x) & np.isfinite(y), u, np.nan)
+    u = K.cell_uniform(np.ascontiguousarray(x).reshape(-1), np.ascontiguousarray(y).reshape(-1),
+                       hash_state(seed), float(cell_m))
+    return u.reshape(x.shape)

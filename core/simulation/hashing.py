@@ -29,24 +29,11 @@ from numpy.typing import ArrayLike, NDArray
 
 from core.errors import InputError
 
-__all__ = ["derive_seed", "hash_normal", "hash_u64", "hash_uniform"]
+__all__ = ["derive_seed", "hash_normal", "hash_state", "hash_u64", "hash_uniform"]
 
 _MASK64 = (1 << 64) - 1
-_GOLDEN = np.uint64(0x9E3779B97F4A7C15)
-_C1 = np.uint64(0xBF58476D1CE4E5B9)
-_C2 = np.uint64(0x94D049BB133111EB)
-_S30 = np.uint64(30)
-_S27 = np.uint64(27)
-_S31 = np.uint64(31)
 _S11 = np.uint64(11)
 _TWO_POW_M53 = 2.0**-53
-
-
-def _mix(z: NDArray[np.uint64]) -> NDArray[np.uint64]:
-    """SplitMix64 finaliser on a 1-D uint64 array (wrapping arithmetic)."""
-    z = (z ^ (z >> _S30)) * _C1
-    z = (z ^ (z >> _S27)) * _C2
-    return z ^ (z >> _S31)
 
 
 def _as_key(a: ArrayLike) -> NDArray[np.uint64]:
@@ -81,16 +68,23 @@ def hash_u64(seed: int, *keys: ArrayLike) -> NDArray[np.uint64]:
     Returns:
         uint64 array of the broadcast shape (0-d for scalar keys).
     """
-    s = _seed_u64(seed)
+    from core.simulation.field_kernels import hash_keys
+
     arrays = [_as_key(k) for k in keys]
     shape = np.broadcast_shapes(*(a.shape for a in arrays)) if arrays else ()
     n = int(np.prod(shape, dtype=np.int64))
-    with np.errstate(over="ignore"):
-        h = np.broadcast_to(_mix(np.full(1, s, dtype=np.uint64) + _GOLDEN), (n,))
-        for idx, a in enumerate(arrays, start=1):
-            flat = np.broadcast_to(a, shape).reshape(n)
-            h = _mix(h ^ (flat + _GOLDEN * np.uint64(idx)))
-    return h.reshape(shape)
+    stacked = np.empty((len(arrays), n), dtype=np.uint64)
+    for row, a in zip(stacked, arrays, strict=True):
+        row[:] = np.broadcast_to(a, shape).reshape(n)
+    return hash_keys(hash_state(seed), stacked.view(np.int64)).reshape(shape)
+
+
+def hash_state(seed: int) -> np.uint64:
+    """The hash's running state after ``seed`` alone (``mix(seed + G)``), where every key
+    starts from."""
+    from core.simulation.field_kernels import seed_state
+
+    return np.uint64(seed_state(_seed_u64(seed)))
 
 
 def hash_uniform(seed: int, *keys: ArrayLike) -> NDArray[np.float64]:

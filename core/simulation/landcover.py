@@ -256,7 +256,8 @@ def sample_buildings(x_m: ArrayLike, y_m: ArrayLike, seed: int,
 
 
 def classify(x_m: ArrayLike, y_m: ArrayLike, terrain_h_m: ArrayLike, slope_deg: ArrayLike,
-             seed: int, config: LandCoverConfig = LandCoverConfig()) -> NDArray[np.uint8]:
+             seed: int, config: LandCoverConfig = LandCoverConfig(),
+             buildings: BuildingSample | None = None) -> NDArray[np.uint8]:
     """Land-cover code (:class:`LandCover`) at each point, by the rules of the module docstring.
 
     Args:
@@ -266,6 +267,7 @@ def classify(x_m: ArrayLike, y_m: ArrayLike, terrain_h_m: ArrayLike, slope_deg: 
         slope_deg: terrain slope at the points, degrees.
         seed: scene seed.
         config: the rules' parameters.
+        buildings: :func:`sample_buildings` at the points, when the caller has it already.
 
     Returns:
         uint8 array of the broadcast shape.
@@ -277,7 +279,7 @@ def classify(x_m: ArrayLike, y_m: ArrayLike, terrain_h_m: ArrayLike, slope_deg: 
         water = np.zeros(x.shape, dtype=bool)
     else:
         water = h < config.water_level_m
-    bld = sample_buildings(x, y, seed, config)
+    bld = sample_buildings(x, y, seed, config) if buildings is None else buildings
     urban = ~water & bld.urban_block & (slope < config.urban_max_slope_deg)
     share = min(1.0, config.forest_fraction / max(1.0 - config.urban_fraction, 1e-12))
     thr = fbm_threshold(share, config.patch_octaves)
@@ -314,12 +316,14 @@ def canopy_height_m(x_m: ArrayLike, y_m: ArrayLike, classes: ArrayLike, seed: in
 
 
 def building_height_m(x_m: ArrayLike, y_m: ArrayLike, classes: ArrayLike, seed: int,
-                      config: LandCoverConfig = LandCoverConfig()) -> NDArray[np.float64]:
+                      config: LandCoverConfig = LandCoverConfig(),
+                      buildings: BuildingSample | None = None) -> NDArray[np.float64]:
     """Building height above the terrain, metres: the building's hashed height on URBAN
-    footprints (constant over each footprint), 0 on streets, yards and other classes."""
+    footprints (constant over each footprint), 0 on streets, yards and other classes
+    (``buildings``: :func:`sample_buildings` at the points, when the caller has it)."""
     x, y = broadcast_xy(x_m, y_m)
     cls = np.broadcast_to(np.asarray(classes), x.shape)
-    bld = sample_buildings(x, y, seed, config)
+    bld = sample_buildings(x, y, seed, config) if buildings is None else buildings
     return np.where(cls == LandCover.URBAN, bld.height_m, 0.0)
 
 

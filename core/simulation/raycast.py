@@ -17,7 +17,7 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import NDArray
 
-from core.dem import SurfaceGrid, first_crossing, march_levels
+from core.dem import SurfaceGrid, march_levels
 from core.errors import InputError
 from core.sensors.base import SensorModel
 
@@ -95,8 +95,12 @@ def first_hit(
     """(x, y, h) where each ray first meets the surface coming down from ``h_top_m``.
 
     The march step keeps the horizontal move under half a grid cell; the crossing is
-    then refined by bisection to ``tol_m``. Rays that never meet it give NaN.
+    then refined by bisection to ``tol_m`` (:func:`core.dem.first_crossing`'s rule, compiled in
+    :func:`core.simulation.raycast_kernels.ray_first_heights`). Rays that never meet it give
+    NaN.
     """
+    from core.simulation import raycast_kernels as K
+
     if not h_top_m > h_bottom_m:
         raise InputError(f"h_top {h_top_m} must be above h_bottom {h_bottom_m}")
     n = rays.x_m.shape[1]
@@ -105,13 +109,13 @@ def first_hit(
     move = np.nanmax(np.hypot(xa - xb, ya - yb)) / (h_top_m - h_bottom_m) if n else 0.0
     levels = march_levels(h_top_m, h_bottom_m, move, min(abs(surface.dx_m), abs(surface.dy_m)),
                           min_step_m=1e-3)
-
-    def above(h: FloatArray, idx: NDArray[np.intp]) -> FloatArray:
-        x, y = rays.at(h, idx)
-        return h - surface.sample(x, y)
-
-    h = first_crossing(above, n, levels, tol_m=tol_m, max_bisections=max_bisections)
-    x, y = rays.at(h)
+    x0, y0, dx, dy = surface.axes
+    hl = np.array(rays.h_levels_m, dtype=np.float64)
+    rx, ry = np.ascontiguousarray(rays.x_m), np.ascontiguousarray(rays.y_m)
+    h = K.ray_first_heights(rx, ry, hl, np.asarray(surface.values, dtype=np.float64),
+                            float(x0), float(y0), float(dx), float(dy), levels, float(tol_m),
+                            int(max_bisections))
+    x, y = K.ray_xy(rx, ry, hl, h)
     return x, y, h
 
 

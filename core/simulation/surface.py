@@ -106,10 +106,10 @@ def sample_surface(spec: SurfaceSpec, x_m: FloatArray, y_m: FloatArray,
     lon, lat = to_lonlat(x, y)
     terr = terrain_m(spec, x, y, lon, lat)
     lc = spec.landcover
-    cls = classify(x, y, terr, slope_deg(spec, lon, lat), spec.seed, lc)
-    canopy = canopy_height_m(x, y, cls, spec.seed, lc)
-    building = building_height_m(x, y, cls, spec.seed, lc)
     bld = sample_buildings(x, y, spec.seed, lc)
+    cls = classify(x, y, terr, slope_deg(spec, lon, lat), spec.seed, lc, bld)
+    canopy = canopy_height_m(x, y, cls, spec.seed, lc)
+    building = building_height_m(x, y, cls, spec.seed, lc, bld)
     on_bld = building > 0
     # flat roofs: the terrain under each building's centre
     roof_base = None
