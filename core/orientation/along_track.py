@@ -30,12 +30,10 @@ from typing import Any
 import numpy as np
 
 from core.errors import ConvergenceError, GeometryError
-from core.orientation.absolute import (
-    AbsoluteConfig,
-    AbsoluteOrientation,
-    Observations,
-    absolute_orientation,
-)
+from core.orientation.absolute import AbsoluteConfig, absolute_orientation
+from core.orientation.frames import FramePrior
+from core.orientation.observations import Observations
+from core.orientation.result import AbsoluteOrientation
 from core.orientation.ties import TieObservations
 from core.sensors.base import SensorModel
 from core.sensors.pushbroom import ATTITUDE_HARMONICS, PushbroomModel
@@ -120,7 +118,8 @@ def estimate_along_track(models: Sequence[SensorModel], obs: Observations,
                          ties: TieObservations | None = None,
                          orders: Sequence[int] = ORDERS,
                          axes: Sequence[str] = AXES,
-                         base: AbsoluteOrientation | None = None) -> AlongTrack:
+                         base: AbsoluteOrientation | None = None,
+                         frames: Sequence[FramePrior] | None = None) -> AlongTrack:
     """Orient with 0 and each of ``orders`` harmonics on ``axes`` of every pushbroom image
     (the models' other adjusted parameters kept) and keep the order of least BIC. The GCPs are
     those ``models`` were oriented on (an order that fails to converge is left out); ``base``:
@@ -138,7 +137,8 @@ def estimate_along_track(models: Sequence[SensorModel], obs: Observations,
             results[0], bic[0] = base, _bic(base, ties, 0)
             continue
         try:
-            res = absolute_orientation(trial, obs, names, cfg if order else config, ties)
+            res = absolute_orientation(trial, obs, names, cfg if order else config, ties,
+                                       frames)
         except (ConvergenceError, GeometryError):
             if order == 0:
                 raise

@@ -1,6 +1,10 @@
-"""The equations of the absolute orientation at any models: the GCPs', the tie points' (their
-ground unknowns removed, :mod:`core.orientation.ties`) and the priors on the additional
-parameters, with the group of each row for the variance components."""
+"""The equations of the absolute orientation at any models: the GCPs' (their ground moved by
+their frame's shift, :mod:`core.orientation.frames`), the tie points' (their ground unknowns
+removed, :mod:`core.orientation.ties`), the priors on the additional parameters and on the
+frames, with the group of each row for the variance components.
+
+The unknowns are every model's parameters (model ``k``'s in columns ``offsets[k]`` to
+``offsets[k+1]``) followed by the frames' (columns ``offsets[-1]`` on)."""
 
 from __future__ import annotations
 
@@ -11,8 +15,9 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
+from core.orientation.frames import FrameLayout
 from core.orientation.ties import TieObservations, tie_rows
-from core.orientation.uncertainty import image_grid
+from core.orientation.uncertainty import ground_jacobian, image_grid
 from core.sensors.base import SensorModel
 
 # the GCPs: a core.orientation.absolute.Observations (not imported: that module imports this)
@@ -21,7 +26,7 @@ Observations = Any
 FloatArray = NDArray[np.float64]
 
 
-GROUPS = ("gcp_col", "gcp_row", "tie", "prior")
+GROUPS = ("gcp_col", "gcp_row", "tie", "prior", "frame")
 
 
 @dataclass(frozen=True, eq=False)
@@ -43,16 +48,28 @@ class Equations:
 
     def __init__(self, obs: Observations, col: FloatArray, row: FloatArray, sigma: FloatArray,
                  seen: NDArray[np.bool_], offsets: NDArray[np.intp],
-                 ties: TieObservations | None, prior: FloatArray) -> None:
+                 ties: TieObservations | None, prior: FloatArray,
+                 frames: FrameLayout) -> None:
         self.obs, self.col, self.row, self.sigma, self.seen = obs, col, row, sigma, seen
-        self.offsets, self.ties, self.prior = offsets, ties, prior
+        self.offsets, self.ties, self.prior, self.frames = offsets, ties, prior, frames
         self.ground = ties.ground() if ties is not None else None
         self.design: FloatArray | None = None
 
-    def build(self, models: Sequence[SensorModel], inlier: NDArray[np.bool_],
-              jacobian: bool = True) -> System:
-        a, r, q, axis = linearise(models, self.obs, self.col, self.row, self.sigma,
-                                   inlier[:, None] & self.seen, self.offsets, jacobian)
+    @property
+    def n_params(self) -> int:
+        return int(self.offsets[-1]) + self.frames.n
+
+    def build(self, models: Sequence[SensorModel], frame_x: FloatArray,
+              inlier: NDArray[np.bool_], jacobian: bool = True) -> System:
+        """Every equation at ``models`` and the frame parameters ``frame_x``."""
+        n_par, n_mod = self.n_params, int(self.offsets[-1])
+        use = inlier[:, None] & self.seen
+        obs = self.obs.shifted(self.frames, frame_x)
+        a, r, q, axis = linearise(models, obs, self.col, self.row, self.sigma, use,
+                                   self.offsets, jacobian)
+        a = np.hstack([a, np.zeros((a.shape[0], self.frames.n))])
+        if jacobian and self.frames.n:
+            a[:, n_mod:] = frame_design(models, obs, use, self.frames)
         a_parts, r_parts, q_parts, g_parts = [a], [r], [q], [axis]
         ground = None
         if self.ties is not None and self.ties.n:
@@ -60,16 +77,24 @@ class Equations:
             # corrections move the rays by microradians, the design hardly at all
             t = tie_rows(models, self.ties, self.ground, self.offsets, jacobian, self.design)
             ground, self.design = t.ground, t.design
-            a_parts.append(t.a)
+            a_parts.append(np.hstack([t.a, np.zeros((t.a.shape[0], self.frames.n))]))
             r_parts.append(t.r)
             q_parts.append(np.ones(t.r.size))
             g_parts.append(np.full(t.r.size, 2))
         if self.prior.size:  # whitened: the delivered values (corrections 0) are the target
             p = np.concatenate([m.params for m in models])
-            a_parts.append(self.prior)
+            a_parts.append(np.hstack([self.prior, np.zeros((self.prior.shape[0],
+                                                            self.frames.n))]))
             r_parts.append(-self.prior @ p)
             q_parts.append(np.ones(self.prior.shape[0]))
             g_parts.append(np.full(self.prior.shape[0], 3))
+        if self.frames.n:  # whitened: no shift is the target
+            rows = np.zeros((self.frames.n, n_par))
+            rows[:, n_mod:] = self.frames.prior_rows()
+            a_parts.append(rows)
+            r_parts.append(-self.frames.prior_rows() @ frame_x)
+            q_parts.append(np.ones(self.frames.n))
+            g_parts.append(np.full(self.frames.n, 4))
         return System(np.vstack(a_parts), np.concatenate(r_parts), np.concatenate(q_parts),
                        np.concatenate(g_parts).astype(np.intp), ground)
 
@@ -77,6 +102,24 @@ class Equations:
         """Start the next tie-point intersections from this system's ground."""
         if system.ground is not None:
             self.ground = system.ground
+
+
+def frame_design(models: Sequence[SensorModel], obs: Observations, use: NDArray[np.bool_],
+                 frames: FrameLayout) -> FloatArray:
+    """The GCP equations' partial derivatives by the frame parameters (rows as
+    :func:`linearise` orders them; px per m): each GCP's ground Jacobian in each image, in the
+    columns of its frame's east, north and up."""
+    blocks = []
+    for m, model in enumerate(models):
+        u = use[:, m]
+        g = ground_jacobian(model, obs.lon_deg[u], obs.lat_deg[u], obs.h_m[u])  # (k, 2, 3)
+        out = np.zeros((int(u.sum()), 2, frames.n))
+        idx = frames.index[np.asarray(obs.frame)[u]]  # (k, 3)
+        for c in range(3):
+            has = idx[:, c] >= 0
+            out[np.flatnonzero(has), :, idx[has, c]] = g[has, :, c]
+        blocks.append(out.reshape(-1, frames.n))
+    return np.vstack(blocks) if blocks else np.zeros((0, frames.n))
 
 
 def prior_rows(models: Sequence[SensorModel], obs: Observations, prior_px: float,

@@ -25,16 +25,19 @@ GCPs by ``1 / tan(incidence)`` metres along the range (2.4 m at 23 degrees).
 
 **The GCP** (:func:`sar_control_points`): the SAR pixel localised at that height (the SAR model:
 orbit and two times, no attitude), with the optical pixel as its image measurement;
-``sigma_xy_m`` from the SAR product's geolocation (``geolocation_sigma_m``), the matching and
-the height's uncertainty through the radar's ``1 / tan(incidence)``; ``source: "sar"``.
+``sigma_xy_m`` from the matching and the height's uncertainty through the radar's
+``1 / tan(incidence)`` (the product's geolocation, common to all of them, is their frame's);
+``source: "sar"``.
 
-A common error of the SAR product (its orbit, azimuth time and range delay) passes whole into
-the orientation, as the reference DEM's misregistration does for SRTM GCPs.
+A common error of the SAR product (its orbit, azimuth time and range delay) is the SAR GCPs'
+frame (:func:`sar_frame`, :mod:`core.orientation.frames`): estimated in the adjustment with its
+prior, as the reference DEM's misregistration is for SRTM GCPs.
 """
 
 from __future__ import annotations
 
-from dataclasses import dataclass, replace
+from collections.abc import Sequence
+from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
@@ -43,6 +46,7 @@ from numpy.typing import NDArray
 from core.dem import GeoDEM
 from core.errors import InputError
 from core.geodesy import metres_per_degree
+from core.orientation.frames import REFERENCE, FramePrior
 from core.orientation.sar_matching import (
     MIN_POINTS,
     SarGcpConfig,
@@ -149,7 +153,8 @@ def sar_control_points(name: str, sar: SensorModel, m: SarOpticalMatches, hts: P
     idx = np.flatnonzero(ok)[hts.inlier]
     sel = hts.inlier
     lon, lat = sar.localize(m.sar_col[idx], m.sar_row[idx], hts.h_m[sel])
-    sigma_xy = np.sqrt(cfg.geolocation_sigma_m**2 + hts.sigma_match_m**2
+    # the product's geolocation is common to every point: the frame's (sar_frame), not here
+    sigma_xy = np.sqrt(hts.sigma_match_m**2
                        + (hts.sigma_h_m[sel] * hts.sar_m_per_m[sel])**2)
     points = []
     for k, (i, x, y, h) in enumerate(zip(idx, lon, lat, hts.h_m[sel], strict=True)):
@@ -237,64 +242,33 @@ def geolocation_sigma_m(mission: str) -> float:
     return GEOLOCATION_SIGMA_M["ERS"]
 
 
-@dataclass(frozen=True)
-class CommonShift:
-    """The SAR GCPs' common horizontal offset (east, north, m) from where models oriented on
-    other control put their image points, its standard error and the points used."""
-
-    east_m: float
-    north_m: float
-    sigma_east_m: float
-    sigma_north_m: float
-    n: int
-
-    def to_dict(self) -> dict[str, float | int]:
-        return {"east_m": self.east_m, "north_m": self.north_m,
-                "sigma_east_m": self.sigma_east_m, "sigma_north_m": self.sigma_north_m,
-                "n": self.n}
-
-
-def common_shift(models: dict[str, SensorModel], gcps: tuple[ControlPoint, ...]) -> CommonShift:
-    """How far the SAR GCPs sit, in common, from the ground their image points reach through
-    ``models`` (name -> model oriented without them, e.g. on SRTM GCPs): the robust mean of
-    (model's ground - GCP's ground), east and north. The SAR scene's own geolocation error
-    and the matching's bias at height steps (see the module docstring) are such a common
-    offset; with other control it is estimated and removed (:func:`shifted`), alone it
-    passes into the orientation."""
-    de, dn = [], []
-    for p in gcps:
-        for name, ip in p.image_points.items():
-            lon, lat = models[name].localize(np.array([ip.col]), np.array([ip.row]),
-                                             np.array([p.h_m]))
-            mx, my = metres_per_degree(p.lat_deg)
-            de.append((float(lon[0]) - p.lon_deg) * float(mx))
-            dn.append((float(lat[0]) - p.lat_deg) * float(my))
-    if len(de) < 3:
-        raise InputError(f"only {len(de)} SAR GCPs to measure their common shift (3 needed)")
-    e, n = np.asarray(de), np.asarray(dn)
-    one = np.ones((e.size, 1))
-    (ce,), se = robust_fit(e, one)
-    (cn,), sn = robust_fit(n, one)
-    return CommonShift(float(ce), float(cn), float(se / np.sqrt(e.size)),
-                       float(sn / np.sqrt(n.size)), int(e.size))
-
-
-def shifted(gcps: tuple[ControlPoint, ...], shift: CommonShift) -> tuple[ControlPoint, ...]:
-    """The GCPs moved by ``shift`` (their image points kept), its provenance recorded."""
-    out = []
-    for p in gcps:
-        mx, my = metres_per_degree(p.lat_deg)
-        prov = {**p.provenance, "common_shift_m": [shift.east_m, shift.north_m]}
-        out.append(replace(p, lon_deg=p.lon_deg + shift.east_m / float(mx),
-                           lat_deg=p.lat_deg + shift.north_m / float(my), provenance=prov))
-    return tuple(out)
-
-
 # the matching's bias at height steps, in radar pixels of the matching grid along the range:
 # against the optical image on the reference's heights, measured 0.7-1.0 on the simulator's
 # forest edges; against the SAR image predicted from the pair's surface, 0.0-0.2
 # (bench/bench_sar_gcps.py on the flat tiny and spot scenes)
 MATCHING_BIAS_PX = {False: 1.0, True: 0.2}
+
+
+#: the frame of SAR-optical GCPs (:mod:`core.orientation.frames`)
+SAR_FRAME = "sar"
+
+
+def sar_frame(results: Sequence[SarImageResult], geolocation_sigma_m: float,
+              up_sigma_m: float, up_of: str = REFERENCE) -> FramePrior:
+    """The prior of the SAR GCPs' frame: the product's geolocation and the matching's bias at
+    height steps (:func:`registration_sigma_m`, from the first image with GCPs), its
+    vertical the reference's (``up_of``; the heights are calibrated on the reference's; alone,
+    ``up_sigma_m``)."""
+    ok = next((r for r in results if r.heights is not None), None)
+    if ok is None:
+        raise InputError("no SAR GCPs: no image was matched to the SAR scene")
+    e, n, u = registration_sigma_m(geolocation_sigma_m, ok.matches.cell_m,
+                                   ok.heights.range_direction_en, up_sigma_m,
+                                   predicted=ok.prediction is not None)
+    return FramePrior(SAR_FRAME, (e, n, u), up_of,
+                      f"SAR geolocation {geolocation_sigma_m:g} m and the matching's bias at "
+                      f"height steps ({MATCHING_BIAS_PX[ok.prediction is not None]:g} radar "
+                      f"pixel of {ok.matches.cell_m:.1f} m along the range)")
 
 
 def registration_sigma_m(geolocation_sigma_m: float, radar_pixel_m: float,

@@ -27,13 +27,11 @@ from typing import Any
 import numpy as np
 
 from core.errors import ConvergenceError, GeometryError
-from core.orientation.absolute import (
-    AbsoluteConfig,
-    AbsoluteOrientation,
-    Observations,
-    absolute_orientation,
-    with_gcp_errors_as_they_are,
-)
+from core.orientation.absolute import AbsoluteConfig, absolute_orientation
+from core.orientation.frames import FramePrior
+from core.orientation.gcp_errors import with_gcp_errors_as_they_are
+from core.orientation.observations import Observations
+from core.orientation.result import AbsoluteOrientation
 from core.orientation.ties import TieObservations
 from core.sensors.base import SensorModel
 from core.sensors.pushbroom import PushbroomModel
@@ -156,7 +154,8 @@ def _wald(result: AbsoluteOrientation, name: str, terms: Sequence[str]) -> float
 def self_calibrate(models: Sequence[SensorModel], obs: Observations, names: Sequence[str],
                    config: AbsoluteConfig = AbsoluteConfig(), terms: Sequence[str] = LENS_TERMS,
                    t_threshold: float = 3.0, min_col_drop: float = 0.15,
-                   ties: TieObservations | None = None) -> SelfCalibration:
+                   ties: TieObservations | None = None,
+                   frames: Sequence[FramePrior] | None = None) -> SelfCalibration:
     """Orient without lens terms, then with ``terms`` on every pushbroom image; keep an
     image's terms when they are significant together and worth it, and orient again with
     those.
@@ -191,17 +190,15 @@ def self_calibrate(models: Sequence[SensorModel], obs: Observations, names: Sequ
     from scipy.stats import chi2, f, norm
 
     names = tuple(names)
-    without = absolute_orientation(models, obs, names, config, ties)
+    without = absolute_orientation(models, obs, names, config, ties, frames)
     trial_models = [_with_terms(m, terms) for m in without.models]
     if all(tm is m for tm, m in zip(trial_models, without.models, strict=True)):
         return SelfCalibration(without, None, {}, t_threshold,
                                decision="no pushbroom image: RPC images take no lens terms")
     keep = without.inlier
-    trial_obs = Observations(obs.lon_deg[keep], obs.lat_deg[keep], obs.h_m[keep],
-                             np.asarray(obs.col)[keep], np.asarray(obs.row)[keep],
-                             obs.sigma_xy_m[keep], obs.sigma_h_m[keep])
+    trial_obs = obs.subset(keep)
     try:
-        trial = absolute_orientation(trial_models, trial_obs, names, config, ties)
+        trial = absolute_orientation(trial_models, trial_obs, names, config, ties, frames)
     except (ConvergenceError, GeometryError) as exc:  # terms the GCPs cannot carry: none kept
         return SelfCalibration(without, None, {}, t_threshold, decision=(
             f"none kept: the adjustment with lens terms failed ({exc})"))
@@ -246,7 +243,7 @@ def self_calibrate(models: Sequence[SensorModel], obs: Observations, names: Sequ
     while chosen:
         final_models = [_with_terms(m, terms if n in chosen else ())
                         for m, n in zip(without.models, names, strict=True)]
-        with_lens = absolute_orientation(final_models, trial_obs, names, config, ties)
+        with_lens = absolute_orientation(final_models, trial_obs, names, config, ties, frames)
         drops = {a.name: 1.0 - b.rms_col_px / a.rms_col_px if a.rms_col_px else 0.0
                  for a, b in zip(without.residuals, with_lens.residuals, strict=True)}
         tie_drop = (1.0 - with_lens.tie_rms_px / without.tie_rms_px

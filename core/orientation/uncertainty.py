@@ -202,11 +202,15 @@ def predicted_rms_px(jac: ArrayLike, covariance: ArrayLike,
 @dataclass(frozen=True)
 class PredictedAccuracy:
     """Predicted check-point RMS (px) in one image, col and row, over ``n`` points: in total
-    (``predicted_rms_*``) and its terms, the adjustment's covariance (``adjustment_rms_*``),
-    the reference's registration (``reference_rms_*``, from ``reference_sigma_m`` east, north,
-    up), the model's own error the GCP residuals show (``unmodelled_rms_*``,
+    (``predicted_rms_*``) and its terms, the adjustment's covariance given the control's frames
+    (``adjustment_rms_*``), the frames' registration (``reference_rms_*``: the reference's,
+    ``reference_sigma_m`` east, north, up, and any other frame's, carried through the models),
+    the model's own error the GCP residuals show (``unmodelled_rms_*``,
     :func:`neighbour_covariance`) and the points' own measurement noise ``noise_px``:
-    ``predicted^2 = adjustment^2 + reference^2 + unmodelled^2 + noise^2``."""
+    ``predicted^2 = adjustment^2 + reference^2 + unmodelled^2 + noise^2``. What the method
+    achieves relative to the frames (``predicted_relative_rms_*``: all but the reference term)
+    and what the frames carry (``predicted_reference_rms_*``, the reference term) are the two
+    parts of the total."""
 
     n: int
     predicted_rms_col_px: float
@@ -219,6 +223,42 @@ class PredictedAccuracy:
     unmodelled_rms_row_px: float
     reference_sigma_m: tuple[float, float, float]
     noise_px: float
+
+    @property
+    def predicted_relative_rms_col_px(self) -> float:
+        return float(np.sqrt(self.adjustment_rms_col_px**2 + self.unmodelled_rms_col_px**2
+                             + self.noise_px**2))
+
+    @property
+    def predicted_relative_rms_row_px(self) -> float:
+        return float(np.sqrt(self.adjustment_rms_row_px**2 + self.unmodelled_rms_row_px**2
+                             + self.noise_px**2))
+
+    @property
+    def predicted_reference_rms_col_px(self) -> float:
+        return self.reference_rms_col_px
+
+    @property
+    def predicted_reference_rms_row_px(self) -> float:
+        return self.reference_rms_row_px
+
+    @classmethod
+    def split(cls, param_jac: ArrayLike, relative_covariance: ArrayLike,
+              reference_covariance: ArrayLike, reference_sigma_m: tuple[float, float, float],
+              unmodelled_px: tuple[float, float] = (0.0, 0.0), noise_px: float = 0.0
+              ) -> PredictedAccuracy:
+        """The terms at points with partial derivatives ``param_jac`` (n, 2, u) by the
+        parameters, whose covariance is the sum of ``relative_covariance`` (what remains were
+        the frames known) and ``reference_covariance`` (what the frames' uncertainty puts
+        there; ``reference_sigma_m``: the reference's prior, for the record)."""
+        ac, ar = predicted_rms_px(param_jac, relative_covariance)
+        rc, rr = predicted_rms_px(param_jac, reference_covariance)
+        uc, ur = (float(x) for x in unmodelled_px)
+        s = tuple(float(v) for v in reference_sigma_m)
+        return cls(int(np.shape(param_jac)[0]),
+                   float(np.sqrt(ac**2 + rc**2 + uc**2 + noise_px**2)),
+                   float(np.sqrt(ar**2 + rr**2 + ur**2 + noise_px**2)), ac, ar, rc, rr, uc, ur,
+                   (s[0], s[1], s[2]), float(noise_px))
 
     @classmethod
     def at(cls, param_jac: ArrayLike, covariance: ArrayLike, ground_jac: ArrayLike,
@@ -243,6 +283,9 @@ class PredictedAccuracy:
     def to_dict(self) -> dict[str, Any]:
         d = dict(vars(self))
         d["reference_sigma_m"] = list(self.reference_sigma_m)
+        for k in ("predicted_relative_rms_col_px", "predicted_relative_rms_row_px",
+                  "predicted_reference_rms_col_px", "predicted_reference_rms_row_px"):
+            d[k] = getattr(self, k)
         return d
 
 

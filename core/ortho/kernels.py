@@ -15,8 +15,6 @@ import numba
 import numpy as np
 from numpy.typing import NDArray
 
-from core.parallel import run_split
-
 FloatArray = NDArray[np.float64]
 
 

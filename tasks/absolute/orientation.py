@@ -1,15 +1,16 @@
-"""Tasks of step 4: the absolute orientation of both images on the simulated GCPs, check points
+"""Tasks of step 4: the absolute orientation of the images on the simulated GCPs, check points
 and the products of ``gcpfree orient`` (oriented models, GCPs, report.json).
 
-The maths is :mod:`core.orientation.absolute` and :mod:`core.orientation.selfcal`; here the
-check points are read (the simulator's ``checkpoints.json`` or a CSV), the adjustment run and
-its products written atomically.
+The maths is :mod:`core.orientation.adjust` (the one estimator); here the check points are
+read (the simulator's ``checkpoints.json`` or a CSV), the estimator called once and its
+products written atomically.
 """
 
 from __future__ import annotations
 
 import csv
-from dataclasses import dataclass, field, replace
+from collections.abc import Sequence
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
@@ -19,21 +20,18 @@ from prefect.cache_policies import NO_CACHE
 
 from core.errors import InputError
 from core.jsonio import parse_json
-from core.orientation.absolute import (
-    AbsoluteConfig,
-    AbsoluteOrientation,
-    Observations,
-    absolute_orientation,
-    check_point_stats,
-    with_gcp_errors_as_they_are,
+from core.orientation.absolute import AbsoluteConfig
+from core.orientation.adjust import (
+    AdjustConfig,
+    ControlSet,
+    ImageToAdjust,
+    Solution,
+    adjust,
+    check_points_in,
 )
-from core.orientation.along_track import AlongTrack, estimate_along_track
-from core.orientation.ground_field import (
-    NO_CORRELATION,
-    CorrelatedGroundError,
-    with_correlated_error,
-)
-from core.orientation.selfcal import SelfCalibration, self_calibrate
+from core.orientation.along_track import AlongTrack
+from core.orientation.result import AbsoluteOrientation
+from core.orientation.selfcal import SelfCalibration
 from core.orientation.ties import TieObservations
 from core.points import (
     CheckPoint,
@@ -43,7 +41,6 @@ from core.points import (
     control_points_to_dict,
 )
 from core.sensors.base import SensorModel
-from core.sensors.pushbroom import PushbroomModel
 from tasks.absolute.surface_match import TieGround
 from tasks.io.rasters import atomic_write_json
 from tasks.io.sensors import LoadedModel, sun_to_dict
@@ -112,151 +109,80 @@ def read_checkpoints(path: str | Path) -> CheckPointSet:
 
 
 def check_point_report(models: tuple[SensorModel, ...], points: CheckPointSet,
-                       adjustment: AbsoluteOrientation | None = None,
-                       reference_sigma_m: tuple[float, float, float] = (5.0, 5.0, 5.0)
+                       solution: Solution | None = None, names: tuple[str, ...] = NAMES
                        ) -> dict[str, dict[str, Any]]:
     """The paper's Table 2 per image: the check points' residuals under ``models``; with the
-    ``adjustment`` that made them, the RMS it predicts at the same points beside the measured
-    (``predicted_rms_col_px``, ``predicted_rms_row_px``: its covariance and the reference's
-    registration ``reference_sigma_m``; the check points carry no measurement noise of their
-    own, none is added)."""
+    ``solution`` that made them, the RMS it predicts at the same points beside the measured
+    (:meth:`core.orientation.adjust.Solution.check_points`)."""
+    if solution is not None:
+        return {n: s.to_dict() for n, s in solution.check_points(points).items()}
     out = {}
-    for k, (name, model) in enumerate(zip(NAMES, models, strict=True)):
-        pts = [p for p in points.points if name in p.image_points]
-        if not pts:
-            continue
-        lon, lat, h, col, row = (np.array(v, dtype=float) for v in zip(
-            *[(p.lon_deg, p.lat_deg, p.h_m, p.image_points[name].col, p.image_points[name].row)
-              for p in pts], strict=True))
-        stats = check_point_stats(model, lon, lat, h, col, row, name)
-        if adjustment is not None:
-            pred = adjustment.predict(k, lon, lat, h, reference_sigma_m)
-            stats = replace(stats, predicted_rms_col_px=pred.predicted_rms_col_px,
-                            predicted_rms_row_px=pred.predicted_rms_row_px)
-        out[name] = stats.to_dict()
+    for name, model in zip(names, models, strict=True):
+        stats = check_points_in(model, points, name)
+        if stats is not None:
+            out[name] = stats.to_dict()
     return out
 
 
 @dataclass(frozen=True, eq=False)
 class AbsoluteProducts:
-    """The oriented models, the adjustment and where they were written."""
+    """The solution of :func:`core.orientation.adjust.adjust` and where its models were
+    written."""
 
-    models: tuple[SensorModel, ...]
-    adjustment: AbsoluteOrientation
-    self_calibration: SelfCalibration | None
+    solution: Solution
     model_paths: tuple[Path, ...]
-    predicted: dict[str, Any] = field(default_factory=dict)
-    along_track: AlongTrack | None = None
-    inlier: np.ndarray | None = None
-    reasons: dict[int, str] | None = None
 
-    def gcp_summary(self, gcps: tuple[ControlPoint, ...]) -> dict[str, Any]:
+    @property
+    def models(self) -> tuple[SensorModel, ...]:
+        return self.solution.models
+
+    @property
+    def adjustment(self) -> AbsoluteOrientation:
+        return self.solution.adjustment
+
+    @property
+    def self_calibration(self) -> SelfCalibration | None:
+        return self.solution.self_calibration
+
+    @property
+    def along_track(self) -> AlongTrack | None:
+        return self.solution.along_track
+
+    @property
+    def predicted(self) -> dict[str, Any]:
+        return self.solution.predicted_over_images()
+
+    def gcp_summary(self, gcps: tuple[ControlPoint, ...] | None = None) -> dict[str, Any]:
         """GCPs used and rejected (ids and reasons), over the GCPs given."""
-        src = self.self_calibration or self.adjustment
-        inlier = src.inlier if self.inlier is None else self.inlier
-        reasons = src.reasons if self.reasons is None else self.reasons
-        return {"given": len(gcps), "used": int(inlier.sum()), "rejected": int((~inlier).sum()),
-                "rejected_ids": [{"id": gcps[int(i)].id, "reason": reasons[int(i)]}
-                                 for i in np.flatnonzero(~inlier)]}
+        return self.solution.gcp_summary()
+
+
+def tie_observations(ties: TieGround | None, config: AbsoluteConfig
+                     ) -> TieObservations | None:
+    """The relative orientation's tie points as the adjustment takes them (None: none)."""
+    if ties is None or not ties.lon_deg.size:
+        return None
+    return TieObservations(np.stack([ties.left_col, ties.right_col], axis=1),
+                           np.stack([ties.left_row, ties.right_row], axis=1),
+                           ties.lon_deg, ties.lat_deg, ties.h_m, config.matching_sigma_px)
 
 
 @task(name="absolute-orientation", cache_policy=NO_CACHE)
-def orient_absolute(left: LoadedModel, right: LoadedModel, gcps: tuple[ControlPoint, ...],
-                    out_dir: Path, corrections: str = "linear", lens: bool = False,
-                    config: AbsoluteConfig | None = None,
-                    ties: TieGround | None = None, along_track: bool = False
-                    ) -> AbsoluteProducts:
-    """Both models adjusted to the GCPs (``corrections``: ``offset`` or ``linear`` terms of
-    each model; ``lens``: self-calibration of the cameras, kept only where significant) and,
-    with ``ties`` (the relative orientation's tie points), to the images' relative geometry
-    too; ``along_track``: then the attitude's along-track profile, harmonics in time as many
-    as the data choose (:mod:`core.orientation.along_track`); written as
-    ``out_dir/left.json`` and ``out_dir/right.json`` (gcpfree model files, with the sun the
-    metadata stated: what later chooses the tie points' measure)."""
-    config = config or AbsoluteConfig()
-    models = (left.model.with_corrections(corrections),
-              right.model.with_corrections(corrections))
-    obs = Observations.from_control_points(gcps, NAMES)
-    tie_obs = None
-    if ties is not None and ties.lon_deg.size:
-        tie_obs = TieObservations(np.stack([ties.left_col, ties.right_col], axis=1),
-                                  np.stack([ties.left_row, ties.right_row], axis=1),
-                                  ties.lon_deg, ties.lat_deg, ties.h_m, config.matching_sigma_px)
-    run = _adjusted(models, obs, config, tie_obs, lens, along_track)
-    if any(run.ground_error.variance_m2):  # again, each GCP weighted with its own share of it
-        xy, h = with_correlated_error(obs.sigma_xy_m, obs.sigma_h_m, run.ground_error)
-        run = _adjusted(models, replace(obs, sigma_xy_m=xy, sigma_h_m=h), config, tie_obs,
-                        lens, along_track)
-    adj, calib, at, kept, reasons, ground_error = (run.adj, run.calib, run.at, run.kept,
-                                                   run.reasons, run.ground_error)
+def orient_absolute(images: Sequence[tuple[str, LoadedModel]], control: Sequence[ControlSet],
+                    out_dir: Path, config: AdjustConfig | None = None,
+                    ties: TieGround | None = None) -> AbsoluteProducts:
+    """Every image (name, model) adjusted to the control sets and the tie points in one
+    solution (:func:`core.orientation.adjust.adjust`), written as ``out_dir/NAME.json``
+    (gcpfree model files, with the sun the metadata stated: what later chooses the tie
+    points' measure)."""
+    config = config or AdjustConfig()
+    solution = adjust([ImageToAdjust(n, m.model, m.size) for n, m in images], control,
+                      tie_observations(ties, config.absolute), config)
     paths = []
-    for name, model, given in zip(NAMES, adj.models, (left, right), strict=True):
+    for (name, given), model in zip(images, solution.models, strict=True):
         paths.append(atomic_write_json(Path(out_dir) / f"{name}.json", {
             **model.to_dict(), **sun_to_dict(given.sun)}))  # type: ignore[attr-defined]
-    return AbsoluteProducts(tuple(adj.models), adj, calib, tuple(paths),
-                            predicted_over_images(adj, (left.size, right.size),
-                                                  np.asarray(obs.h_m)[kept], config,
-                                                  ground_error),
-                            at, kept, reasons)
-
-
-@dataclass(frozen=True, eq=False)
-class _Run:
-    adj: AbsoluteOrientation
-    calib: SelfCalibration | None
-    at: AlongTrack | None
-    kept: np.ndarray
-    reasons: dict[int, str]
-    ground_error: CorrelatedGroundError
-
-
-def _adjusted(models: tuple[SensorModel, ...], obs: Observations, config: AbsoluteConfig,
-              tie_obs: TieObservations | None, lens: bool, along_track: bool) -> _Run:
-    """One run of :func:`orient_absolute`'s adjustment with the GCPs weighted as ``obs``
-    says: self-calibration or not, the along-track profile, the uncertainties."""
-    calib = None
-    if lens:
-        calib = self_calibrate(models, obs, NAMES, config, ties=tie_obs)
-        adj = calib.result
-    else:
-        adj = absolute_orientation(models, obs, NAMES, config, tie_obs)
-    kept = (calib or adj).inlier  # over the GCPs given
-    reasons = dict((calib or adj).reasons)
-    at = None
-    if along_track and any(isinstance(m, PushbroomModel) for m in adj.models):
-        idx = np.flatnonzero(kept)
-        sub = Observations(obs.lon_deg[idx], obs.lat_deg[idx], obs.h_m[idx],
-                           np.asarray(obs.col)[idx], np.asarray(obs.row)[idx],
-                           obs.sigma_xy_m[idx], obs.sigma_h_m[idx])
-        base = adj if adj.inlier.size == idx.size else None
-        at = estimate_along_track(adj.models, sub, NAMES, config, tie_obs, base=base)
-        adj = at.result
-        kept = np.zeros_like(kept)
-        kept[idx[adj.inlier]] = True
-        reasons.update({int(idx[i]): r for i, r in adj.reasons.items()})
-    adj, ground_error = with_gcp_errors_as_they_are(adj, obs, kept, config, tie_obs)
-    return _Run(adj, calib, at, kept, reasons, ground_error)
-
-
-GRID_SIDE = 9
-
-
-def predicted_over_images(adj: AbsoluteOrientation, sizes: tuple[tuple[int, int], ...],
-                          h: np.ndarray, config: AbsoluteConfig,
-                          ground_error: CorrelatedGroundError = NO_CORRELATION
-                          ) -> dict[str, Any]:
-    """report.json's ``absolute.predicted``: per image, the check-point RMS the adjustment
-    predicts over a regular grid of ``GRID_SIDE`` x ``GRID_SIDE`` pixels spanning the image at
-    the scene's heights (the 5th, 50th and 95th percentiles of the heights ``h`` of the GCPs
-    kept), with the reference's registration sigma it assumed and the GCPs' correlated ground
-    error it propagated (``ground_error``)."""
-    heights = [float(v) for v in np.percentile(h, [5.0, 50.0, 95.0])]
-    images = {name: adj.predict_over_image(k, sizes[k], heights, config.reference_sigma_m,
-                                           GRID_SIDE).to_dict()
-              for k, name in enumerate(NAMES)}
-    return {"grid_points_per_side": GRID_SIDE, "heights_m": heights,
-            "reference_sigma_m": list(config.reference_sigma_m),
-            "correlated_ground_error": ground_error.to_dict(), "images": images}
+    return AbsoluteProducts(solution, tuple(paths))
 
 
 def write_gcps(path: Path, gcps: tuple[ControlPoint, ...]) -> Path:

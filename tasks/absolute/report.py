@@ -65,7 +65,7 @@ from typing import Any
 from core.errors import InputError
 from core.jsonio import parse_json
 from core.matching.peaks import MEASURE_NAMES
-from core.orientation.absolute import CheckPointStats
+from core.orientation.checkpoints import CheckPointStats
 from tasks.absolute.report_sections import (  # noqa: F401 (the sections, importable from here)
     NUMBER,
     Absolute,
@@ -141,7 +141,7 @@ class OrientReport:
             "relative_dem": self.relative_dem.to_dict(),
             "surface_matching": self.surface_matching.to_dict(),
             "gcps": self.gcps.to_dict(), "absolute": self.absolute.to_dict(),
-            "models": asdict(self.models), "reference": asdict(self.reference),
+            "models": asdict(self.models), "reference": self.reference.to_dict(),
             "dsm": self.dsm.to_dict()}
         for key in ("check_points", "check_points_before"):
             stats = getattr(self, key)

@@ -14,13 +14,14 @@ from typing import TYPE_CHECKING, Any
 
 from core.errors import InputError
 from core.jsonio import json_ready
+from core.orientation.frames import REFERENCE
 from tasks.dense.dem import DemSummary
 
 if TYPE_CHECKING:
     from core.heights import DatumDecision
     from core.matching.relief import ReliefVerdict
     from core.matching.surface import SurfaceMatchConfig
-    from core.points import ControlPoint
+    from core.orientation.adjust import Solution
     from tasks.absolute.orientation import AbsoluteProducts
     from tasks.absolute.surface_match import SurfaceMatchResult
     from tasks.io.pair import PairInputs
@@ -139,9 +140,9 @@ class GcpSummary:
     file: str = "gcps.json"
 
     @classmethod
-    def of(cls, absolute: AbsoluteProducts, gcps: tuple[ControlPoint, ...]) -> GcpSummary:
-        """The GCPs ``absolute`` used and rejected, over the ``gcps`` given to it."""
-        return cls.from_dict(_json({**absolute.gcp_summary(gcps), "file": "gcps.json"}))
+    def of(cls, absolute: AbsoluteProducts) -> GcpSummary:
+        """The GCPs ``absolute`` used and rejected, over the GCPs given to it."""
+        return cls.from_dict(_json({**absolute.gcp_summary(), "file": "gcps.json"}))
 
     def to_dict(self) -> dict[str, Any]:
         return {"given": self.given, "used": self.used, "rejected": self.rejected,
@@ -257,6 +258,7 @@ class Absolute:
     predicted: Mapping[str, Any] | None = None
     tie_points: Mapping[str, Any] | None = None
     along_track: Mapping[str, Any] | None = None
+    frames: tuple[Mapping[str, Any], ...] | None = None
 
     @classmethod
     def of(cls, absolute: AbsoluteProducts, corrections: str) -> Absolute:
@@ -279,7 +281,9 @@ class Absolute:
                 **{k: dict(v) for k, v in (("variance_components", self.variance_components),
                                            ("predicted", self.predicted),
                                            ("tie_points", self.tie_points),
-                                           ("along_track", self.along_track)) if v is not None}}
+                                           ("along_track", self.along_track)) if v is not None},
+                **({"frames": [dict(f) for f in self.frames]} if self.frames is not None
+                   else {})}
 
     @classmethod
     def from_dict(cls, d: Doc, where: str = "absolute") -> Absolute:
@@ -295,7 +299,9 @@ class Absolute:
             self_calibration=LensCalibration.from_dict(lens) if lens is not None else None,
             variance_components=_optional(d, "variance_components", where),
             predicted=_predicted(d, where), tie_points=_optional(d, "tie_points", where),
-            along_track=_optional(d, "along_track", where))
+            along_track=_optional(d, "along_track", where),
+            frames=(tuple(dict(f) for f in _get(d, "frames", where, list)) if "frames" in d
+                    else None))
 
 
 @dataclass(frozen=True)
@@ -313,27 +319,47 @@ class Models:
 @dataclass(frozen=True)
 class ReferenceUsed:
     """The reference DEM the pair was oriented to (``path``: given, or prepared from
-    ``srtm_dir``), its vertical datum and what decided it."""
+    ``srtm_dir``), its vertical datum and what decided it; ``registration_estimate``: where
+    other control (a SAR scene) made the reference's own misregistration observable, the
+    reference's shift as estimated (``shift_m``: east, north, up, m, where the reference
+    shows the world against the truth; ``sigma_m``; its prior ``prior_sigma_m``), removed from
+    the orientation; None where it was not observable."""
 
     path: str
     vertical: str
     vertical_source: str
     given: str | None = None
     srtm_dir: str | None = None
+    registration_estimate: Mapping[str, Any] | None = None
 
     @classmethod
-    def of(cls, path: Path, datum: DatumDecision, pair: PairInputs) -> ReferenceUsed:
-        """The reference at ``path`` with its datum decision, as ``pair`` gave it."""
+    def of(cls, path: Path, datum: DatumDecision, pair: PairInputs,
+           solution: Solution | None = None) -> ReferenceUsed:
+        """The reference at ``path`` with its datum decision, as ``pair`` gave it; with the
+        ``solution``, its registration where it was estimated."""
+        est = None
+        frame = solution.frame(REFERENCE) if solution is not None else None
+        if frame is not None and frame.observed:
+            # X_true = X_gcp + s: the reference shows the world moved by -s
+            est = {"shift_m": [-v for v in frame.shift_m], "sigma_m": list(frame.sigma_m),
+                   "prior_sigma_m": list(frame.prior_sigma_m), "source": frame.source}
         return cls(str(path), datum.datum, datum.source,
                    None if pair.reference is None else str(pair.reference),
-                   None if pair.srtm_dir is None else str(pair.srtm_dir))
+                   None if pair.srtm_dir is None else str(pair.srtm_dir), est)
+
+    def to_dict(self) -> dict[str, Any]:
+        d = asdict(self)
+        if self.registration_estimate is None:
+            d.pop("registration_estimate")
+        return d
 
     @classmethod
     def from_dict(cls, d: Doc, where: str = "reference") -> ReferenceUsed:
         opt = (str, type(None))
         return cls(_get(d, "path", where, str), _get(d, "vertical", where, str),
                    _get(d, "vertical_source", where, str), _get(d, "given", where, opt),
-                   _get(d, "srtm_dir", where, opt))
+                   _get(d, "srtm_dir", where, opt),
+                   _optional(d, "registration_estimate", where))
 
 
 @dataclass(frozen=True)

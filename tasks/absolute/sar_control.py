@@ -19,8 +19,8 @@ from rasterio.errors import NotGeoreferencedWarning
 
 from core.dem import GeoDEM, SurfaceGrid
 from core.errors import GeometryError, InputError
+from core.orientation.frames import FrameEstimate, shifted_ground
 from core.orientation.sar_gcps import (
-    CommonShift,
     SarImageResult,
     geolocation_sigma_m,
     sar_gcps_of_image,
@@ -181,13 +181,15 @@ class SarControl:
                 "images": images}
 
     def summary(self, srtm_used: bool, models: Mapping[str, Any] | None = None,
-                shift: CommonShift | None = None,
+                frame: FrameEstimate | None = None,
                 used: tuple[ControlPoint, ...] | None = None) -> dict[str, Any]:
         """report.json's ``sar`` section: the scene, the GCPs' role (``with SRTM``, or
-        ``alone`` where SRTM surface matching was refused), their ``common_shift_m`` measured
-        against the SRTM orientation and removed (with SRTM), and per image the counts, the
+        ``alone`` where SRTM surface matching was refused), their ``frame`` as the adjustment
+        estimated it (its prior, the shift of the SAR GCPs onto the truth and its sigma:
+        :class:`core.orientation.frames.FrameEstimate`), and per image the counts, the
         matching's noise and, given the oriented ``models`` (name -> sensor model) and the SAR
-        GCPs ``used`` (default as made), their residuals (measured - projected, px)."""
+        GCPs ``used`` (default as made), their residuals (measured - projected, px; their
+        ground moved by ``frame``'s shift, as the adjustment moved it)."""
         by_image = {r.name: [p for p in (used if used is not None else r.gcps)
                              if r.name in p.image_points] for r in self.results}
         images = {}
@@ -199,6 +201,8 @@ class SarControl:
             if models is not None and pts:
                 lon, lat, h = (np.array([getattr(p, k) for p in pts])
                                for k in ("lon_deg", "lat_deg", "h_m"))
+                if frame is not None:
+                    lon, lat, h = shifted_ground(lon, lat, h, frame.shift_m)
                 col, row = models[r.name].project(lon, lat, h)
                 dc = np.array([p.image_points[r.name].col for p in pts]) - col
                 dr = np.array([p.image_points[r.name].row for p in pts]) - row
@@ -212,7 +216,7 @@ class SarControl:
                 "geolocation_sigma_m": self.config.geolocation_sigma_m,
                 "role": "with SRTM" if srtm_used else
                         "alone: SRTM surface matching refused (relief verdict or no window)",
-                "common_shift_m": None if shift is None else shift.to_dict(),
+                "frame": None if frame is None else frame.to_dict(),
                 "images": images}
 
     def lines(self) -> list[str]:

@@ -15,9 +15,9 @@ import pyproj
 import rasterio
 from rasterio.warp import Resampling, reproject
 
-from core.evaluation.coregister import CoregConfig, CoregResult, DemGrid, nuth_kaab
 from core.dem import GeoDEM, SurfaceGrid
 from core.errors import InputError
+from core.evaluation.coregister import CoregConfig, CoregResult, DemGrid, nuth_kaab
 from core.heights import DatumDecision
 from tasks.io.dem import dem_datum
 from tasks.io.geoid import load_geoid

@@ -35,12 +35,12 @@ from rasterio.windows import Window
 from core.dem import sample_bilinear
 from core.errors import CoverageError, InputError
 from core.evaluation.evaluation_report import DemInfo
+from core.evaluation.void_fill import FillConfig, FillResult, delta_surface_fill, dsm_to_datum
 from core.geodesy import ARCSEC, metres_per_degree
 from core.geoid import GeoidGrid
 from core.grid_points import affine_nodes
 from core.heights import VERTICAL_CHOICES, HeightFrame
 from core.jsonio import to_json
-from core.evaluation.void_fill import FillConfig, FillResult, delta_surface_fill, dsm_to_datum
 from tasks.io.crs import Projection
 from tasks.io.dem import dem_datum
 from tasks.io.geoid import load_geoid

@@ -14,7 +14,7 @@ from tasks.absolute.report import OrientReport
 from tasks.report.doc import Block, Para, Table, flatten, fmt
 
 if TYPE_CHECKING:
-    from core.orientation.absolute import CheckPointStats
+    from core.orientation.checkpoints import CheckPointStats
     from tasks.absolute.report import Absolute, GcpSummary, Relief, SurfaceMatching
     from tasks.dense.dem import DemSummary
 

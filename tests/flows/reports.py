@@ -8,7 +8,7 @@ import math
 from typing import Any
 
 from core.evaluation.evaluation import DzStats
-from core.orientation.absolute import CheckPointStats
+from core.orientation.checkpoints import CheckPointStats
 from tasks.absolute.report import (
     Absolute,
     FinalDsm,

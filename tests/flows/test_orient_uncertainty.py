@@ -147,6 +147,8 @@ def test_predicted_check_points_hold_under_correlated_gcp_errors(tmp_path):
     loaded = [LoadedModel(m, "pushbroom", tmp_path / f"{k}.json", None, (3000, 3000))
               for k, m in enumerate(delivered)]
     from core.orientation.absolute import AbsoluteConfig
+    from core.orientation.adjust import AdjustConfig, ControlSet
+    from core.orientation.frames import REFERENCE, FramePrior
 
     config = AbsoluteConfig(reference_sigma_m=(0.0, 0.0, 0.0))
     error = CorrelatedGroundError((16.0, 16.0, 4.0), 4000.0, 0)
@@ -158,11 +160,13 @@ def test_predicted_check_points_hold_under_correlated_gcp_errors(tmp_path):
     for seed in range(24):
         rng = np.random.default_rng(100 + seed)
         gcps = correlated_gcps(truth, rng, error)
-        prod = orient_absolute.fn(loaded[0], loaded[1], gcps, tmp_path, "linear",
-                                  config=config)
+        control = [ControlSet("surface", gcps, FramePrior(REFERENCE,
+                                                          config.reference_sigma_m))]
+        prod = orient_absolute.fn((("left", loaded[0]), ("right", loaded[1])), control,
+                                  tmp_path, AdjustConfig(absolute=config))
         assert prod.predicted["reference_sigma_m"] == [0.0, 0.0, 0.0]
         for k, s in enumerate(check(prod.models, truth)):
-            p = prod.adjustment.predict(k, lo, la, hh, config.reference_sigma_m)
+            p = prod.adjustment.predict(k, lo, la, hh)
             measured.append((s.rms_col_px**2, s.rms_row_px**2))
             predicted.append((p.predicted_rms_col_px**2, p.predicted_rms_row_px**2))
     ratio = np.sqrt(np.mean(measured, axis=0) / np.mean(predicted, axis=0))

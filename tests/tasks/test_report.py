@@ -535,7 +535,7 @@ def test_the_schema_keeps_every_key_its_records_write():
     """The records report.json embeds whole keep their writers' keys: a key added to the
     relief verdict or the check-point table would otherwise be dropped on the way through."""
     from core.matching.relief import ReliefVerdict
-    from core.orientation.absolute import CheckPointStats
+    from core.orientation.checkpoints import CheckPointStats
     from tasks.absolute.report import Relief
 
     verdict = ReliefVerdict(10, 9, 8, 50.0, 20.0, 10.0)
@@ -576,7 +576,7 @@ def test_report_json_carries_the_predicted_accuracy_beside_the_measured():
     ``predicted_rms_row_px`` beside the measured RMS, ``absolute.variance_components`` and
     ``absolute.predicted`` (per image over a grid, for users with no check point) come back
     as written; a report without them (older runs) still reads, with None."""
-    from core.orientation.absolute import CheckPointStats
+    from core.orientation.checkpoints import CheckPointStats
     from core.orientation.uncertainty import PredictedAccuracy, VarianceComponents
 
     comps = VarianceComponents(("gcp_col", "gcp_row"), np.array([0.56, 0.21]),

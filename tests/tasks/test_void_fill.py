@@ -14,8 +14,8 @@ import pytest
 import rasterio
 
 from core.errors import CoverageError, InputError
-from core.geodesy import metres_per_degree
 from core.evaluation.void_fill import FillConfig
+from core.geodesy import metres_per_degree
 from tasks.evaluation.void_fill import (
     FillOptions,
     fill_tile_voids,

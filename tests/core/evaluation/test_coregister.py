@@ -12,9 +12,9 @@ import rasterio
 from affine import Affine
 from scipy.ndimage import shift as nd_shift
 
-from core.evaluation.coregister import _Sampler, _weighted_median, nuth_kaab
 from core.dem import GeoDEM, SurfaceGrid
 from core.errors import InputError, InsufficientDataError
+from core.evaluation.coregister import _Sampler, _weighted_median, nuth_kaab
 from core.geodesy import metres_per_degree
 from tasks.io.geoid import BUNDLED_SRTM_DIR, load_geoid
 

@@ -8,8 +8,6 @@ import pytest
 from scipy import ndimage
 
 from core.errors import InputError
-from core.geoid import GeoidGrid
-from core.heights import HeightFrame
 from core.evaluation.void_fill import (
     FillConfig,
     delta_surface_fill,
@@ -17,6 +15,8 @@ from core.evaluation.void_fill import (
     harmonic_fill,
     nanmean_window,
 )
+from core.geoid import GeoidGrid
+from core.heights import HeightFrame
 
 N = 60
 ROWS, COLS = np.mgrid[0:N, 0:N].astype(np.float64)

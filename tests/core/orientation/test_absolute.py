@@ -9,11 +9,9 @@ import numpy as np
 import pytest
 
 from core.errors import InsufficientDataError
-from core.orientation.absolute import (
-    Observations,
-    absolute_orientation,
-    check_point_stats,
-)
+from core.orientation.absolute import absolute_orientation
+from core.orientation.checkpoints import check_point_stats
+from core.orientation.observations import Observations
 from core.sensors.pushbroom_synthetic import SyntheticSpec, synthetic_pushbroom
 from core.sensors.rpcfit import fit_rpc
 

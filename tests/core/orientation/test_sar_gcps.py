@@ -107,7 +107,10 @@ def test_gcps_land_on_the_true_ground_whatever_the_optical_model_error():
     # 150 m of optical model error does not reach the GCPs: metres, as the SAR's noise
     assert np.sqrt(np.mean(dx**2)) < 3.0 and np.sqrt(np.mean(dy**2)) < 2.0
     assert all(p.source == "sar" and set(p.image_points) == {"left"} for p in gcps)
-    assert np.median([p.sigma_xy_m for p in gcps]) >= 3.0
+    # each GCP's stated precision is its own error's (the product's geolocation, common to
+    # all, is their frame's prior: core.orientation.sar_gcps.sar_frame)
+    stated = float(np.sqrt(np.mean([p.sigma_xy_m**2 for p in gcps])))
+    assert 0.5 < np.sqrt(np.mean(dx**2 + dy**2)) / stated < 2.0
 
 
 def test_a_blunder_across_the_parallax_is_rejected():

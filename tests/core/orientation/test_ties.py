@@ -9,7 +9,8 @@ from dataclasses import replace
 
 import numpy as np
 
-from core.orientation.absolute import AbsoluteConfig, Observations, absolute_orientation
+from core.orientation.absolute import AbsoluteConfig, absolute_orientation
+from core.orientation.observations import Observations
 from core.orientation.selfcal import LENS_TERMS, _with_terms, self_calibrate
 from core.orientation.ties import TieObservations, refine_ground, tie_rows
 from core.orientation.uncertainty import ground_jacobian

@@ -9,7 +9,8 @@ import numpy as np
 import pytest
 
 from core.errors import InputError
-from core.orientation.absolute import AbsoluteConfig, Observations, absolute_orientation
+from core.orientation.absolute import AbsoluteConfig, absolute_orientation
+from core.orientation.observations import Observations
 from core.orientation.uncertainty import (
     PredictedAccuracy,
     components_differ,
@@ -152,7 +153,9 @@ def test_absolute_orientation_calibrates_its_gcp_sigmas_and_predicts_its_check_p
         res = absolute_orientation(delivered, obs, ("left", "right"),
                                    AbsoluteConfig(matching_sigma_px=0.3))
         comps = res.components
-        assert comps is not None and comps.names == ("gcp_col", "gcp_row"), comps
+        # the reference's frame is a group of its own, a prior (fixed factor 1)
+        assert comps is not None and comps.names == ("gcp_col", "gcp_row", "frame"), comps
+        assert comps.factor_of("frame") == 1.0
         factors.append(comps.factors * 0.3**2)
         stats = check(res.models, truth)
         g = np.random.default_rng(5)
@@ -160,10 +163,11 @@ def test_absolute_orientation_calibrates_its_gcp_sigmas_and_predicts_its_check_p
         hh = 400.0 + 1000.0 * g.uniform(size=300)
         lo, la = truth[0].localize(c0, r0, hh)
         for k, s in enumerate(stats):
-            p = res.predict(k, lo, la, hh, (0.0, 0.0, 0.0))
+            p = res.predict(k, lo, la, hh)  # exact check points: the part relative to the frame
             measured.append((s.rms_col_px**2, s.rms_row_px**2))
-            predicted.append((p.predicted_rms_col_px**2, p.predicted_rms_row_px**2))
-    sig = np.sqrt(np.mean(factors, axis=0))
+            predicted.append((p.predicted_relative_rms_col_px**2,
+                              p.predicted_relative_rms_row_px**2))
+    sig = np.sqrt(np.mean(factors, axis=0)[:2])
     assert sig == pytest.approx([sc, sr], rel=0.15)
     ratio = np.sqrt(np.mean(measured, axis=0) / np.mean(predicted, axis=0))
     assert ratio == pytest.approx([1.0, 1.0], abs=0.15), ratio

@@ -1,0 +1,303 @@
+"""The one estimator of the absolute orientation: any number of images, typed sets of ground
+control each in its own frame, tie points, and the steps a configuration chooses.
+
+``adjust(images, control, ties, config) -> Solution``. Each image is one model with its
+correction family (``config.corrections``); each control set (SRTM surface-matching windows,
+SAR-optical points, a GCP file) brings its GCPs and the prior of its frame
+(:mod:`core.orientation.frames`: the set's common registration error, an unknown of the
+adjustment); the tie points carry the images' relative geometry. The steps:
+
+1. the adjustment (:func:`~core.orientation.absolute.absolute_orientation`: robust, blunders
+   rejected, variance components), with lens self-calibration when ``config.lens``
+   (:mod:`core.orientation.selfcal`) and the attitude's along-track profile when
+   ``config.along_track`` (:mod:`core.orientation.along_track`);
+2. the GCPs' correlated ground error found on its residuals and propagated into the
+   parameters' covariance (:func:`~core.orientation.absolute.with_gcp_errors_as_they_are`);
+3. where that error is not nil, or where two frames meet, the adjustment once more: each GCP
+   weighted with its share of the correlated error
+   (:func:`~core.orientation.ground_field.with_correlated_error`), and each frame's prior
+   holding what its GCPs may share beyond their producer's statement (:func:`frames_widened`),
+   so that the better-known frame wins;
+4. the predictions from that one solution: per image and axis, the check-point RMS relative
+   to the control's frames and what the frames' registration carries, with their total
+   (:meth:`Solution.predict`, :meth:`Solution.predicted_over_images`).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from dataclasses import dataclass, field, replace
+from typing import Any, Literal
+
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+
+from core.errors import InputError
+from core.orientation.absolute import AbsoluteConfig, absolute_orientation
+from core.orientation.along_track import AlongTrack, estimate_along_track
+from core.orientation.checkpoints import CheckPointStats, check_point_stats
+from core.orientation.frames import FrameEstimate, FramePrior
+from core.orientation.gcp_errors import with_gcp_errors_as_they_are
+from core.orientation.ground_field import (
+    NO_CORRELATION,
+    CorrelatedGroundError,
+    with_correlated_error,
+)
+from core.orientation.observations import Observations
+from core.orientation.result import AbsoluteOrientation
+from core.orientation.selfcal import SelfCalibration, self_calibrate
+from core.orientation.ties import TieObservations
+from core.orientation.uncertainty import PredictedAccuracy
+from core.points import CheckPointSet, ControlPoint
+from core.sensors.base import SensorModel
+from core.sensors.pushbroom import PushbroomModel
+
+FloatArray = NDArray[np.float64]
+Corrections = Literal["linear", "offset"]
+CORRECTIONS: tuple[Corrections, ...] = ("linear", "offset")
+ControlKind = Literal["surface", "sar", "gcp"]
+#: the predicted RMS over an image: a regular grid of this many points per side
+GRID_SIDE = 9
+
+
+@dataclass(frozen=True, eq=False)
+class ImageToAdjust:
+    """One image of the adjustment: its name, its model as delivered (the corrections of
+    ``AdjustConfig.corrections`` are added to it) and its size (cols, rows)."""
+
+    name: str
+    model: SensorModel
+    size: tuple[int, int]
+
+
+@dataclass(frozen=True, eq=False)
+class ControlSet:
+    """One source of ground control: its ``kind``, its GCPs (each measured in one or more of
+    the images, by name) and the prior of its frame."""
+
+    kind: ControlKind
+    points: tuple[ControlPoint, ...]
+    frame: FramePrior
+
+    def __post_init__(self) -> None:
+        if self.kind not in ("surface", "sar", "gcp"):
+            raise InputError(f"control kind {self.kind!r} unknown; use surface, sar or gcp")
+
+
+@dataclass(frozen=True)
+class AdjustConfig:
+    """What :func:`adjust` does: the adjustment's settings (``absolute``), the corrections of
+    every image (``linear``: pushbroom attitude biases and rates, RPC affine; ``offset``:
+    biases, RPC shift), lens self-calibration (``lens``), the along-track attitude profile
+    (``along_track``), the GCPs' correlated ground error (``correlated_ground_error``) and,
+    where two frames meet, their priors widened by what their GCPs may share
+    (``frames_from_scatter``, :func:`frames_widened`)."""
+
+    absolute: AbsoluteConfig = field(default_factory=AbsoluteConfig)
+    corrections: Corrections = "linear"
+    lens: bool = False
+    along_track: bool = False
+    correlated_ground_error: bool = True
+    frames_from_scatter: bool = True
+
+    def __post_init__(self) -> None:
+        if self.corrections not in CORRECTIONS:
+            raise InputError(f"corrections {self.corrections!r} unknown; use "
+                             f"{' or '.join(CORRECTIONS)}")
+
+
+@dataclass(frozen=True, eq=False)
+class Solution:
+    """The adjusted images and everything the estimator found: the final adjustment (its
+    models, covariance over the images' and frames' parameters, residuals), the lens and
+    along-track steps, the GCPs kept (over ``gcps``, every set's in order) and why others were
+    rejected, the GCPs' correlated ground error, the frames as their priors finally were."""
+
+    names: tuple[str, ...]
+    sizes: tuple[tuple[int, int], ...]
+    adjustment: AbsoluteOrientation
+    self_calibration: SelfCalibration | None
+    along_track: AlongTrack | None
+    gcps: tuple[ControlPoint, ...]
+    kinds: tuple[ControlKind, ...]
+    kept: NDArray[np.bool_]
+    reasons: dict[int, str]
+    ground_error: CorrelatedGroundError
+    frames_used: tuple[FramePrior, ...]
+
+    @property
+    def models(self) -> tuple[SensorModel, ...]:
+        return self.adjustment.models
+
+    def frames(self) -> tuple[FrameEstimate, ...]:
+        return self.adjustment.frames()
+
+    def frame(self, name: str) -> FrameEstimate | None:
+        return next((f for f in self.frames() if f.name == name), None)
+
+    def predict(self, k: int, lon_deg: ArrayLike, lat_deg: ArrayLike, h_m: ArrayLike,
+                noise_px: float = 0.0) -> PredictedAccuracy:
+        """The check-point RMS predicted at ground points in image ``k``: relative to the
+        control's frames, the frames' registration, and their total."""
+        return self.adjustment.predict(k, lon_deg, lat_deg, h_m, noise_px)
+
+    def predicted_over_images(self) -> dict[str, Any]:
+        """report.json's ``absolute.predicted``: per image, the check-point RMS predicted over
+        a regular grid of ``GRID_SIDE`` x ``GRID_SIDE`` pixels spanning the image at the
+        scene's heights (the 5th, 50th and 95th percentiles of the heights of the GCPs kept),
+        with the reference's registration sigma assumed, the GCPs' correlated ground error
+        propagated and every frame."""
+        h = np.array([p.h_m for p, k in zip(self.gcps, self.kept, strict=True) if k])
+        heights = [float(v) for v in np.percentile(h, [5.0, 50.0, 95.0])]
+        images = {name: self.adjustment.predict_over_image(k, self.sizes[k], heights,
+                                                           GRID_SIDE).to_dict()
+                  for k, name in enumerate(self.names)}
+        ref = self.frames_used[0].sigma_m if self.frames_used else (0.0, 0.0, 0.0)
+        return {"grid_points_per_side": GRID_SIDE, "heights_m": heights,
+                "reference_sigma_m": list(ref),
+                "correlated_ground_error": self.ground_error.to_dict(),
+                "frames": [f.to_dict() for f in self.frames()], "images": images}
+
+    def check_points(self, points: CheckPointSet) -> dict[str, CheckPointStats]:
+        """The paper's Table 2 per image at independent check points, with the RMS predicted
+        there (in total and its two parts; the check points carry no measurement noise of
+        their own, none is added)."""
+        out = {}
+        for k, (name, model) in enumerate(zip(self.names, self.models, strict=True)):
+            stats = check_points_in(model, points, name)
+            if stats is None:
+                continue
+            lon, lat, h = _points_in(points, name)[:3]
+            out[name] = stats.with_prediction(self.predict(k, lon, lat, h))
+        return out
+
+    def gcp_summary(self) -> dict[str, Any]:
+        """GCPs used and rejected (ids and reasons), over the GCPs given."""
+        return {"given": len(self.gcps), "used": int(self.kept.sum()),
+                "rejected": int((~self.kept).sum()),
+                "rejected_ids": [{"id": self.gcps[int(i)].id, "reason": self.reasons[int(i)]}
+                                 for i in np.flatnonzero(~self.kept)]}
+
+
+def _points_in(points: CheckPointSet, name: str) -> tuple[FloatArray, ...]:
+    pts = [p for p in points.points if name in p.image_points]
+    return tuple(np.array(v, dtype=np.float64) for v in zip(
+        *[(p.lon_deg, p.lat_deg, p.h_m, p.image_points[name].col, p.image_points[name].row)
+          for p in pts], strict=True)) if pts else ()
+
+
+def check_points_in(model: SensorModel, points: CheckPointSet, name: str
+                    ) -> CheckPointStats | None:
+    """The check points' residuals in image ``name`` under ``model`` (None: none there)."""
+    arrays = _points_in(points, name)
+    return check_point_stats(model, *arrays, name) if arrays else None
+
+
+@dataclass(frozen=True, eq=False)
+class _Run:
+    adj: AbsoluteOrientation
+    calib: SelfCalibration | None
+    at: AlongTrack | None
+    kept: np.ndarray
+    reasons: dict[int, str]
+    ground_error: CorrelatedGroundError
+
+
+def _run(models: Sequence[SensorModel], names: tuple[str, ...], obs: Observations,
+         frames: Sequence[FramePrior], config: AdjustConfig,
+         ties: TieObservations | None) -> _Run:
+    """Step 1 and 2 with the GCPs weighted as ``obs`` says and the frames' priors
+    ``frames``."""
+    cfg = config.absolute
+    calib = None
+    if config.lens:
+        calib = self_calibrate(models, obs, names, cfg, ties=ties, frames=frames)
+        adj = calib.result
+    else:
+        adj = absolute_orientation(models, obs, names, cfg, ties, frames)
+    kept = (calib or adj).inlier  # over the GCPs given
+    reasons = dict((calib or adj).reasons)
+    at = None
+    if config.along_track and any(isinstance(m, PushbroomModel) for m in adj.models):
+        idx = np.flatnonzero(kept)
+        base = adj if adj.inlier.size == idx.size else None
+        at = estimate_along_track(adj.models, obs.subset(idx), names, cfg, ties, base=base,
+                                  frames=frames)
+        adj = at.result
+        kept = np.zeros_like(kept)
+        kept[idx[adj.inlier]] = True
+        reasons.update({int(idx[i]): r for i, r in adj.reasons.items()})
+    ground_error = NO_CORRELATION
+    if config.correlated_ground_error:
+        adj, ground_error = with_gcp_errors_as_they_are(adj, obs, kept, cfg, ties)
+    return _Run(adj, calib, at, kept, reasons, ground_error)
+
+
+def frames_widened(sets: Sequence[ControlSet], frames: Sequence[FramePrior]
+                   ) -> tuple[FramePrior, ...]:
+    """Each frame's prior with what its GCPs may share beyond its producer's statement added:
+    surface-matching windows overlap and inherit the relative DEM's deformation and the
+    reference's local errors, so their errors are correlated across the scene and their mean
+    is off by about their own stated precision (the median of the set's ``sigma_xy_m``,
+    ``sigma_h_m``), whatever SRTM's registration; SAR points and GCP files state their own
+    independent precision and their common error is the frame's (nothing added)."""
+    out = list(frames)
+    names = [f.name for f in frames]
+    for c in sets:
+        if c.kind != "surface":
+            continue
+        xy = float(np.median([p.sigma_xy_m for p in c.points]))
+        h = float(np.median([p.sigma_h_m for p in c.points]))
+        k = names.index(c.frame.name)
+        out[k] = out[k].inflated((xy, xy, 0.0 if out[k].up_of else h),
+                                 f"its {len(c.points)} windows' median precision {xy:.1f} m "
+                                 f"horizontal, {h:.1f} m vertical (overlapping windows share "
+                                 "their errors)")
+    return tuple(out)
+
+
+def adjust(images: Sequence[ImageToAdjust], control: Sequence[ControlSet],
+           ties: TieObservations | None = None,
+           config: AdjustConfig = AdjustConfig()) -> Solution:
+    """Every image adjusted to every control set and the tie points (module docstring)."""
+    images = tuple(images)
+    names = tuple(i.name for i in images)
+    if len(set(names)) != len(names):
+        raise InputError(f"image names must be unique, got {names}")
+    sets = [c for c in control if c.points]
+    if not sets:
+        raise InputError("no ground control: give at least one control set with GCPs")
+    frames: list[FramePrior] = []
+    frame_of: list[int] = []
+    gcps: list[ControlPoint] = []
+    kinds: list[ControlKind] = []
+    for c in sets:
+        if c.frame.name not in [f.name for f in frames]:
+            frames.append(c.frame)
+        f = [p.name for p in frames].index(c.frame.name)
+        unknown = {n for p in c.points for n in p.image_points} - set(names)
+        if unknown:
+            raise InputError(f"{c.kind} GCPs measured in images {sorted(unknown)} that are not "
+                             f"adjusted ({', '.join(names)})")
+        gcps.extend(c.points)
+        frame_of.extend([f] * len(c.points))
+        kinds.extend([c.kind] * len(c.points))
+    for p in frames:  # a frame sharing another's vertical needs that one present
+        if p.up_of is not None and p.up_of not in [q.name for q in frames]:
+            frames[frames.index(p)] = replace(p, up_of=None)
+    if len(frames) == 1:  # alone, a frame trades with the biases: considered, not estimated
+        frames[0] = replace(frames[0], estimated=False)
+    models = [i.model.with_corrections(config.corrections)  # type: ignore[attr-defined]
+              for i in images]
+    obs = Observations.from_control_points(gcps, names, frame_of)
+    run = _run(models, names, obs, frames, config, ties)
+    used = tuple(frames)
+    again = any(run.ground_error.variance_m2)
+    if len(frames) > 1 and config.frames_from_scatter:
+        used = frames_widened(sets, frames)
+        again = True
+    if again:  # each GCP weighted with its own share of the correlated error
+        xy, h = with_correlated_error(obs.sigma_xy_m, obs.sigma_h_m, run.ground_error)
+        run = _run(models, names, obs.with_sigmas(xy, h), used, config, ties)
+    return Solution(names, tuple(i.size for i in images), run.adj, run.calib, run.at,
+                    tuple(gcps), tuple(kinds), run.kept, run.reasons, run.ground_error, used)
