@@ -39,8 +39,9 @@ V01 = Path(__file__).resolve().parents[1] / "data" / "products_v0_1"
 # file -> (its document, what follows the JSON text: eval.json ends with a newline)
 WRITTEN = {"gcps.json": (GCPS, ""), "windows.json": (WINDOWS, ""),
            "checkpoints.json": (CHECKPOINTS, ""), "eval.json": (EVALUATION, "\n"),
-           "pair.json": (PAIR, ""), "archive_pair.json": (PAIR, ""), "scene.json": (SCENE, "")}
-MODELS = ("delivered_left.json", "left.json")
+           "pair.json": (PAIR, ""), "archive_pair.json": (PAIR, ""), "scene.json": (SCENE, ""),
+           "scene_realistic.json": (SCENE, "")}
+MODELS = ("delivered_left.json", "left.json", "truth_left_realistic.json")
 
 
 def _raw(name: str) -> object:
@@ -144,6 +145,9 @@ def test_an_old_scene_json_reads_into_its_values():
         assert inj.roll_bias_rad == r["roll_bias_rad"] and inj.jitter == tuple(r["jitter"])
         assert inj.distortion.k1 == r["distortion"]["k1"] and inj.realistic is None
     assert SceneDef.from_dict(raw) == scene  # the simulator's own reader agrees
+    realistic = SCENE.read(V01 / "scene_realistic.json")
+    assert realistic == SceneDef.from_dict(_raw("scene_realistic.json"))
+    assert realistic.injected["left"].realistic is not None and realistic.errors.lens
     with pytest.raises(InputError, match="key 'grid' must be a list of 5 values"):
         SCENE.load(_broken("scene.json", ("grid",), [1.0, 2.0]))
 
