@@ -36,9 +36,13 @@ Mission figures (:data:`MISSIONS`), with where they come from:
   IW products ~2-3 m, dominated by the uncorrected tropospheric path delay and azimuth
   timing biases; restituted orbits ~5-10 cm): orbit 0.05 m per axis, azimuth time 0.3 ms
   (~2 m), instrument range bias 0.5 m (1 sigma).
-- Both: the tropospheric path delay 2.3 m at zenith at sea level, scaled by exp(-h/7 km)
-  and 1/cos(incidence) (one way), added to the random range bias (it is what products
-  really lack, Schubert et al.).
+- Both: the tropospheric path delay, its hydrostatic part 2.3 m at zenith at sea level
+  scaled by exp(-h/7 km), its wet part drawn in 5-30 cm at zenith (the mid-latitude range of
+  the zenith wet delay, which no standard atmosphere predicts: Bevis et al. 1992, Schubert
+  et al. 2017), both by 1/cos(incidence) (one way), added to the random range bias (it is
+  what products really lack, Schubert et al.). A processor can take out the hydrostatic part
+  with a standard atmosphere (:func:`core.sensors.sar.standard_tropospheric_delay_m`); the
+  wet part stays.
 
 Scaling: presets coarser than 10 m (``pixel_scale`` > 1, the tiny preset) multiply both pixel
 spacings by ``pixel_scale`` and the looks by its square (the product implies averaging that
@@ -66,6 +70,7 @@ ToLonLat = Callable[[FloatArray, FloatArray], tuple[FloatArray, FloatArray]]
 
 ZENITH_DELAY_M = 2.3  # tropospheric path delay at zenith, sea level (one way)
 TROPO_SCALE_HEIGHT_M = 7000.0
+ZENITH_WET_DELAY_M = (0.05, 0.30)  # the zenith wet delay's range at mid latitudes
 STATE_VECTOR_SPACING_S = 10.0  # as Sentinel-1 annotations
 SRGR_RECORD_SPACING_S = 1.0  # slant-to-ground records, about every second as in S1 GRD
 SRGR_DEGREE = 5
@@ -382,11 +387,13 @@ def sar_models(m: SarMission, lon_deg: FloatArray, lat_deg: FloatArray, h_m: Flo
 
 def draw_errors(m: SarMission, rng: np.random.Generator, h_centre_m: float) -> SarErrors:
     """The delivered product's errors, drawn with the mission's 1-sigma figures; the
-    tropospheric delay is the deterministic zenith delay mapped to the incidence."""
+    tropospheric delay is the hydrostatic zenith delay plus a wet delay drawn in
+    :data:`ZENITH_WET_DELAY_M`, mapped to the incidence."""
     along, across, radial = (float(s * rng.normal()) for s in m.orbit_sigma_m)
     az = float(m.azimuth_time_sigma_s * rng.normal())
     instr = float(m.range_bias_sigma_m * rng.normal())
-    tropo = float(ZENITH_DELAY_M * np.exp(-max(h_centre_m, 0.0) / TROPO_SCALE_HEIGHT_M)
+    wet = float(rng.uniform(*ZENITH_WET_DELAY_M))  # drawn last: the draws above unchanged
+    tropo = float((ZENITH_DELAY_M * np.exp(-max(h_centre_m, 0.0) / TROPO_SCALE_HEIGHT_M) + wet)
                   / np.cos(np.radians(m.incidence_deg)))
     delay = 2.0 * (tropo + instr) / SPEED_OF_LIGHT_M_S
     return SarErrors(along, across, radial, az, delay, tropo, instr)
