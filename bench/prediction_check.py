@@ -64,9 +64,9 @@ from core.orientation.ground_field import (  # noqa: E402
 )
 from core.orientation.uncertainty import ground_jacobian  # noqa: E402
 from core.orientation.ties import TieObservations, tie_residuals, tie_rows  # noqa: E402
-from core.points import control_points_from_dict  # noqa: E402
 from core.sensors.pushbroom import PushbroomModel  # noqa: E402
 from tasks.absolute.surface_match import TieGround  # noqa: E402
+from tasks.io.products import GCPS  # noqa: E402
 from tasks.io.sensors import load_model, read_model_file  # noqa: E402
 
 NAMES = orientation.NAMES
@@ -84,7 +84,7 @@ def adjusted(scene: Path, out: Path) -> dict[str, Any]:
     rel = json.loads((out / "relative" / "rel.json").read_text())
     right = replace(load_model(scene / "right.tif"),
                     model=PushbroomModel.from_dict(rel["right_model"]))
-    gcps = control_points_from_dict(json.loads((out / "gcps.json").read_text()))
+    gcps = GCPS.read(out / "gcps.json").points
     ties = TieGround.from_tiepoints_json(out / "relative" / "rel.tiepoints.json")
     seen: dict[str, Any] = {}
     inner, cov = orientation.with_gcp_errors_as_they_are, absolute.correlated_covariance

@@ -44,10 +44,10 @@ from core.orientation.adjust import (  # noqa: E402
     adjust,
 )
 from core.orientation.frames import REFERENCE, FramePrior  # noqa: E402
-from core.points import control_points_from_dict  # noqa: E402
 from core.sensors.pushbroom import PushbroomModel  # noqa: E402
 from tasks.absolute.orientation import NAMES, read_checkpoints, tie_observations  # noqa: E402
 from tasks.absolute.surface_match import TieGround  # noqa: E402
+from tasks.io.products import GCPS  # noqa: E402
 from tasks.io.sensors import load_model, read_model_file  # noqa: E402
 
 DRAWS = 4000
@@ -68,7 +68,7 @@ def solution_again(scene: Path, out: Path) -> Solution:
     rel = json.loads((out / "relative" / "rel.json").read_text())
     right = replace(load_model(scene / "right.tif"),
                     model=PushbroomModel.from_dict(rel["right_model"]))
-    gcps = control_points_from_dict(json.loads((out / "gcps.json").read_text()))
+    gcps = GCPS.read(out / "gcps.json").points
     ties = TieGround.from_tiepoints_json(out / "relative" / "rel.tiepoints.json")
     control = [ControlSet("surface", gcps, FramePrior(REFERENCE, absolute.reference_sigma_m))]
     cfg = AdjustConfig(absolute=absolute, corrections=s["corrections"],
