@@ -42,8 +42,10 @@ class OrientParams:
     qualify, else InsufficientReliefError, unless a SAR scene is given: ``sar`` (its image;
     its model beside it or ``sar_model``) adds SAR-optical GCPs
     (:mod:`core.orientation.sar_gcps`) to the SRTM ones, or replaces them where the relief
-    verdict refuses SRTM matching. ``write_report``: the run report (report.html, .md) at the
-    end; ``gcpfree pair`` writes it once, after its orthos and evaluation.
+    verdict refuses SRTM matching; ``sar_sigma_m``: its product's stated geolocation (default
+    the mission's), the prior of the SAR GCPs' frame. ``write_report``: the run report
+    (report.html, .md) at the end; ``gcpfree pair`` writes it once, after its orthos and
+    evaluation.
     """
 
     pair: PairInputs
@@ -61,9 +63,20 @@ class OrientParams:
     sar: Path | None = None
     sar_model: Path | None = None
     write_report: bool = True
+    sar_sigma_m: float | None = None
 
     # what only changes how the orientation runs, not what it is
     RUN_ONLY = ("out", "workers", "progress", "write_report")
+
+    def sar_config(self, sar: Any) -> Any:
+        """The SAR GCPs' settings: the product's geolocation sigma as ``sar_sigma_m`` states
+        it, else the mission's (:func:`core.orientation.sar_gcps.geolocation_sigma_m`)."""
+        from core.orientation.sar_gcps import geolocation_sigma_m
+        from core.orientation.sar_matching import SarGcpConfig
+        from tasks.absolute.sar_control import mission_of
+
+        return SarGcpConfig(geolocation_sigma_m=self.sar_sigma_m if self.sar_sigma_m
+                            else geolocation_sigma_m(mission_of(sar)))
 
     def adjust_config(self) -> AdjustConfig:
         """The estimator's configuration (:class:`core.orientation.adjust.AdjustConfig`)."""
@@ -137,8 +150,9 @@ def orient_flow(params: OrientParams) -> OrientOutcome:
 
         first = max((p.id for p in windows.gcps), default=0) + 1
         sar = sar_ground_control(sar_scene, {"left": rel.left, "right": rel.right}, reference,
-                                 out / "sar_points.json", workers=params.workers,
-                                 first_id=first, surface=out / "relative_dem.tif")
+                                 out / "sar_points.json", params.sar_config(sar_scene),
+                                 workers=params.workers, first_id=first,
+                                 surface=out / "relative_dem.tif")
         _say(sar.lines())
     control = ground_control(windows, verdict, sar, params.absolute)
     _say(control.notes)

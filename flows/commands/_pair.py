@@ -112,6 +112,10 @@ def add_orientation_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--sar-model", type=Path, default=None, metavar="FILE",
                    help="the SAR scene's model when not beside it (Sentinel-1 annotation XML or "
                         "gcpfree SAR .json)")
+    p.add_argument("--sar-sigma", type=float, default=None, metavar="M",
+                   help="the SAR product's stated geolocation accuracy, 1 sigma, m (default "
+                        "the mission's: Sentinel-1 3, ERS and others 10): the prior of the SAR "
+                        "GCPs' frame, against which the reference's own shift is estimated")
 
 
 def add_run_arguments(p: argparse.ArgumentParser) -> None:
@@ -128,6 +132,10 @@ def check_sar_arguments(args: argparse.Namespace) -> None:
 
     if args.sar_model is not None and args.sar is None:
         raise InputError("--sar-model names the model of the --sar image: give --sar too")
+    sigma = getattr(args, "sar_sigma", None)
+    if sigma is not None and (args.sar is None or not sigma > 0):
+        raise InputError(f"--sar-sigma {sigma:g} is the --sar product's geolocation sigma: give "
+                         "--sar, and a sigma > 0 m")
     for flag, path in (("--sar", args.sar), ("--sar-model", args.sar_model)):
         if path is not None and not Path(path).is_file():
             raise InputError(f"{flag} {path} does not exist; give the SAR image (and its "

@@ -80,6 +80,6 @@ def run(args: argparse.Namespace) -> int:
             corrections=args.corrections, spacing_m=args.window_spacing,
             min_windows=args.min_windows, workers=args.workers, progress=not args.no_progress,
             surface=surface, absolute=AbsoluteConfig(reference_sigma_m=sigma), sar=args.sar,
-            sar_model=args.sar_model))
+            sar_model=args.sar_model, sar_sigma_m=args.sar_sigma))
         print("\n".join(outcome.lines()))
     return 0

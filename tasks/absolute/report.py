@@ -226,8 +226,22 @@ class OrientReport:
             out.append(f"along-track attitude  {at['harmonics']} harmonics (BIC over "
                        f"{', '.join(map(str, at['orders_tried']))}); GCP rows {rows} px")
         for name, c in (self.check_points or {}).items():
+            pred = ("" if c.predicted_rms_col_px is None else
+                    f"; predicted {c.predicted_rms_col_px:.3f} / {c.predicted_rms_row_px:.3f}")
+            if c.predicted_relative_rms_col_px is not None:
+                pred += (f" (relative {c.predicted_relative_rms_col_px:.3f} / "
+                         f"{c.predicted_relative_rms_row_px:.3f}, reference "
+                         f"{c.predicted_reference_rms_col_px:.3f} / "
+                         f"{c.predicted_reference_rms_row_px:.3f})")
             out.append(f"check points {name:<6}  P {c.rms_col_px:.3f} px  "
-                       f"L {c.rms_row_px:.3f} px RMS ({c.n} points)")
+                       f"L {c.rms_row_px:.3f} px RMS ({c.n} points){pred}")
+        est = self.reference.registration_estimate
+        if est:
+            out.append("reference's shift     " + " / ".join(
+                f"{v:+.1f} +- {s:.1f}" for v, s in zip(est["shift_m"], est["sigma_m"],
+                                                       strict=True))
+                       + " m east / north / up, estimated against the other control and "
+                         "removed")
         d = self.dsm.summary
         out.append(f"final DSM             {d.dem_path} ({d.resolution_m:g} m, EPSG:{d.epsg}, "
                    f"{d.completeness_pct:.1f} % complete) and {self.dsm.egm96} (EGM96)")

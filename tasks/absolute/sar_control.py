@@ -27,6 +27,7 @@ from core.orientation.sar_gcps import (
 )
 from core.orientation.sar_matching import SarGcpConfig
 from core.points import ControlPoint
+from core.sensors.troposphere import with_standard_troposphere
 from tasks.io.crs import Projection
 from tasks.io.rasters import atomic_write_json, open_raster, read_surface_window
 from tasks.io.sensors import LoadedModel, load_model
@@ -135,6 +136,7 @@ class SarControl:
     sar: LoadedModel
     results: tuple[SarImageResult, ...]
     config: SarGcpConfig
+    troposphere_m: float = 0.0
 
     @property
     def gcps(self) -> tuple[ControlPoint, ...]:
@@ -178,7 +180,7 @@ class SarControl:
                           "reference (Goncalves 2002); planimetry from the SAR model",
                 "cell_m": self.results[0].matches.cell_m if self.results else None,
                 "geolocation_sigma_m": self.config.geolocation_sigma_m,
-                "images": images}
+                "troposphere_m": self.troposphere_m, "images": images}
 
     def summary(self, srtm_used: bool, models: Mapping[str, Any] | None = None,
                 frame: FrameEstimate | None = None,
@@ -214,6 +216,7 @@ class SarControl:
         return {"file": FILE, "sar_image": str(self.sar.image),
                 "mission": self.mission,
                 "geolocation_sigma_m": self.config.geolocation_sigma_m,
+                "troposphere_m": self.troposphere_m,
                 "role": "with SRTM" if srtm_used else
                         "alone: SRTM surface matching refused (relief verdict or no window)",
                 "frame": None if frame is None else frame.to_dict(),
@@ -230,14 +233,21 @@ class SarControl:
 def sar_ground_control(sar: LoadedModel, images: Mapping[str, LoadedModel], reference: GeoDEM,
                        out: Path | None = None, config: SarGcpConfig | None = None,
                        workers: int | None = None, first_id: int = 1,
-                       surface: Path | None = None) -> SarControl:
+                       surface: Path | None = None, troposphere: bool = True) -> SarControl:
     """GCPs of every optical image in ``images`` (name -> model, their images read) from the
     SAR scene ``sar`` (:func:`load_sar`), numbered from ``first_id``; ``surface``: the
     pair's relative DEM (in the frame of ``images``' models), whence the SAR image is
-    predicted; ``out``: ``sar_points.json`` written there."""
+    predicted; ``out``: ``sar_points.json`` written there; ``troposphere``: the standard
+    atmosphere's hydrostatic delay taken out of the SAR's range first
+    (:mod:`core.sensors.troposphere`)."""
     cfg = config or SarGcpConfig(geolocation_sigma_m=geolocation_sigma_m(mission_of(sar)))
     h_mid = float(np.nanmedian(reference.h_m))
     check_overlap(sar, images, h_mid)
+    delay_m = 0.0
+    if troposphere:  # the hydrostatic delay a standard atmosphere predicts, out of its timing
+        lon, lat = (float(np.mean(v)) for v in _corners(next(iter(images.values())), h_mid))
+        model, delay_m = with_standard_troposphere(sar.model, lon, lat, h_mid)
+        sar = replace(sar, model=model)
     sar_pixels = _read(sar.image)
     dsm = read_surface(surface) if surface is not None else None
     parts = [dask.delayed(sar_gcps_of_image)(name, m.model, _read(m.image or m.source),
@@ -250,7 +260,7 @@ def sar_ground_control(sar: LoadedModel, images: Mapping[str, LoadedModel], refe
                                              for k, p in enumerate(r.gcps))))
         next_id += len(r.gcps)
     results = tuple(results)
-    result = SarControl(sar, results, cfg)
+    result = SarControl(sar, results, cfg, delay_m)
     if out is not None:
         atomic_write_json(out, result.to_dict())
     return result

@@ -91,7 +91,8 @@ def orientation_changes(out: Path,
                         settings: Mapping[str, Any] | None = None) -> tuple[str, ...] | None:
     """None when the orientation's products are not all there or do not read back; else the
     names of the ``settings`` whose value differs from what report.json records (every name
-    when it records none, an older gcpfree's report), () when none differs."""
+    when it records none, an older gcpfree's report; a setting it lacks is unchanged when it
+    is unset now, null: an option added since, at its default), () when none differs."""
     from tasks.absolute.report import read_report
 
     try:
@@ -103,7 +104,8 @@ def orientation_changes(out: Path,
     if settings is None:
         return ()
     had = report.settings or {}
-    return tuple(k for k in settings if k not in had or had[k] != settings[k])
+    return tuple(k for k in settings
+                 if (had[k] != settings[k] if k in had else settings[k] is not None))
 
 
 def pair_complete(out: str | Path, params: Mapping[str, Any] | None = None) -> bool:

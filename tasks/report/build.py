@@ -71,6 +71,7 @@ from tasks.report.tables import (
     dem_tables,
     evaluation_tables,
     gcp_tables,
+    prediction_table,
     relative_tables,
     relief_verdict,
     summary_table,
@@ -348,6 +349,10 @@ def _check_points(rep: _Report, checkpoints: Path | None,
         rep.lack("check points (none given to the orientation): no independent check")
     else:
         rep.add(check_point_table(after, before))
+        if any(s.predicted_rms_col_px is not None for s in after.values()):
+            rep.add(prediction_table(after, o.absolute if o is not None else None,
+                                     o.reference.registration_estimate if o is not None
+                                     else None))
     if checkpoints is None:
         if after is not None:
             rep.lack("the check-point file (not passed to the report): no check-point vectors")

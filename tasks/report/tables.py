@@ -210,6 +210,40 @@ def check_point_table(after: Mapping[str, CheckPointStats],
                     "before: relative orientation only")
 
 
+def prediction_table(after: Mapping[str, CheckPointStats],
+                     absolute: Absolute | None = None,
+                     registration: Mapping[str, Any] | None = None) -> Table:
+    """The check points measured against what the orientation predicted there, in total and
+    in its two parts: relative to the control's frames (what the method achieves) and the
+    frames' own registration carried through the models (the reference's, from its producer's
+    statement or ``--reference-sigma``; another frame's where one was used); with the frames
+    the adjustment estimated and, where it was observable, the reference's own shift."""
+    rows = []
+    for name, s in after.items():
+        if s.predicted_relative_rms_col_px is None:  # a report of an earlier version
+            continue
+        for ax, key in (("col", "P"), ("row", "L")):
+            rows.append([name, key, getattr(s, f"rms_{ax}_px"),
+                         getattr(s, f"predicted_rms_{ax}_px"),
+                         getattr(s, f"predicted_relative_rms_{ax}_px"),
+                         getattr(s, f"predicted_reference_rms_{ax}_px")])
+    frames = "; ".join(
+        f"{f.get('name')}: prior {'/'.join(fmt(v) for v in f.get('prior_sigma_m', []))} m"
+        + (f", shift {'/'.join(fmt(v) for v in f.get('shift_m', []))} +- "
+           f"{'/'.join(fmt(v) for v in f.get('sigma_m', []))} m" if f.get("observed") else
+           " (not observable: its prior stands)")
+        for f in ((absolute.frames or ()) if absolute is not None else ()))
+    shift = ""
+    if registration:
+        shift = (f"; the reference's own shift (east / north / up, m): "
+                 f"{'/'.join(fmt(v) for v in registration.get('shift_m', []))} +- "
+                 f"{'/'.join(fmt(v) for v in registration.get('sigma_m', []))}, removed")
+    return Table.of(("image", "axis", "measured RMS", "predicted", "of which relative",
+                     "of which reference"), rows,
+                    "Check points: measured against predicted (px; predicted^2 = relative^2 "
+                    "+ reference^2)" + (f". Frames: {frames}" if frames else "") + shift)
+
+
 def evaluation_tables(ev: Doc) -> list[Block]:
     """eval.json: per class and overall, then where the points went and the inputs."""
     labels = ev.get("class_labels") or {}
