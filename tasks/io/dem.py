@@ -106,18 +106,6 @@ def tile_datum(tiles: TileSet, option: str = "--reference-vertical") -> TileSet:
     return replace(tiles, datum=first)
 
 
-def check_srtm_tiles(tiles: TileSet | list) -> None:
-    """Tiles read as EGM96 through the bundled grid (a caller that converts no other geoid):
-    refuse a tile whose tag or CRS says its heights are ellipsoidal, or that are EGM2008
-    (Copernicus), in one line (the one rule, :func:`dem_datum`)."""
-    for t in tiles:
-        decision = dem_datum(t.path, what="SRTM tile", option="--reference-vertical")
-        if decision.datum != "egm96":
-            raise InputError(f"SRTM tile {t.path} holds {decision.datum} heights "
-                             f"({decision.source}); prepare-reference converts EGM96 tiles: "
-                             "give the tiles as distributed, or this DEM as --reference")
-
-
 def check_reference(path: str | Path) -> None:
     """Fail early, in one line, on a reference DEM that cannot be read as lon/lat heights."""
     path = Path(path)
