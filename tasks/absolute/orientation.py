@@ -37,13 +37,15 @@ from core.points import (
     CheckPoint,
     CheckPointSet,
     ControlPoint,
+    GcpSet,
     ImagePoint,
-    control_points_to_dict,
 )
 from core.sensors.base import SensorModel
 from tasks.absolute.surface_match import TieGround
+from tasks.io.model_files import model_document
+from tasks.io.products import CHECKPOINTS, GCPS
 from tasks.io.rasters import atomic_write_json
-from tasks.io.sensors import LoadedModel, sun_to_dict
+from tasks.io.sensors import LoadedModel
 
 NAMES = ("left", "right")
 CSV_COLUMNS = ("id", "lon_deg", "lat_deg", "h_m", "left_col", "left_row", "right_col",
@@ -86,15 +88,10 @@ def read_checkpoints(path: str | Path) -> CheckPointSet:
     else:
         text = path.read_text(encoding="utf-8", errors="replace")
         doc = parse_json(text, f"check point file {path}")
-        try:
-            if not isinstance(doc, dict):
-                raise InputError("it is not a JSON object")
-            points = CheckPointSet.from_dict(doc)
-        except InputError as exc:
-            raise InputError(f"check point file {path}: {exc}") from None
-        except (KeyError, TypeError, ValueError, AttributeError, OverflowError) as exc:
-            raise InputError(f"check point file {path} is malformed ({type(exc).__name__}: "
-                             f"{exc}); give the simulator's checkpoints.json or a CSV") from None
+        if not isinstance(doc, dict):
+            raise InputError(f"check point file {path}: it is not a JSON object; give the "
+                             "simulator's checkpoints.json or a CSV")
+        points = CHECKPOINTS.load(doc, f"check point file {path}")
     bad = [p.id for p in points.points if not np.isfinite(
         [p.lon_deg, p.lat_deg, p.h_m, *(v for ip in p.image_points.values()
                                           for v in (ip.col, ip.row))]).all()]
@@ -180,10 +177,10 @@ def orient_absolute(images: Sequence[tuple[str, LoadedModel]], control: Sequence
                       tie_observations(ties, config.absolute), config)
     paths = []
     for (name, given), model in zip(images, solution.models, strict=True):
-        paths.append(atomic_write_json(Path(out_dir) / f"{name}.json", {
-            **model.to_dict(), **sun_to_dict(given.sun)}))  # type: ignore[attr-defined]
+        paths.append(atomic_write_json(Path(out_dir) / f"{name}.json",
+                                       model_document(model, given.sun)))
     return AbsoluteProducts(solution, tuple(paths))
 
 
 def write_gcps(path: Path, gcps: tuple[ControlPoint, ...]) -> Path:
-    return atomic_write_json(path, control_points_to_dict(gcps))
+    return GCPS.write(path, GcpSet(points=gcps))
