@@ -1,9 +1,14 @@
 """Flow ``dsm`` (``gcpfree dsm``, :mod:`flows.commands.dsm`): a stereo pair's DSM by dense
-matching, on Dask tiles.
+matching, on Dask tiles, or the DSM of N views.
 
 relative orientation of the pair (``flows.relative``) -> tiles rectified and sized from the
 reference DEM -> each tile matched (SGM) and triangulated -> median per cell in the local UTM
 zone, small holes filled -> ``DSM.tif``, ``DSM_mask.tif``, ``DSM.json``.
+
+With ``images`` (``--images A B C ...``): one joint relative orientation of all of them (the
+first fixed, ``flows.relative.views_models``) -> every overlapping pair matched as above ->
+their heights fused per cell (:mod:`core.matching.fusion`) -> ``DSM.tif``, ``DSM_mask.tif``,
+``DSM_views.tif`` (images per cell), ``DSM.json`` (with ``pairwise_median_m``).
 """
 
 from __future__ import annotations
@@ -15,7 +20,9 @@ from prefect import flow
 
 from core.matching.dense import MatchingConfig
 from core.matching.dense_tile import TileStats
+from core.matching.fusion import FusionConfig
 from tasks.dense.dem import DemSummary, DenseConfig, DensePlan
+from tasks.dense.multiview import MatchedViewPair, ViewsDemSummary
 from tasks.io.pair import PairInputs
 from tasks.io.sensors import LoadedModel
 
@@ -30,7 +37,8 @@ class DsmParams:
     ``orient``: orient the pair first (``flows.relative.relative_models``); without it the
     models are used as they are (consistent models, e.g. the simulator's truth or RPCs
     trusted relative to each other). ``height_range_m``: the scene's ellipsoidal heights when
-    there is no reference DEM (default for RPCs: their height offset +- scale).
+    there is no reference DEM (default for RPCs: their height offset +- scale). ``images``:
+    the DSM of these N views (``roi`` in the first), the pair's options for them all.
     """
 
     pair: PairInputs
@@ -46,6 +54,12 @@ class DsmParams:
     pointing_correction: bool = True
     workers: int | None = None
     progress: bool = True
+    images: tuple[Path, ...] = ()  # N views (the pair's left and right are the first two)
+    fusion: str = "weighted"  # of the views' pairs: core.matching.fusion.FUSION_METHODS
+
+    def fusion_config(self) -> FusionConfig:
+        """How the views' pairs are fused (checked: a bad value raises InputError)."""
+        return FusionConfig(method=self.fusion)
 
     def config(self) -> DenseConfig:
         """The tasks' settings (checked: a bad value raises InputError)."""
@@ -127,8 +141,84 @@ def pair_dem(pair: OrientedPair, out: Path, cfg: DenseConfig,
     return grid_dem_cog(m.plan, m.stats, m.work, Path(out), cfg)
 
 
+@dataclass(frozen=True, eq=False)
+class OrientedViews:
+    """N views ready for matching (``views``, jointly oriented; ``before`` as delivered), the
+    reference DEM and its datum, and the tie points' heights (None when not oriented)."""
+
+    views: tuple[LoadedModel, ...]
+    before: tuple[LoadedModel, ...]
+    reference: Path | None
+    reference_vertical: str
+    h_range_m: tuple[float, float] | None
+
+
+def oriented_views(params: DsmParams) -> OrientedViews:
+    """The views jointly oriented by ``flows.relative.views_models`` (its products in
+    ``<out>_relative/``), or with ``orient=False`` the models as found; a reference prepared
+    from the DEM tiles when that is what was given."""
+    out, pair = Path(params.out), params.pair
+    if params.orient:
+        from flows.relative import views_models
+
+        o = views_models(pair, params.images, out.parent / f"{out.stem}_relative",
+                         params.workers)
+        same = pair.reference is not None and o.reference is not None and \
+            Path(o.reference).resolve() == pair.reference.resolve()
+        return OrientedViews(o.views, o.models_before, o.reference,
+                             pair.reference_vertical if same else "auto", o.h_range_m)
+    from tasks.relative.orientation import load_views, reference_ground
+
+    views = tuple(load_views(pair, params.images))
+    if pair.srtm_dir is None:
+        return OrientedViews(views, views, pair.reference, pair.reference_vertical, None)
+    ground = reference_ground(pair, list(views), out, params.height_range_m)
+    return OrientedViews(views, views, ground.path, "auto", None)
+
+
+def match_views(v: OrientedViews, params: DsmParams, cfg: DenseConfig) -> list[MatchedViewPair]:
+    """Every overlapping pair of the views planned (the ROI of the first image in each pair's
+    left one), matched and, after a joint orientation, triangulated with the delivered models
+    too, into ``.<out>.work/I-J``."""
+    from core.sensors.footprint import scene_height_range_m
+    from tasks.dense.dem import match_tiles, plan_dense, retriangulate_tiles
+    from tasks.dense.multiview import b_over_h, pair_roi, unify_plans
+    from tasks.relative.orientation import overlapping_pairs
+
+    out, views = Path(params.out), list(v.views)
+    h_range = scene_height_range_m([m.model for m in views], params.height_range_m,
+                                   any_terrain=v.reference is not None)
+    h_roi = h_range if v.h_range_m is None else (v.h_range_m[0] - cfg.margin_m,
+                                                 v.h_range_m[1] + cfg.margin_m)
+    pairs = overlapping_pairs(views, 0.5 * sum(h_range), h_range)
+    plans = unify_plans([plan_dense(views[i], views[j], pair_roi(views, i, params.roi, h_roi),
+                                    v.reference, h_range, v.reference_vertical, cfg)
+                         for i, j in pairs])
+    matched = []
+    for (i, j), plan in zip(pairs, plans, strict=True):
+        work = out.parent / f".{out.name}.work" / f"{i}-{j}"
+        stats = match_tiles(plan, views[i], views[j], work, cfg)
+        bh = b_over_h(views[i], views[j], 0.5 * sum(h_roi))
+        if not params.orient:
+            matched.append(MatchedViewPair((i, j), plan, stats, work, bh))
+            continue
+        before = work.with_name(f"{i}-{j}.before")
+        b = retriangulate_tiles(plan, stats, work, before, v.before[i].model,
+                                v.before[j].model, cfg)
+        matched.append(MatchedViewPair((i, j), plan, stats, work, bh, b, before))
+    return matched
+
+
 @flow(name="dsm", log_prints=True)
-def dsm_flow(params: DsmParams) -> DemSummary:
-    """Orient the pair -> plan the tiles -> match and triangulate them -> grid the DSM."""
+def dsm_flow(params: DsmParams) -> DemSummary | ViewsDemSummary:
+    """Orient the pair -> plan the tiles -> match and triangulate them -> grid the DSM; with
+    ``images``, orient them jointly -> match every pair -> fuse their heights."""
+    if params.images:
+        from tasks.dense.multiview import grid_views_cog
+
+        cfg, fusion = params.config(), params.fusion_config()
+        matched = match_views(oriented_views(params), params, cfg)
+        return grid_views_cog(matched, tuple(str(im) for im in params.images),
+                              Path(params.out), cfg, fusion)
     return pair_dem(oriented_pair(params), Path(params.out), params.config(), params.roi,
                     params.height_range_m)

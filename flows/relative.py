@@ -23,7 +23,8 @@ from tasks.io.sensors import LoadedModel
 class RelativeParams:
     """Parameters of :func:`relative_flow` (see ``gcpfree relative --help``): the pair (its
     reference optional: without one, the heights come from ``height_range_m``), where to
-    write ``rel.json``, and the settings."""
+    write ``rel.json``, and the settings; for :func:`views_relative_flow`, the ``images``
+    too."""
 
     pair: PairInputs
     out: Path
@@ -34,6 +35,8 @@ class RelativeParams:
     reference_sigma_m: float = 5.0
     tie_points: TiePointConfig = field(default_factory=TiePointConfig)  # measure: the pair's
     workers: int | None = None  # threads matching the tie-point cells (default one per core)
+    images: tuple[Path, ...] = ()  # views_relative_flow: the N images, the first fixed; the
+    # pair carries their band, reference and tie measure
 
 
 @dataclass(frozen=True, eq=False)
@@ -53,48 +56,24 @@ def relative_flow(params: RelativeParams) -> RelativeOutcome:
     """Models -> reference -> tie points -> relative orientation -> rel.json."""
     from dataclasses import replace
 
-    from core.matching.tiepoints import default_search_radius_m, ground_sampling_m
-    from core.sensors.footprint import ANY_TERRAIN_H_M
-    from tasks.dense.dem import scene_height_range
-    from tasks.io.dem import dem_datum, read_reference
-    from tasks.io.reference import build_reference, locate_tiles
+    from core.matching.peaks import MEASURE_NAMES
     from tasks.relative.orientation import (
-        ReferenceUsed,
         check_overlap,
         load_pair,
         orient_relative,
-        pair_box,
-        reference_box_heights,
+        reference_ground,
         scene_height_m,
+        search_radius_m,
     )
-    from core.matching.peaks import MEASURE_NAMES
     from tasks.relative.tiepoints import find_tie_points, tie_measure
 
     out, pair = Path(params.out), params.pair
     left, right = load_pair(pair)
-    reference_path, vertical = pair.reference, pair.reference_vertical
-    first_range = params.height_range_m or ANY_TERRAIN_H_M
-    if reference_path is None and pair.srtm_dir is not None:
-        box = pair_box(left, right, first_range)
-        tiles = locate_tiles(pair.dem_source, box, True)
-        reference_path = Path(build_reference(tiles, box, out.with_name(out.stem +
-                                                                        ".reference.tif")).path)
-        vertical = "auto"  # its own tag says ellipsoidal
-    dem, used = None, None
-    if reference_path is not None:
-        used = ReferenceUsed(Path(reference_path), dem_datum(reference_path, vertical),
-                             None if pair.reference is not None else pair.srtm_dir)
-        dem = read_reference(used.path, pair_box(left, right, first_range), used.datum.datum)
-        h_range = reference_box_heights(dem)
-    else:
-        h_range = scene_height_range(left, right, params.height_range_m, None)
+    ground = reference_ground(pair, [left, right], out, params.height_range_m)
+    dem, h_range = ground.dem, ground.h_range
     check_overlap(left, right, scene_height_m(left, dem, h_range),
                   None if dem is not None else h_range)
-    radius = params.search_radius_m
-    if radius is None:
-        c, r = 0.5 * (left.size[0] - 1), 0.5 * (left.size[1] - 1)
-        radius = default_search_radius_m(ground_sampling_m(left.model, c, r, 0.5 * (h_range[0]
-                                                                               + h_range[1])))
+    radius = search_radius_m(params.search_radius_m, left, h_range)
     measure, why = tie_measure(pair.tie_measure, left.sun, right.sun)
     measure_line = f"tie-point measure     {MEASURE_NAMES[measure]} ({why})"
     print(measure_line)
@@ -105,10 +84,10 @@ def relative_flow(params: RelativeParams) -> RelativeOutcome:
                            num_workers=params.workers)
     products = orient_relative(left, right, ties, out, dem, h_range,
                                RelativeConfig(corrections=params.corrections),
-                               params.reference_sigma_m, used)
+                               params.reference_sigma_m, ground.used)
     for line in products.lines():
         print(line)
-    return RelativeOutcome(left, replace(right, model=products.right_model), reference_path,
+    return RelativeOutcome(left, replace(right, model=products.right_model), ground.path,
                            products.rel_json, (measure_line, *products.lines()))
 
 
@@ -120,3 +99,75 @@ def relative_models(pair: PairInputs, out_dir: Path,
     out_dir = Path(out_dir)
     out_dir.mkdir(parents=True, exist_ok=True)
     return relative_flow(RelativeParams(pair=pair, out=out_dir / "rel.json", workers=workers))
+
+
+@dataclass(frozen=True, eq=False)
+class ViewsOutcome:
+    """N images after one joint relative orientation: ``views[k].model`` adjusted (the first
+    as given); ``h_range_m`` the tie points' heights; ``reference`` as in
+    :class:`RelativeOutcome`; ``models_before`` the models as delivered."""
+
+    views: tuple[LoadedModel, ...]
+    models_before: tuple[LoadedModel, ...]
+    reference: Path | None
+    rel_json: Path
+    h_range_m: tuple[float, float]
+    lines: tuple[str, ...] = ()
+
+
+@flow(name="relative-views", log_prints=True)
+def views_relative_flow(params: RelativeParams) -> ViewsOutcome:
+    """Models -> reference -> tie points of every overlapping pair -> one joint relative
+    orientation of all images (the first fixed) -> relative.json."""
+    from dataclasses import replace
+
+    from core.matching.peaks import MEASURE_NAMES
+    from tasks.relative.orientation import (
+        common_cell_m,
+        load_views,
+        orient_views,
+        overlapping_pairs,
+        reference_ground,
+        scene_height_m,
+        search_radius_m,
+    )
+    from tasks.relative.tiepoints import find_tie_points, tie_measure
+
+    out, pair = Path(params.out), params.pair
+    views = load_views(pair, params.images)
+    ground = reference_ground(pair, views, out, params.height_range_m)
+    dem, h_range = ground.dem, ground.h_range
+    pairs = overlapping_pairs(views, scene_height_m(views[0], dem, h_range),
+                              None if dem is not None else h_range)
+    cfg = replace(params.tie_points, cell_m=params.cell_m,
+                  search_radius_m=search_radius_m(params.search_radius_m, views[0], h_range))
+    cfg = replace(cfg, cell_m=common_cell_m(views, pairs, dem, h_range, cfg))
+    ties, lines = [], []
+    for i, j in pairs:
+        measure, why = tie_measure(pair.tie_measure, views[i].sun, views[j].sun)
+        lines.append(f"tie points {i}-{j}       {MEASURE_NAMES[measure]} ({why})")
+        print(lines[-1])
+        ties.append(find_tie_points(views[i].image or views[i].source,
+                                    views[j].image or views[j].source, views[i].model,
+                                    views[j].model, dem, replace(cfg, measure=measure),
+                                    h_range_m=h_range, num_workers=params.workers))
+    products = orient_views(views, pairs, ties, out, dem, h_range,
+                            RelativeConfig(corrections=params.corrections),
+                            params.reference_sigma_m, ground.used)
+    for line in products.lines():
+        print(line)
+    return ViewsOutcome(tuple(replace(v, model=m) for v, m in zip(views, products.models,
+                                                                   strict=True)),
+                        tuple(views), ground.path, products.rel_json, products.h_range_m,
+                        (*lines, *products.lines()))
+
+
+@flow(name="relative-views-models")
+def views_models(pair: PairInputs, images: tuple[Path, ...], out_dir: Path,
+                 workers: int | None = None) -> ViewsOutcome:
+    """The images jointly oriented (for ``gcpfree dsm --images``); writes
+    ``out_dir/relative.json`` and its tracks. ``workers``: threads for the tie points."""
+    out_dir = Path(out_dir)
+    out_dir.mkdir(parents=True, exist_ok=True)
+    return views_relative_flow(RelativeParams(pair=pair, out=out_dir / "relative.json",
+                                              workers=workers, images=tuple(images)))

@@ -169,15 +169,18 @@ def remove_small_islands(z: NDArray[np.float32], min_cells: int
 
 def grid_dem(x_m: ArrayLike, y_m: ArrayLike, h_m: ArrayLike, status: ArrayLike, x0_m: float,
              y0_m: float, res_m: float, shape: tuple[int, int], max_hole_cells: int = 5,
-             min_island_cells: int = 5) -> DemCells:
+             min_island_cells: int = 5, z_m: NDArray[np.float32] | None = None) -> DemCells:
     """Grid ground points: ``h_m`` finite where matched, ``status`` a
     :class:`~core.matching.dense.PixelStatus` per point; ``(x0_m, y0_m)`` the north-west
-    corner of the block. Groups of fewer than ``min_island_cells`` valid cells are blanked
-    (mismatch) before holes of fewer than ``max_hole_cells`` are filled, and the cells next to
-    those outside the pair are blanked (:func:`without_rim`)."""
+    corner of the block. Each cell's height is the median of its matched points, or ``z_m``
+    when given (the cells' heights made otherwise: a fusion of several pairs,
+    :mod:`core.matching.fusion`). Groups of fewer than ``min_island_cells`` valid cells are
+    blanked (mismatch) before holes of fewer than ``max_hole_cells`` are filled, and the cells
+    next to those outside the pair are blanked (:func:`without_rim`)."""
     if not res_m > 0 or min(shape) < 1:
         raise InputError(f"grid_dem needs res_m > 0 and a non-empty shape, got {res_m}, {shape}")
-    z = median_per_cell(x_m, y_m, h_m, x0_m, y0_m, res_m, shape)
+    z = (median_per_cell(x_m, y_m, h_m, x0_m, y0_m, res_m, shape) if z_m is None
+         else np.asarray(z_m, dtype=np.float32).reshape(shape))
     ix, iy, inside = _cells(x_m, y_m, x0_m, y0_m, res_m, shape)
     st = np.asarray(status).ravel()
     cell = iy * shape[1] + ix

@@ -43,7 +43,7 @@ from scipy.optimize import minimize_scalar
 from core.dem import GeoDEM
 from core.errors import GeometryError, InputError
 from core.sensors.base import SensorModel, localize_on_dem
-from core.sensors.footprint import PixelBox
+from core.sensors.footprint import PixelBox, edge_pixels
 
 FloatArray = NDArray[np.float64]
 
@@ -478,3 +478,28 @@ def plan_tile_on_dem(
         return None
     return plan_tile(index, left, right, core, terrain, margin_m, margin_px, config, max_disp,
                      right_pad_px)
+
+
+def box_in_image(source: SensorModel, box: PixelBox, target: SensorModel,
+                 target_size: tuple[int, int], h_range_m: tuple[float, float]
+                 ) -> PixelBox | None:
+    """The pixels of ``target`` that see the ground of the ``source`` pixels ``box`` at any
+    height of ``h_range_m``: its edges localised at both heights and projected into
+    ``target``, their bounding box (whole pixels, end-exclusive) clipped to the image;
+    None when it misses the image (a multi-view DSM's region of interest, given in its
+    first image, in another pair's left image)."""
+    col, row = edge_pixels(box)
+    cs, rs = [], []
+    for h in map(float, h_range_m):
+        lon, lat = source.localize(col, row, np.full(col.size, h))
+        c, r = target.project(lon, lat, np.full(col.size, h))
+        cs.append(np.asarray(c, np.float64))
+        rs.append(np.asarray(r, np.float64))
+    c, r = np.concatenate(cs), np.concatenate(rs)
+    if not (np.isfinite(c).all() and np.isfinite(r).all()):
+        raise GeometryError("the region of interest does not project into every image; "
+                            "check the images' models")
+    cols, rows = target_size
+    out = (max(int(np.floor(c.min())), 0), max(int(np.floor(r.min())), 0),
+           min(int(np.ceil(c.max())) + 1, cols), min(int(np.ceil(r.max())) + 1, rows))
+    return out if out[2] > out[0] and out[3] > out[1] else None

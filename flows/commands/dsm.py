@@ -21,9 +21,21 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
             "1 mismatch, 2 occluded/outside) and OUT.json (figures per tile)."),
     )
     add_pair_arguments(p)
+    for action in p._actions:  # --images may replace them
+        if action.dest in ("left", "right"):
+            action.required = False
+    p.add_argument("--images", type=Path, nargs="+", default=None, metavar="IMAGE",
+                   help="N >= 2 views of one area instead of --left/--right (models found "
+                        "beside them): one joint relative orientation (the first fixed), "
+                        "every overlapping pair matched, their heights fused per cell; "
+                        "OUT_views.tif counts the images behind each cell")
+    p.add_argument("--fusion", choices=("weighted", "median"), default="weighted",
+                   help="with --images: weighted (default), the pairs' heights weighted by "
+                        "(B/H)^2 within 3 robust sigmas of their weighted median; median: "
+                        "their median")
     p.add_argument("--roi", type=int, nargs=4, default=None,
                    metavar=("COL", "ROW", "WIDTH", "HEIGHT"),
-                   help="region of the left image (pixels); default the whole image")
+                   help="region of the left (first) image (pixels); default the whole image")
     p.add_argument("--resolution", type=float, default=None, metavar="M",
                    help="DSM cell size in metres (default 2 x the left image's GSD)")
     add_reference_arguments(p, use="sizes the disparity search")
@@ -56,8 +68,14 @@ def run(args: argparse.Namespace) -> int:
         from core.errors import InputError
         from tasks.dense.blocks import check_roi
 
+        images = _check_images(args)
         pair, left, _ = check_pair(args)
         check_roi(tuple(args.roi) if args.roi else None, left.size)
+        if images:
+            from tasks.io.sensors import load_model
+
+            for image in images[2:]:
+                load_model(image, band=pair.band)  # a missing model is one line too
         out_dir = Path(args.out).resolve().parent
         if not out_dir.is_dir():
             raise InputError(f"the folder of --out ({out_dir}) does not exist; create it first")
@@ -70,9 +88,33 @@ def run(args: argparse.Namespace) -> int:
             vertical=args.vertical, orient=not args.no_orient, margin_m=args.margin,
             tile_px=args.tile_px, min_match_rate=args.min_match_rate,
             pointing_correction=not args.no_pointing_correction, workers=args.workers,
-            progress=not args.no_progress)
+            progress=not args.no_progress, images=images, fusion=args.fusion)
         params.config()  # a bad setting is one line too
         api.ready()
         summary = dsm_flow(params)
     print("\n".join(summary.lines()))
     return 0
+
+
+def _check_images(args: argparse.Namespace) -> tuple[Path, ...]:
+    """``--images`` checked (at least two that exist, not with --left/--right and their
+    models); the first two become the pair whose reference and overlap are checked."""
+    from core.errors import InputError
+
+    if not args.images:
+        if args.left is None or args.right is None:
+            raise InputError("give the pair (--left and --right) or the views (--images A B "
+                             "...)")
+        return ()
+    if any(getattr(args, k) is not None for k in ("left", "right", "left_model",
+                                                  "right_model")):
+        raise InputError("--images replaces --left/--right and their models (found beside "
+                         "each image): give one or the other")
+    images = tuple(Path(im) for im in args.images)
+    if len(images) < 2 or len(set(images)) < len(images):
+        raise InputError(f"--images needs two different images or more, got {len(images)}")
+    for image in images:
+        if not image.exists():
+            raise InputError(f"{image} does not exist; give the views' images")
+    args.left, args.right = images[0], images[1]
+    return images

@@ -28,7 +28,8 @@ from core.matching.dense_tile import (
     dense_tile,
     retriangulate,
 )
-from core.matching.grid import GridSpec, grid_dem
+from core.matching.fusion import FusionConfig, fuse_heights
+from core.matching.grid import GridSpec, grid_dem, median_per_cell
 from core.matching.rectify import TilePlan, TileRectification
 from core.sensors.base import SensorModel
 from core.sensors.footprint import PixelBox
@@ -61,6 +62,17 @@ class SensorImage:
         """The sensor pixels ``box`` (:func:`read_window`) with the model."""
         image, nodata = read_window(self.path, box)
         return SensorWindow(image, (int(box[0]), int(box[1])), self.model, self.size, nodata)
+
+
+@dataclass(frozen=True)
+class PairPoints:
+    """A pair's point files for the multi-view grid: its folder ``work``, its tiles' figures,
+    its fusion weight ((B/H)^2) and its two images (indices into the views)."""
+
+    work: str
+    stats: tuple[TileStats, ...]
+    weight: float
+    images: tuple[int, int]
 
 
 # ---------------------------------------------------------------------------- tiles
@@ -159,14 +171,10 @@ def retriangulate_block(stats: TileStats, work_in: str, work_out: str, left: Sen
     return replace(stats, bounds_m=bounds, miss_median_m=miss)
 
 
-def grid_block(block: np.ndarray, spec: GridSpec, stats: tuple[TileStats, ...], work: str,
-               origin_m: tuple[float, float], halo: int, max_hole_cells: int,
-               min_island_cells: int, block_info: dict | None = None) -> np.ndarray:
-    """(3, h, w) float32: heights, mask and overlap of the DEM grid's ``block`` (its position),
-    from the point files of the tiles whose ground reaches the block, with a ``halo`` of cells
-    for the hole filling."""
-    (r0, r1), (c0, c1) = block_info[0]["array-location"][-2:]
-    xmin, ymin, xmax, ymax = spec.bounds_of(r0 - halo, r1 + halo, c0 - halo, c1 + halo)
+def _points_in(bounds: tuple[float, float, float, float], stats: tuple[TileStats, ...],
+               work: str, origin_m: tuple[float, float]) -> dict[str, np.ndarray]:
+    """The points (x, y, h, status) of the tiles in ``work`` that fall in ``bounds``."""
+    xmin, ymin, xmax, ymax = bounds
     parts: dict[str, list[np.ndarray]] = {"x": [], "y": [], "h": [], "s": []}
     for s in stats:
         b = s.bounds_m
@@ -180,14 +188,57 @@ def grid_block(block: np.ndarray, spec: GridSpec, stats: tuple[TileStats, ...], 
             parts["y"].append(y[keep])
             parts["h"].append(f["h"][keep])
             parts["s"].append(f["status"][keep])
+    return {k: np.concatenate(v) if v else np.zeros(0) for k, v in parts.items()}
+
+
+def grid_block(block: np.ndarray, spec: GridSpec, stats: tuple[TileStats, ...], work: str,
+               origin_m: tuple[float, float], halo: int, max_hole_cells: int,
+               min_island_cells: int, block_info: dict | None = None) -> np.ndarray:
+    """(3, h, w) float32: heights, mask and overlap of the DEM grid's ``block`` (its position),
+    from the point files of the tiles whose ground reaches the block, with a ``halo`` of cells
+    for the hole filling."""
+    (r0, r1), (c0, c1) = block_info[0]["array-location"][-2:]
+    xmin, ymin, xmax, ymax = spec.bounds_of(r0 - halo, r1 + halo, c0 - halo, c1 + halo)
+    cat = _points_in((xmin, ymin, xmax, ymax), stats, work, origin_m)
     shape = (r1 - r0 + 2 * halo, c1 - c0 + 2 * halo)
-    cat = {k: np.concatenate(v) if v else np.zeros(0) for k, v in parts.items()}
     cells = grid_dem(cat["x"], cat["y"], cat["h"], cat["s"].astype(np.uint8), xmin, ymax,
                      spec.res_m, shape, max_hole_cells=max_hole_cells,
                      min_island_cells=min_island_cells)
     inner = (slice(halo, shape[0] - halo), slice(halo, shape[1] - halo))
     out = np.stack([cells.z_m[inner], cells.mask[inner].astype(np.float32),
                     cells.overlap[inner].astype(np.float32)])
-    del cells, cat, parts
+    del cells, cat
+    _trim_heap()
+    return out
+
+
+def views_block(block: np.ndarray, spec: GridSpec, pairs: tuple[PairPoints, ...],
+                origin_m: tuple[float, float], halo: int, max_hole_cells: int,
+                min_island_cells: int, fusion: FusionConfig, heights_only: bool = False,
+                block_info: dict | None = None) -> np.ndarray:
+    """(4 + n_pairs, h, w) float32 of a multi-view DEM grid's ``block``: the fused heights
+    (:func:`core.matching.fusion.fuse_heights`), mask, overlap and count of views, then each
+    pair's own median heights; with ``heights_only`` (n_pairs, h, w), the pairs' heights
+    alone. The points of every pair's tiles that reach the block, with a ``halo``."""
+    (r0, r1), (c0, c1) = block_info[0]["array-location"][-2:]
+    bounds = spec.bounds_of(r0 - halo, r1 + halo, c0 - halo, c1 + halo)
+    cats = [_points_in(bounds, p.stats, p.work, origin_m) for p in pairs]
+    shape = (r1 - r0 + 2 * halo, c1 - c0 + 2 * halo)
+    inner = (slice(None), slice(halo, shape[0] - halo), slice(halo, shape[1] - halo))
+    z_pairs = np.stack([median_per_cell(c["x"], c["y"], c["h"], bounds[0], bounds[3],
+                                        spec.res_m, shape) for c in cats])
+    if heights_only:
+        _trim_heap()
+        return z_pairs[inner]
+    fused = fuse_heights(z_pairs, [p.weight for p in pairs], [p.images for p in pairs], fusion)
+    cat = {k: np.concatenate([c[k] for c in cats]) for k in ("x", "y", "h", "s")}
+    cells = grid_dem(cat["x"], cat["y"], cat["h"], cat["s"].astype(np.uint8), bounds[0],
+                     bounds[3], spec.res_m, shape, max_hole_cells=max_hole_cells,
+                     min_island_cells=min_island_cells, z_m=fused.z_m)
+    views = np.where(np.isfinite(fused.z_m) & np.isfinite(cells.z_m), fused.views, 0)
+    out = np.concatenate([np.stack([cells.z_m, cells.mask.astype(np.float32),
+                                    cells.overlap.astype(np.float32),
+                                    views.astype(np.float32)]), z_pairs])[inner]
+    del cells, cat, cats, z_pairs
     _trim_heap()
     return out

@@ -113,6 +113,12 @@ class DenseConfig:
         if self.max_hole_cells < 0 or self.min_island_cells < 0:
             raise InputError("max_hole_cells and min_island_cells must be >= 0")
 
+    @property
+    def halo_cells(self) -> int:
+        """The cells each grid block reads around itself: a hole the halo cuts is not
+        filled, and the edge cells it would blank stay in the halo."""
+        return max(self.max_hole_cells, self.min_island_cells, 1) + 1
+
 
 @dataclass(frozen=True, eq=False)
 class DensePlan:
@@ -334,7 +340,7 @@ def check_match_rate(stats: tuple[TileStats, ...], min_rate: float) -> None:
 # ---------------------------------------------------------------------------- 3. grid
 
 
-def _grid_spec(plan: DensePlan, stats: tuple[TileStats, ...]) -> GridSpec:
+def grid_spec(plan: DensePlan, stats: tuple[TileStats, ...]) -> GridSpec:
     bounds = [s.bounds_m for s in stats if s.bounds_m is not None and s.n_valid > 0]
     if not bounds:
         raise InsufficientDataError("no pixel was matched; the DEM would be empty")
@@ -349,9 +355,8 @@ def grid_dem_cog(plan: DensePlan, stats: tuple[TileStats, ...], work: Path, out:
     """Grid the tiles' points into ``out`` (heights) and ``<out>_mask.tif``, write
     ``<out>.json``; remove the work folder unless ``keep_work``."""
     out = Path(out)
-    spec = _grid_spec(plan, stats)
-    # a hole the halo cuts is not filled: the edge cells it would blank stay in the halo
-    halo = max(cfg.max_hole_cells, cfg.min_island_cells, 1) + 1
+    spec = grid_spec(plan, stats)
+    halo = cfg.halo_cells
     base = darr.zeros(spec.shape, chunks=CHUNK, dtype=np.float32)
     stack = darr.map_blocks(grid_block, base, spec=spec, stats=stats, work=str(work),
                             origin_m=plan.origin_m, halo=halo,
@@ -360,22 +365,14 @@ def grid_dem_cog(plan: DensePlan, stats: tuple[TileStats, ...], work: Path, out:
                             chunks=((3,),) + base.chunks, dtype=np.float32)
     z, mask, overlap = stack[0], stack[1].astype(np.uint8), stack[2] > 0
     mask_path = out.with_name(out.stem + "_mask.tif")
-    # EGM96 heights carry their vertical CRS too (UTM + EGM96 height, a compound CRS)
-    crs = f"EPSG:{plan.epsg}" + ("+5773" if cfg.vertical == "egm96" else "")
-    georef = {"transform": spec.geotransform(), "crs": crs}
-    tags = {"vertical_datum": VERTICAL_TAGS[cfg.vertical], "units": "m",
-            "long_name": "height" if cfg.vertical == "ellipsoidal" else "orthometric height",
-            "software": "gcpfree dsm"}
+    georef = grid_georef(plan.epsg, spec, cfg.vertical)
     counts = [(mask == v).sum() for v in (MASK_VALID, MASK_MISMATCH)] + [overlap.sum()]
     with threads(cfg.num_workers):
         n_ok, n_mis, n_overlap, zmin, zmax = write_arrays_cog(
-            [CogItem(z, out, CogOptions(nodata=np.nan, tags=tags, **georef)),
-             CogItem(mask, mask_path, CogOptions(
-                 resampling="nearest", tags={"values": "0 valid, 1 mismatch, 2 occluded or "
-                                                       "outside"}, **georef))],
+            dem_items(z, mask, out, mask_path, georef, cfg.vertical),
             extra=[*counts, darr.nanmin(z), darr.nanmax(z)])
     n_cells = spec.n_rows * spec.n_cols
-    summary = _summary(plan, stats, spec, out, mask_path, cfg.vertical, n_cells,
+    summary = dem_summary(plan, stats, spec, out, mask_path, cfg.vertical, n_cells,
                        (int(n_ok), int(n_mis), int(n_overlap)), (float(zmin), float(zmax)))
     atomic_write_json(out.with_suffix(".json"), summary.to_dict())
     if not keep_work:
@@ -383,7 +380,26 @@ def grid_dem_cog(plan: DensePlan, stats: tuple[TileStats, ...], work: Path, out:
     return summary
 
 
-def _summary(plan: DensePlan, stats: tuple[TileStats, ...], spec: GridSpec, out: Path,
+def grid_georef(epsg: int, spec: GridSpec, vertical: str) -> dict[str, Any]:
+    """The DEM grid's transform and CRS; EGM96 heights carry their vertical CRS too (UTM +
+    EGM96 height, a compound CRS)."""
+    return {"transform": spec.geotransform(),
+            "crs": f"EPSG:{epsg}" + ("+5773" if vertical == "egm96" else "")}
+
+
+def dem_items(z: Any, mask: Any, out: Path, mask_path: Path, georef: dict[str, Any],
+              vertical: str) -> list[CogItem]:
+    """The heights and the mask of a DEM as COGs, with their tags."""
+    tags = {"vertical_datum": VERTICAL_TAGS[vertical], "units": "m",
+            "long_name": "height" if vertical == "ellipsoidal" else "orthometric height",
+            "software": "gcpfree dsm"}
+    return [CogItem(z, out, CogOptions(nodata=np.nan, tags=tags, **georef)),
+            CogItem(mask, mask_path, CogOptions(
+                resampling="nearest", tags={"values": "0 valid, 1 mismatch, 2 occluded or "
+                                                      "outside"}, **georef))]
+
+
+def dem_summary(plan: DensePlan, stats: tuple[TileStats, ...], spec: GridSpec, out: Path,
              mask_path: Path, vertical: str, n_cells: int, counts: tuple[int, int, int],
              z_range: tuple[float, float]) -> DemSummary:
     n_overlap = max(sum(s.n_overlap for s in stats), 1)

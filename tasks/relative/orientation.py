@@ -19,7 +19,15 @@ from core.errors import CoverageError, GeometryError, InsufficientDataError
 from core.geodesy import BBox
 from core.heights import DatumDecision
 from core.intersection import triangulate
+from core.matching.overlap import overlap_cell_m
 from core.matching.tiepoint_results import TiePointResult, TiePointStatus
+from core.matching.tiepoints import HeightPrior, TiePointConfig
+from core.orientation.multiview import (
+    JointAlong,
+    ViewPairFit,
+    fix_along_joint,
+    joint_relative_orientation,
+)
 from core.orientation.relative import (
     AlongEpipolar,
     RelativeConfig,
@@ -28,6 +36,7 @@ from core.orientation.relative import (
     image_correction,
     relative_orientation,
 )
+from core.orientation.tracks import PairTies, Tracks, tracks_from_pairs
 from core.sensors.base import SensorModel
 from core.sensors.footprint import footprint_box
 from core.sensors.viewing import footprint_mean_height_m, pair_geometry
@@ -103,6 +112,56 @@ class ReferenceUsed:
         return {"path": str(self.path), **self.datum.to_dict(),
                 "srtm_dir": None if self.srtm_dir is None else str(self.srtm_dir)}
 
+
+
+@dataclass(frozen=True, eq=False)
+class Ground:
+    """The heights a relative orientation searches its tie points over: the reference DEM
+    (``path``, prepared from DEM tiles when those were given; ``dem`` read over the images)
+    with ``used`` its datum decision, or none; ``h_range`` the reference's heights, else the
+    scene's (:func:`core.sensors.footprint.scene_height_range_m`)."""
+
+    path: Path | None
+    used: ReferenceUsed | None
+    dem: GeoDEM | None
+    h_range: tuple[float, float]
+
+
+def reference_ground(pair: PairInputs, views: list[LoadedModel], out: Path,
+                     height_range_m: tuple[float, float] | None) -> Ground:
+    """The reference of ``pair`` (given, or prepared from its DEM tiles over every image's
+    footprint into ``<out>.reference.tif``) read over the images, or the scene's heights."""
+    from core.sensors.footprint import ANY_TERRAIN_H_M, scene_height_range_m
+    from tasks.io.dem import dem_datum, read_reference
+    from tasks.io.reference import build_reference, locate_tiles
+
+    out = Path(out)
+    path, vertical = pair.reference, pair.reference_vertical
+    box = views_box(views, height_range_m or ANY_TERRAIN_H_M)
+    if path is None and pair.srtm_dir is not None:
+        tiles = locate_tiles(pair.dem_source, box, True)
+        path = Path(build_reference(tiles, box, out.with_name(out.stem + ".reference.tif")).path)
+        vertical = "auto"  # its own tag says ellipsoidal
+    if path is None:
+        return Ground(None, None, None, scene_height_range_m([v.model for v in views],
+                                                             height_range_m, any_terrain=False))
+    used = ReferenceUsed(Path(path), dem_datum(path, vertical),
+                         None if pair.reference is not None else pair.srtm_dir)
+    dem = read_reference(used.path, box, used.datum.datum)
+    return Ground(Path(path), used, dem, reference_box_heights(dem))
+
+
+def search_radius_m(given: float | None, left: LoadedModel, h_range: tuple[float, float]
+                    ) -> float:
+    """The tie points' search radius: ``given``, else from the left image's GSD at its centre
+    (:func:`core.matching.tiepoints.default_search_radius_m`)."""
+    from core.matching.tiepoints import default_search_radius_m, ground_sampling_m
+
+    if given is not None:
+        return given
+    c, r = 0.5 * (left.size[0] - 1), 0.5 * (left.size[1] - 1)
+    return default_search_radius_m(ground_sampling_m(left.model, c, r,
+                                                     0.5 * (h_range[0] + h_range[1])))
 
 
 @dataclass(frozen=True, eq=False)
@@ -231,3 +290,174 @@ def reference_box_heights(reference: GeoDEM) -> tuple[float, float]:
         raise CoverageError("the reference DEM holds no height over the pair; give a DEM that "
                             "covers the images")
     return lo, hi
+
+
+# ---------------------------------------------------------------------------- N images
+
+
+@task(name="load-views")
+def load_views(pair: PairInputs, images: tuple[Path, ...]) -> list[LoadedModel]:
+    """The sensor models of every image (found beside them; the pair's band), the first one
+    fixed in the orientation."""
+    from tasks.io.sensors import load_model
+
+    return [load_model(Path(im), band=pair.band) for im in images]
+
+
+def views_box(views: list[LoadedModel], h_range: tuple[float, float]) -> BBox:
+    """The lon/lat box holding every image's footprint over the height range."""
+    return footprint_box([(m.model, (0, 0, *m.size)) for m in views], h_range)
+
+
+def overlapping_pairs(views: list[LoadedModel], h_m: float,
+                      h_range: tuple[float, float] | None) -> list[tuple[int, int]]:
+    """The pairs (i < j) of images that overlap (:func:`check_overlap`); GeometryError when an
+    image overlaps none of the others."""
+    pairs = []
+    for i in range(len(views)):
+        for j in range(i + 1, len(views)):
+            try:
+                check_overlap(views[i], views[j], h_m, h_range)
+            except GeometryError:
+                continue
+            pairs.append((i, j))
+    alone = [v for k, v in enumerate(views) if not any(k in p for p in pairs)]
+    if alone:
+        raise GeometryError(
+            f"{alone[0].image or alone[0].source} overlaps none of the other images under "
+            "their sensor models; give images of one area, and check each model")
+    return pairs
+
+
+def common_cell_m(views: list[LoadedModel], pairs: list[tuple[int, int]], dem: GeoDEM | None,
+                  h_range: tuple[float, float], cfg: TiePointConfig) -> float:
+    """One tie-point ground cell for every pair: the smallest any pair's overlap needs
+    (:func:`core.matching.overlap.overlap_cell_m`), so that the pairs sharing an image pick
+    its points in the same cells and their points chain into tracks seen three times or
+    more (on the Marseille triplet, 46 of 75 against 23 with each pair's own cell)."""
+    heights = (HeightPrior.from_dem(dem, cfg.search_radius_m, cfg.height_margin_m)
+               if dem is not None else HeightPrior.from_range(*h_range))
+    return min(overlap_cell_m(views[i].model, views[j].model, views[i].size, views[j].size,
+                              heights, cfg.cell_m, cfg.min_cells_per_side) for i, j in pairs)
+
+
+@dataclass(frozen=True, eq=False)
+class ViewsProducts:
+    """What :func:`orient_views` wrote and the figures a user reads first: the models (the
+    first as given, the others adjusted), the tracks and the joint adjustment."""
+
+    rel_json: Path
+    tracks_json: Path
+    models: tuple[SensorModel, ...]
+    n_tracks: int
+    n_multi: int
+    n_rejected: int
+    rms_before_px: float
+    rms_after_px: float
+    along: JointAlong
+    pairs: tuple[ViewPairFit, ...]
+    h_range_m: tuple[float, float]  # the inlier tracks' heights
+
+    def lines(self) -> list[str]:
+        along = ("not observable: held at the metadata (no reference DEM)"
+                 if not self.along.observable else
+                 f"set from the reference DEM ({self.along.height_offset_m:+.2f} m, "
+                 f"+- {self.along.sigma_m:.2f} m)" if self.along.sigma_m is not None
+                 else "observable")
+        out = [(f"relative orientation  {self.rel_json} ({len(self.models)} images, the first "
+                "fixed)"),
+               (f"tie points            {self.n_tracks} tracks, {self.n_multi} seen by three "
+                f"images or more, {self.n_rejected} rejected ({self.tracks_json.name})"),
+               (f"equations RMS         {self.rms_before_px:.3f} px before, "
+                f"{self.rms_after_px:.3f} px after")]
+        out += [f"  pair {i}-{j}            {p.n_points} points, y-parallax RMS "
+                f"{p.parallax_rms_before_px:.3f} px before, {p.parallax_rms_after_px:.3f} after"
+                for p in self.pairs for i, j in [p.images]]
+        return [*out, f"common height         {along}"]
+
+
+def _track_ground(models: tuple[SensorModel, ...], tracks: Tracks, source: np.ndarray,
+                  h: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Each track's ground (lon, lat) on its source ray at its height."""
+    lon, lat = np.full(tracks.n, np.nan), np.full(tracks.n, np.nan)
+    for s in np.unique(source):
+        sel = source == s
+        lon[sel], lat[sel] = models[s].localize(tracks.col[sel, s], tracks.row[sel, s], h[sel])
+    return lon, lat
+
+
+@task(name="joint-relative-orientation")
+def orient_views(
+    views: list[LoadedModel], pairs: list[tuple[int, int]], ties: list[TiePointResult],
+    out: Path, reference: GeoDEM | None = None, h_range: tuple[float, float] | None = None,
+    config: RelativeConfig = DEFAULT_CONFIG, reference_sigma_m: float = 5.0,
+    reference_used: ReferenceUsed | None = None,
+) -> ViewsProducts:
+    """Every image but the first adjusted at once to the tie points of every pair
+    (:func:`core.orientation.multiview.joint_relative_orientation`), their common height set
+    from the reference DEM when there is one; writes ``out`` (relative.json) and
+    ``<out>.tracks.json``."""
+    h_mid = 0.5 * sum(h_range) if h_range is not None else 0.0
+    pair_ties = []
+    for (i, j), t in zip(pairs, ties, strict=True):
+        tp = t.tie_points
+        ok = tp.ok
+        h0 = tp.h_m[ok] if tp.h_m.size else np.nan
+        pair_ties.append(PairTies(i, j, tp.left_col[ok], tp.left_row[ok], tp.right_col[ok],
+                                  tp.right_row[ok], h0))
+    tracks, which = tracks_from_pairs(len(views), pair_ties, h_mid)
+    res = joint_relative_orientation([v.model for v in views], tracks, config)
+    models, along = res.models, JointAlong(observable=not res.unobservable)
+    if reference is not None and res.unobservable:
+        href = reference.height_m(*_track_ground(models, tracks, res.source, res.h_m))
+        dirs = np.array([[u.step[n] for n in res.param_names] for u in res.unobservable]).T
+        models, along = fix_along_joint(models, 0, tracks, res.inlier, dirs, href,
+                                        [v.size for v in views], reference_sigma_m)
+    h_in = res.h_m[res.inlier]
+    h_track = (float(np.min(h_in)), float(np.max(h_in)))
+    h_ref = float(np.median(h_in))
+    tracks_json = Path(out).with_suffix(".tracks.json")
+    atomic_write_json(tracks_json, {
+        "col": tracks.col.tolist(), "row": tracks.row.tolist(), "h_m": res.h_m.tolist(),
+        "inlier": res.inlier.tolist(), "source": res.source.tolist(),
+        "parallax_px": res.parallax_px.tolist(),
+        "pairs": [{"images": [i, j], "track": w.tolist()}
+                  for (i, j), w in zip(pairs, which, strict=True)],
+        "heights": "WGS84 ellipsoidal, on each track's source ray under the adjusted models",
+    }, indent=None)
+    corrections = [None] + [vars(image_correction(models[0], v.model.with_corrections(
+        config.corrections), m, *v.size, h_ref)) for v, m in zip(views[1:], models[1:],
+                                                                  strict=True)]
+    atomic_write_json(out, {
+        "format": "gcpfree.relative-views", "version": 1, "fixed": 0,
+        "images": [{"image": str(v.image), "model": str(v.source), "family": v.family}
+                   for v in views],
+        "tracks": tracks.n, "tracks_multi": int((tracks.seen.sum(axis=1) > 2).sum()),
+        "tracks_rejected": int(res.rejected.size), "tracks_file": tracks_json.name,
+        "pairs": [{"images": list(p.images),
+                   "tie_points": None if t is None else int(t.tie_points.ok.sum()),
+                   "tie_point_search": None if t is None else t.report.to_dict(),
+                   "parallax_rms_before_px": p.parallax_rms_before_px,
+                   "parallax_rms_after_px": p.parallax_rms_after_px}
+                  for p, t in zip(res.pairs, _ties_of(res.pairs, pairs, ties), strict=True)],
+        "rms_before_px": res.rms_before_px, "rms_after_px": res.rms_after_px,
+        "sigma_px": res.sigma_px, "n_iterations": res.n_iterations,
+        "converged": res.converged, "corrections": config.corrections,
+        "param_names": list(res.param_names), "params_before": res.params_before.tolist(),
+        "params_after": [float(v) for m in models[1:] for v in m.params],
+        "unobservable": [vars(u) for u in res.unobservable], "common_height": vars(along),
+        "image_correction": corrections, "tracks_height_m": list(h_track),
+        "reference": None if reference_used is None else reference_used.to_dict(),
+        "models": [_model_dict(m) for m in models],
+    })
+    return ViewsProducts(Path(out), tracks_json, tuple(models), tracks.n,
+                         int((tracks.seen.sum(axis=1) > 2).sum()), int(res.rejected.size),
+                         res.rms_before_px, res.rms_after_px, along, res.pairs, h_track)
+
+
+def _ties_of(fits: tuple[ViewPairFit, ...], pairs: list[tuple[int, int]],
+             ties: list[TiePointResult]) -> list[TiePointResult | None]:
+    """The tie-point search of each pair the adjustment reports on (same order; None for two
+    images tied only through tracks that a third one sees)."""
+    by_pair = dict(zip(pairs, ties, strict=True))
+    return [by_pair.get(f.images) for f in fits]

@@ -161,6 +161,43 @@ def test_real_pleiades_pairs(prefect_harness, data_dir, tmp_path, pair):
     assert abs(doc["pointing_dy_px"][0]) < 10.0
 
 
+def test_three_views_of_the_marseille_triplet(prefect_harness, data_dir, tmp_path):
+    """``--images`` on crops of the real Pleiades triplet: with the delivered RPCs the pairs'
+    heights disagree (02-01 and 02-03 5 m apart, 01-03 between them: each pair's along-track
+    error, which no y-parallax shows); one joint relative orientation (02 fixed, 01 and 03
+    adjusted to the tracks the three see) brings every two pairs within 0.5 m, and the fused
+    DSM has heights in more cells than any pair alone, most from all three images."""
+    d = data_dir / "pleiades_marseille_triplet"
+    out = tmp_path / "views.tif"
+    images = [str(d / f"img_{k}.tif") for k in ("02", "01", "03")]
+    assert dsm.run(parse("--images", *images, "--resolution", "0.5", "--no-progress",
+                         "--out", str(out))) == 0
+    doc = json.loads(out.with_suffix(".json").read_text())
+    pm = doc["pairwise_median_m"]
+    assert list(pm) == ["0-1 minus 0-2", "0-1 minus 1-2", "0-2 minus 1-2"]
+    # measured: -4.96, -2.49, +2.49 m before; -0.29, -0.20, +0.12 m after
+    assert pm["0-1 minus 0-2"]["before"] < -4.0
+    assert abs(pm["0-1 minus 1-2"]["before"]) > 1.5 and abs(pm["0-2 minus 1-2"]["before"]) > 1.5
+    assert all(abs(v["after"]) < 0.5 and v["cells"] > 50_000 for v in pm.values()), pm
+    with rasterio.open(out) as src:
+        z = src.read(1)
+    with rasterio.open(tmp_path / "views_views.tif") as src:
+        views = src.read(1)
+    with rasterio.open(tmp_path / "views_mask.tif") as src:
+        mask = src.read(1)
+    assert set(np.unique(views)) <= {0, 2, 3} and ((mask == 0) == np.isfinite(z)).all()
+    assert not (views[~np.isfinite(z)] > 0).any()  # a count of views only with a height
+    valid = int(np.isfinite(z).sum())
+    best = max(p["cells"] for p in doc["pairs"])
+    assert valid > 1.1 * best and (views == 3).sum() > 0.6 * valid  # measured 1.2x, 75 %
+    assert [p["images"] for p in doc["pairs"]] == [[0, 1], [0, 2], [1, 2]]
+    assert doc["pairs"][2]["b_over_h"] > 1.8 * doc["pairs"][0]["b_over_h"]  # 0.23 / 0.11
+    rel = json.loads((tmp_path / "views_relative" / "relative.json").read_text())
+    assert rel["format"] == "gcpfree.relative-views" and rel["tracks_multi"] > 30
+    assert rel["rms_after_px"] < 0.15 < rel["rms_before_px"]
+    assert not any(tmp_path.glob(".views.tif.work*"))  # the pairs' points are removed
+
+
 def test_bad_input_is_one_line_before_anything_runs(tmp_path, data_dir):
     d = data_dir / "pleiades_ventoux"
     base = ["--left", str(d / "left_image.tif"), "--right", str(d / "right_image.tif"),
@@ -171,8 +208,20 @@ def test_bad_input_is_one_line_before_anything_runs(tmp_path, data_dir):
         ([*base, "--roi", "600", "0", "100", "100"], "outside the left image"),
         ([*base, "--reference", str(tmp_path / "none.hgt")], "does not exist"),
         ([*base, "--tile-px", "10"], "tile_px"),
+        (["--no-orient"], "--left and --right"),
+        (["--images", str(d / "left_image.tif")], "two different images or more"),
+        (["--images", str(d / "left_image.tif"), str(d / "left_image.tif")], "two different"),
+        ([*base, "--images", str(d / "left_image.tif"), str(d / "right_image.tif")],
+         "replaces --left/--right"),
+        (["--images", str(d / "left_image.tif"), str(tmp_path / "none.tif")], "does not exist"),
+        (["--images", str(d / "left_image.tif"), str(d / "right_image.tif"), "--fusion",
+          "mean"], None),
     ]
     for argv, message in cases:
+        if message is None:  # refused by the parser, as every bad choice
+            with pytest.raises(SystemExit):
+                parse(*argv, "--out", str(tmp_path / "o.tif"))
+            continue
         with pytest.raises(InputError, match=message) as err:
             dsm.run(parse(*argv, "--out", str(tmp_path / "o.tif")))
         assert "\n" not in str(err.value)
@@ -186,7 +235,8 @@ def test_help_lists_the_options(capsys):
         parse("--help")
     text = capsys.readouterr().out
     for opt in ("--left", "--right", "--left-model", "--right-model", "--roi", "--resolution",
-                "--reference", "--srtm-dir", "--vertical", "--out", "--no-orient"):
+                "--reference", "--srtm-dir", "--vertical", "--out", "--no-orient", "--images",
+                "--fusion"):
         assert opt in text
 
 
