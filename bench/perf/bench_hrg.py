@@ -5,9 +5,9 @@ Targets: `gcpfree pair` on hrg peaks at <= 4096 MB for the whole process tree (t
 6000x6000, peaks at about 1.5 GB) and takes about 4x the time of spot. The simulator's own peak
 is printed too. Peak memory is the resident memory of the child and all its descendants
 (Dask worker processes included, Prefect's temporary API server left out), sampled every
-0.25 s (bench/bench_dsm.py's tree_rss_mb).
+0.25 s (bench/perf/bench_dsm.py's tree_rss_mb).
 
-    python bench/bench_hrg.py [--scene DIR] [--spot DIR] [--workers N] [--skip-pair]
+    python bench/perf/bench_hrg.py [--scene DIR] [--spot DIR] [--workers N] [--skip-pair]
 
 --scene reuses (or resumes) an hrg scene folder (default: a temporary one, simulated without
 lidar: four times the spot preset's pixels, so about four times its simulation); --spot also
@@ -35,7 +35,7 @@ from pathlib import Path
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from bench_dsm import tree_pids, tree_rss_mb
 
-REPO = Path(__file__).resolve().parents[1]
+REPO = Path(__file__).resolve().parents[2]
 
 SIMULATE = """
 import sys

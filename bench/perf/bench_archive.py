@@ -21,7 +21,7 @@ with the orientation and ortho products of one real run, so a pair only writes i
 STAC and manifest: the throughput of resumed pairs), GCPFREE_BENCH_RUNS (comma list among
 1,2,kill; default all three).
 
-    .venv/bin/python bench/bench_archive.py
+    .venv/bin/python bench/perf/bench_archive.py
 """
 
 from __future__ import annotations
@@ -36,7 +36,7 @@ import threading
 import time
 from pathlib import Path
 
-sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
+sys.path.insert(0, str(Path(__file__).resolve().parents[2]))
 
 SEEDED_PRODUCTS = ("report.json", "left.json", "right.json", "gcps.json", "windows.json",
                    "dsm.tif", "dsm.json", "dsm_mask.tif", "dsm_egm96.tif", "dsm_egm96.json",

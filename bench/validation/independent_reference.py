@@ -75,7 +75,7 @@ def make_reference(scene: Path, dest: Path, seed: int) -> tuple[float, float]:
     tmp = dest.with_suffix(".part.tif")
     with rasterio.open(tmp, "w", **profile) as out:
         out.write(h.astype(np.float32), 1)
-        out.update_tags(**{**tags, "source": "bench/independent_reference.py"})
+        out.update_tags(**{**tags, "source": "bench/validation/independent_reference.py"})
     tmp.replace(dest)
     return float(dx), float(dy)
 
@@ -94,7 +94,7 @@ def independent_scene(scene: Path, dest: Path, seed: int) -> Path:
         dx, dy = make_reference(scene, dest / "reference.tif", seed)
         (dest / "truth" / "reference_errors.json").write_text(json.dumps({
             "shift_east_m": dx, "shift_north_m": dy, "canopy_seen": CANOPY, "noise_m": NOISE_M,
-            "correlation_m": CORR_M, "source": "bench/independent_reference.py"}, indent=1))
+            "correlation_m": CORR_M, "source": "bench/validation/independent_reference.py"}, indent=1))
     return dest
 
 

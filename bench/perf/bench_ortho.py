@@ -30,7 +30,7 @@ the clock starts; the first-call time is printed). Throughput is in output cells
 shares the cores are slower, and the ratio of two runs taken one after the other is what
 to read. ``--repeat N`` times each pair N times (alternating ours and GDAL's).
 
-    .venv/bin/python bench/bench_ortho.py [SCENE_DIR] [--crop 4000] [--repeat 1]
+    .venv/bin/python bench/perf/bench_ortho.py [SCENE_DIR] [--crop 4000] [--repeat 1]
         [--no-pushbroom]
 
 SCENE_DIR is a simulated scene (``gcpfree simulate --preset spot --no-lidar --out DIR``, about
@@ -49,7 +49,7 @@ import tempfile
 import time
 from pathlib import Path
 
-REPO = Path(__file__).resolve().parents[1]
+REPO = Path(__file__).resolve().parents[2]
 sys.path.insert(0, str(REPO))
 sys.path.insert(0, str(Path(__file__).parent))
 

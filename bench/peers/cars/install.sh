@@ -1,5 +1,5 @@
 #!/usr/bin/env bash
-# CARS (CNES satellite stereo pipeline) in its own virtual environment, bench/cars/.venv
+# CARS (CNES satellite stereo pipeline) in its own virtual environment, bench/peers/cars/.venv
 # (ignored by git): nothing of CARS is part of gcpfree. CARS 1.3.0 installs from PyPI with pip.
 set -euo pipefail
 here="$(cd "$(dirname "${BASH_SOURCE[0]}")" && pwd)"

@@ -2,7 +2,7 @@
 
 Run from the repository root::
 
-    .venv/bin/python bench/bench_rpc.py [--n 1000000] [--repeat 3]
+    .venv/bin/python bench/perf/bench_rpc.py [--n 1000000] [--repeat 3]
 
 Prints best-of-``repeat`` wall times, ratios (with the load average: the machine's other work
 slows every figure; read the ratios of one run) and the largest disagreement; asserts nothing.
@@ -28,12 +28,12 @@ import numpy as np
 from rasterio.rpc import RPC
 from rasterio.transform import RPCTransformer
 
-sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
+sys.path.insert(0, str(Path(__file__).resolve().parents[2]))
 
 from core.sensors.rpc import RPCModel
 from tests.peers import rpcm_model_module
 
-GEOM = Path(__file__).resolve().parents[1] / "tests" / "data" / "pleiades_ventoux" / "left_image.geom"
+GEOM = Path(__file__).resolve().parents[2] / "tests" / "data" / "pleiades_ventoux" / "left_image.geom"
 
 
 def best_time(fn: Callable[[], object], repeat: int) -> tuple[float, object]:

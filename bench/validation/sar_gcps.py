@@ -5,7 +5,7 @@ reference, its planimetry from the SAR model at that height) is worth.
 
     .venv/bin/gcpfree simulate --preset tiny --seed 3 --relief-factor 0.05 --sar ers \\
         --out /tmp/s20/flat
-    .venv/bin/python bench/bench_sar_gcps.py /tmp/s20/flat [--image left] [--cell 80] \\
+    .venv/bin/python bench/validation/sar_gcps.py /tmp/s20/flat [--image left] [--cell 80] \\
         [--orient /tmp/s20/o_flat]
 
 The matches and heights are the product's own (core/orientation/sar_gcps.py: both images
@@ -41,7 +41,7 @@ import rasterio
 from pyproj import Transformer
 from rasterio.errors import NotGeoreferencedWarning
 
-sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
+sys.path.insert(0, str(Path(__file__).resolve().parents[2]))
 
 from core.dem import sample_bilinear
 from core.geodesy import BBox

@@ -9,7 +9,7 @@ check-point RMS less its reference term (the reference's stated registration sig
 ground's partial derivatives at the check points), so measured and predicted are compared on
 the part that is not one draw per scene.
 
-Run: ``.venv/bin/python bench/beyond_shift.py SCENE_DIR ORIENT_DIR`` (the simulator's output
+Run: ``.venv/bin/python bench/validation/beyond_shift.py SCENE_DIR ORIENT_DIR`` (the simulator's output
 and ``gcpfree orient --checkpoints SCENE_DIR/truth/checkpoints.json``'s). Prints per image the
 check points' RMS (col / row, px) as measured and beyond the shift, and the predicted RMS in
 total and without the reference's term. Asserts nothing.
@@ -24,7 +24,7 @@ from typing import Any
 
 import numpy as np
 
-sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
+sys.path.insert(0, str(Path(__file__).resolve().parents[2]))
 
 from core.geodesy import metres_per_degree  # noqa: E402
 from core.intersection import triangulate  # noqa: E402

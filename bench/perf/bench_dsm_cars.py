@@ -12,8 +12,8 @@ Prints both wall times (each a fresh process, Prefect's temporary server include
 both completenesses over the ROI footprint, and the median and NMAD of ours minus CARS's.
 Targets (issue 10): our time <= 1/5 of CARS's, completeness >= CARS's, NMAD <= 0.5 m.
 
-    bash bench/cars/install.sh                   # once: CARS in bench/cars/.venv
-    .venv/bin/python bench/cars/run_reunion.py [--initial-elevation H] [--keep DIR]
+    bash bench/peers/cars/install.sh                   # once: CARS in bench/peers/cars/.venv
+    .venv/bin/python bench/perf/bench_dsm_cars.py [--initial-elevation H] [--keep DIR]
 """
 
 from __future__ import annotations
@@ -29,11 +29,10 @@ from pathlib import Path
 
 import numpy as np
 
-HERE = Path(__file__).resolve().parent
-REPO = HERE.parents[1]
+REPO = Path(__file__).resolve().parents[2]
 sys.path.insert(0, str(REPO))
 DATA = REPO / "tests" / "data" / "pleiades_reunion"
-CARS = HERE / ".venv" / "bin" / "cars"
+CARS = REPO / "bench" / "peers" / "cars" / ".venv" / "bin" / "cars"
 ROI = (150, 150, 700, 700)
 RES_M = 0.5
 EPSG = 32740
@@ -45,7 +44,7 @@ def run_ours(out: Path, tmp: Path) -> float:
     env = dict(os.environ, PREFECT_HOME=str(tmp / "prefect"))
     t0 = time.perf_counter()
     # the command as a user runs it (its temporary Prefect server and a fresh PREFECT_HOME:
-    # a first run; bench/bench_dsm_wall.py times later runs and where the time goes)
+    # a first run; bench/perf/bench_dsm_wall.py times later runs and where the time goes)
     r = subprocess.run([sys.executable, "-m", "flows.cli", *argv], cwd=REPO, env=env,
                        capture_output=True, text=True, check=False)
     dt = time.perf_counter() - t0
@@ -176,7 +175,7 @@ def main() -> None:
     ap.add_argument("--keep", type=Path, default=None, help="keep the products in this folder")
     args = ap.parse_args()
     if not CARS.exists():
-        raise SystemExit(f"{CARS} is missing: run bash bench/cars/install.sh first")
+        raise SystemExit(f"{CARS} is missing: run bash bench/peers/cars/install.sh first")
     with tempfile.TemporaryDirectory() as tmp_name:
         tmp = Path(args.keep) if args.keep else Path(tmp_name)
         tmp.mkdir(parents=True, exist_ok=True)

@@ -1,4 +1,4 @@
-"""xdem's Nuth & Kaab on DEM pairs, run by bench/xdem/.venv/bin/python (xdem is not a
+"""xdem's Nuth & Kaab on DEM pairs, run by bench/peers/xdem/.venv/bin/python (xdem is not a
 dependency of gcpfree): ``fit_pairs.py REF DEM [REF DEM ...] [--repeat N]``.
 
 For each pair: the GeoTIFFs read with rasterio (NaN voids), ``xdem.coreg.NuthKaab()`` with its

@@ -1,5 +1,5 @@
 """``gcpfree coregister`` beside xdem's ``NuthKaab`` (xdem 0.2.3, its own venv:
-``bash bench/xdem/install.sh``) on DEM pairs with known sub-pixel shifts.
+``bash bench/peers/xdem/install.sh``) on DEM pairs with known sub-pixel shifts.
 
 Pairs: a real DEM and a copy of it moved by a known (col, row) shift in pixels, by a quintic
 spline (an interpolation neither implementation uses: gcpfree samples with a cubic spline),
@@ -16,8 +16,8 @@ process (the fit alone on arrays in memory, median of ``--repeat``; target issue
 xdem process fitting all the pairs (import and reading included; target: ours faster), with
 the CPU seconds of each beside the wall time, and the load average.
 
-    bash bench/xdem/install.sh                        # once: xdem in bench/xdem/.venv
-    .venv/bin/python bench/bench_coregister.py [--reunion-dsm DSM.tif] [--repeat 3]
+    bash bench/peers/xdem/install.sh                        # once: xdem in bench/peers/xdem/.venv
+    .venv/bin/python bench/perf/bench_coregister.py [--reunion-dsm DSM.tif] [--repeat 3]
 """
 
 from __future__ import annotations
@@ -38,10 +38,10 @@ import rasterio
 from affine import Affine
 from scipy.ndimage import shift as nd_shift
 
-REPO = Path(__file__).resolve().parents[1]
+REPO = Path(__file__).resolve().parents[2]
 sys.path.insert(0, str(REPO))
-XDEM_PY = REPO / "bench" / "xdem" / ".venv" / "bin" / "python"
-XDEM_FIT = REPO / "bench" / "xdem" / "fit_pairs.py"
+XDEM_PY = REPO / "bench" / "peers" / "xdem" / ".venv" / "bin" / "python"
+XDEM_FIT = REPO / "bench" / "peers" / "xdem" / "fit_pairs.py"
 SRTM = REPO / "tasks" / "data" / "N44E005.hgt"
 REUNION = REPO / "tests" / "data" / "pleiades_reunion"
 NOISE_M = 0.3
@@ -153,7 +153,7 @@ def main() -> None:
                     help="shell rounds (both sides each round, default 2)")
     args = ap.parse_args()
     if not XDEM_PY.exists():
-        raise SystemExit(f"{XDEM_PY} is missing: run bash bench/xdem/install.sh first")
+        raise SystemExit(f"{XDEM_PY} is missing: run bash bench/peers/xdem/install.sh first")
     with tempfile.TemporaryDirectory(prefix="bench-coregister-") as tmp_name:
         tmp = Path(tmp_name)
         dsm = args.reunion_dsm or reunion_dsm(tmp)

@@ -18,7 +18,7 @@ import tempfile
 import time
 from pathlib import Path
 
-SRTM = Path(__file__).resolve().parents[1] / "tasks" / "data" / "N44E005.hgt"
+SRTM = Path(__file__).resolve().parents[2] / "tasks" / "data" / "N44E005.hgt"
 
 
 def run(cmd: list[str], env: dict[str, str]) -> float:

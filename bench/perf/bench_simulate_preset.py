@@ -2,7 +2,7 @@
 
 Target (issue 4): peak memory below 3 GB. The simulation runs in a child process; its peak is
 the resident memory of the child and its descendants (Prefect's temporary API server left
-out), sampled every 0.25 s (bench/bench_dsm.py's tree_rss_mb). Prints figures, asserts
+out), sampled every 0.25 s (bench/perf/bench_dsm.py's tree_rss_mb). Prints figures, asserts
 nothing. Set GCPFREE_BENCH_PRESET=hrs, hrg or tiny to measure another preset (the flow is
 called directly, so any preset of core.simulation.scene.PRESETS works), GCPFREE_BENCH_LIDAR=0
 to skip the lidar.

@@ -1,7 +1,7 @@
 """Where the wall time of ``gcpfree dsm`` goes, from the shell, on the Pleiades Reunion ROI of
-``bench/cars/run_reunion.py`` (left pixels 150 150 700 700, 0.5 m, EGM96, ``--no-orient``):
+``bench/perf/bench_dsm_cars.py`` (left pixels 150 150 700 700, 0.5 m, EGM96, ``--no-orient``):
 the time a user waits, beside CARS's 229 s on the same ROI (measured once with
-``bench/cars/run_reunion.py``; target issue 21: <= 0.1 x, i.e. <= 23 s).
+``bench/perf/bench_dsm_cars.py``; target issue 21: <= 0.1 x, i.e. <= 23 s).
 
 Each run is a fresh process started here, timed from before its start to its exit:
 
@@ -15,7 +15,7 @@ Both in a fresh ``PREFECT_HOME`` (a user's first run: Prefect creates its databa
 in the same one (every later run). Then one instrumented run of each prints the timeline: the
 interpreter up, the command's modules imported, the API ready, each task of the flow, the exit.
 
-    .venv/bin/python bench/bench_dsm_wall.py [--repeat N]
+    .venv/bin/python bench/perf/bench_dsm_wall.py [--repeat N]
 
 Prints figures with the load average (2 shared cores: compare the two variants of the same
 round, not figures across rounds); asserts nothing.
@@ -34,9 +34,9 @@ import tempfile
 import time
 from pathlib import Path
 
-REPO = Path(__file__).resolve().parents[1]
+REPO = Path(__file__).resolve().parents[2]
 DATA = REPO / "tests" / "data" / "pleiades_reunion"
-CARS_S = 229.0  # CARS 1.3.0 on the same ROI, two workers (bench/cars/run_reunion.py)
+CARS_S = 229.0  # CARS 1.3.0 on the same ROI, two workers (bench/perf/bench_dsm_cars.py)
 
 ARGV = ["dsm", "--left", str(DATA / "img_01.tif"), "--right", str(DATA / "img_02.tif"),
         "--roi", "150", "150", "700", "700", "--resolution", "0.5", "--vertical", "egm96",

@@ -10,7 +10,7 @@ is printed too: figures taken while other work shares the cores are slower. Then
 truth DSM after the best-fit 3-D offset and tilt: NMAD per land-cover class (target <= 1 GSD
 on bare soil), and the % mismatched.
 
-    .venv/bin/python bench/bench_dsm.py [SCENE_DIR]
+    .venv/bin/python bench/perf/bench_dsm.py [SCENE_DIR]
 
 SCENE_DIR is a simulated scene (``gcpfree simulate --preset spot --no-lidar --out DIR``,
 about 8 minutes); without it one is simulated into a temporary folder. GCPFREE_BENCH_PRESET
@@ -30,7 +30,7 @@ from pathlib import Path
 
 import numpy as np
 
-REPO = Path(__file__).resolve().parents[1]
+REPO = Path(__file__).resolve().parents[2]
 sys.path.insert(0, str(REPO))
 
 CHILD = """

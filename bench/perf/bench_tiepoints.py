@@ -135,7 +135,7 @@ def main() -> None:
             before = resource.getrusage(resource.RUSAGE_CHILDREN)
             r = subprocess.run([sys.executable, "-c", CHILD, str(scene), str(ref), str(out),
                                 asked], capture_output=True, text=True, env=env, check=False,
-                               cwd=Path(__file__).resolve().parents[1])
+                               cwd=Path(__file__).resolve().parents[2])
             if r.returncode != 0:
                 print(r.stdout[-3000:], r.stderr[-3000:])
                 raise SystemExit("tie points failed")

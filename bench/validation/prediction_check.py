@@ -2,7 +2,7 @@
 
 ``report.json``'s prediction beyond the reference term (the parameters' covariance, with the
 GCPs' ground error correlated over kilometres, and the model's own error) is compared with the
-check points beyond the GCPs' common error (``bench/beyond_shift.py``), with what the GCPs'
+check points beyond the GCPs' common error (``bench/validation/beyond_shift.py``), with what the GCPs'
 true errors say, and with what chance allows:
 
 - ``measured``: the check points beyond the GCPs' common error;
@@ -24,7 +24,7 @@ true errors say, and with what chance allows:
   fitted correlated error, no reference term) with the used GCPs' mean error taken out as the
   measurement takes it out (:func:`predicted_beyond_common`), and measured over it.
 
-Run: ``.venv/bin/python bench/prediction_check.py SCENE_DIR ORIENT_DIR [SCENE_DIR ORIENT_DIR
+Run: ``.venv/bin/python bench/validation/prediction_check.py SCENE_DIR ORIENT_DIR [SCENE_DIR ORIENT_DIR
 ...]`` (the simulator's output and ``gcpfree orient --self-calibrate --checkpoints
 SCENE_DIR/truth/checkpoints.json``'s). The adjustment is run again from ``ORIENT_DIR``'s GCPs
 and tie points with the settings in its ``report.json`` (deterministic: the same models).
@@ -49,7 +49,7 @@ from typing import Any
 
 import numpy as np
 
-sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
+sys.path.insert(0, str(Path(__file__).resolve().parents[2]))
 
 import core.orientation.absolute as absolute  # noqa: E402
 import tasks.absolute.orientation as orientation  # noqa: E402
