@@ -192,8 +192,10 @@ def main() -> None:
         for scene, f in got["figures"].items():
             print(f"  {scene}: {json.dumps(f)}")
         if args.record:
+            commit = subprocess.run(["git", "rev-parse", "--short", "HEAD"], cwd=REPO,
+                                    capture_output=True, text=True, check=False).stdout.strip()
             golden[case] = {"case": CASES[case], "hashes": got["hashes"],
-                            "figures": got["figures"]}
+                            "figures": got["figures"], "recorded_at": commit}
         else:
             bad = compare(case, got, golden)
             print(f"  {len(got['hashes'])} files, "

@@ -92,6 +92,7 @@ class LidarReturns:
     las_class: NDArray[np.uint8]
     cell_i: NDArray[np.int64]
     cell_j: NDArray[np.int64]
+    index: NDArray[np.intp]  # of each return in the points surveyed
 
     def __len__(self) -> int:
         return int(self.x_m.size)
@@ -187,7 +188,7 @@ def lidar_returns(points: LidarPoints, ground_h_m: ArrayLike, surface_h_m: Array
     noise = config.noise_sigma_m * hash_normal(derive_seed(seed, "lidar-noise"), ci, cj)
     z = z_true + noise
     return LidarReturns(points.x_m[keep], points.y_m[keep], z[keep], z_true[keep], las[keep],
-                        ci[keep], cj[keep])
+                        ci[keep], cj[keep], np.flatnonzero(keep))
 
 
 @dataclass(frozen=True, eq=False)
@@ -210,7 +211,7 @@ def lidar_tile(spec: SurfaceSpec, bounds_m: tuple[float, float, float, float], s
     s = sample_surface(spec, pts.x_m, pts.y_m, to_lonlat)
     ret = lidar_returns(pts, s.dtm_m, s.dsm_m, s.classes, s.building_m > 0, s.dark_roof, seed,
                         config)
-    lon, lat = to_lonlat(ret.x_m, ret.y_m)
+    lon, lat = s.lon_deg[ret.index], s.lat_deg[ret.index]
     return LidarTile(ret, spec.geoid.ellipsoidal_to_orthometric(lon, lat, ret.z_m))
 
 

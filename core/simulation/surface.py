@@ -16,7 +16,7 @@ from collections.abc import Callable
 from dataclasses import dataclass
 
 import numpy as np
-from numpy.typing import NDArray
+from numpy.typing import ArrayLike, NDArray
 
 from core.dem import GeoDEM
 from core.errors import InputError
@@ -71,12 +71,26 @@ class SurfaceSample:
     dark_roof: NDArray[np.bool_]
     dtm_m: FloatArray  # ellipsoidal bare earth, water flat
     dsm_m: FloatArray  # ellipsoidal surface: canopy top, roofs
+    lon_deg: FloatArray  # the points' geodetic coordinates
+    lat_deg: FloatArray
+
+
+def dem_height_m(dem: GeoDEM, lon: ArrayLike, lat: ArrayLike) -> FloatArray:
+    """``dem.height_m(lon, lat)`` in one compiled pass (the same values:
+    :func:`core.simulation.raycast_kernels.sample_grid` is SciPy's bilinear sample)."""
+    from core.simulation.raycast_kernels import sample_grid
+
+    lon, lat = np.broadcast_arrays(np.asarray(lon, dtype=np.float64),
+                                   np.asarray(lat, dtype=np.float64))
+    x0, y0, dx, dy = dem.axes
+    return sample_grid(dem.h_m, x0, y0, dx, dy, np.ascontiguousarray(lon).reshape(-1),
+                       np.ascontiguousarray(lat).reshape(-1)).reshape(lon.shape)
 
 
 def terrain_m(spec: SurfaceSpec, x_m: FloatArray, y_m: FloatArray, lon: FloatArray,
               lat: FloatArray) -> FloatArray:
     """Ellipsoidal bare terrain: DEM H + geoid N + sub-cell fractal detail."""
-    H = spec.dem_H.height_m(lon, lat)
+    H = dem_height_m(spec.dem_H, lon, lat)
     detail = fractal_detail_m(
         x_m, y_m, derive_seed(spec.seed, "terrain-detail"), spec.detail_amplitude_m,
         spec.detail_min_wavelength_m, max(spec.dem_cell_m, spec.detail_min_wavelength_m),
@@ -91,8 +105,8 @@ def slope_deg(spec: SurfaceSpec, lon: FloatArray, lat: FloatArray) -> FloatArray
     hx = 0.5 * abs(d.dlon_deg)
     hy = 0.5 * abs(d.dlat_deg)
     m_lon, m_lat = metres_per_degree(lat)
-    dzdx = (d.height_m(lon + hx, lat) - d.height_m(lon - hx, lat)) / (2 * hx * m_lon)
-    dzdy = (d.height_m(lon, lat + hy) - d.height_m(lon, lat - hy)) / (2 * hy * m_lat)
+    dzdx = (dem_height_m(d, lon + hx, lat) - dem_height_m(d, lon - hx, lat)) / (2 * hx * m_lon)
+    dzdy = (dem_height_m(d, lon, lat + hy) - dem_height_m(d, lon, lat - hy)) / (2 * hy * m_lat)
     g = np.hypot(dzdx, dzdy)
     return np.degrees(np.arctan(np.where(np.isfinite(g), g, 0.0)))
 
@@ -121,4 +135,4 @@ def sample_surface(spec: SurfaceSpec, x_m: FloatArray, y_m: FloatArray,
     dtm = dtm_m(terr, cls, lc)
     dsm = dsm_m(terr, cls, canopy, building, lc, roof_base_h_m=roof_base)
     dark = bld.dark_roof & on_bld & (cls == LandCover.URBAN)
-    return SurfaceSample(terr, cls, canopy, building, dark, dtm, dsm)
+    return SurfaceSample(terr, cls, canopy, building, dark, dtm, dsm, lon, lat)

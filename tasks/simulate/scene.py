@@ -9,6 +9,7 @@ reading of the DEM the world stands on are in :mod:`tasks.simulate.io`.
 
 from __future__ import annotations
 
+from concurrent.futures import ThreadPoolExecutor
 from dataclasses import asdict, dataclass, replace
 from datetime import date
 from functools import lru_cache, partial
@@ -64,6 +65,7 @@ from tasks.io.rasters import (
     read_window,
     write_arrays_cog,
 )
+from tasks.scheduling import schedule
 from tasks.simulate.io import ScenePaths, check_dem, load_surface_spec, read_dem_window
 
 NOISE_DN = {8: 1.0, 12: 6.0}
@@ -433,20 +435,23 @@ def make_lidar(scene: SceneDef, out: Path, tile_m: float = 1000.0) -> Path:
     header.generating_software = "gcpfree"
     tmp = paths.lidar.with_name(f".{paths.lidar.name}.tmp")
     seed = derive_seed(scene.seed, "lidar")
-    to_lonlat = Projection(scene.epsg).to_lonlat
+    boxes = [(tx, ty, min(tx + tile_m, xmax), min(ty + tile_m, ymax))
+             for ty in np.arange(ymin, ymax, tile_m) for tx in np.arange(xmin, xmax, tile_m)]
+    survey = partial(lidar_tile, spec, seed=seed, spacing_m=scene.preset_spec.lidar_spacing_m,
+                     to_lonlat=Projection(scene.epsg).to_lonlat)
+    workers = schedule(len(boxes)).workers
     try:
         # the temporary name ends in .tmp: say LAZ, or laspy writes an uncompressed LAS
-        with laspy.open(tmp, mode="w", header=header, do_compress=True) as writer:
-            for ty in np.arange(ymin, ymax, tile_m):
-                for tx in np.arange(xmin, xmax, tile_m):
-                    box = (tx, ty, min(tx + tile_m, xmax), min(ty + tile_m, ymax))
-                    tile = lidar_tile(spec, box, seed, scene.preset_spec.lidar_spacing_m,
-                                      to_lonlat)
-                    if tile is None:
+        with (laspy.open(tmp, mode="w", header=header, do_compress=True) as writer,
+              ThreadPoolExecutor(workers) as pool):
+            for g in range(0, len(boxes), 4 * workers):  # a few tiles in flight per thread
+                # tiles surveyed in threads, written in their order: the bytes of one thread
+                for t in pool.map(survey, boxes[g:g + 4 * workers]):
+                    if t is None:
                         continue
-                    rec = laspy.ScaleAwarePointRecord.zeros(len(tile.returns), header=header)
-                    rec.x, rec.y, rec.z = tile.returns.x_m, tile.returns.y_m, tile.z_orthometric_m
-                    rec.classification = tile.returns.las_class
+                    rec = laspy.ScaleAwarePointRecord.zeros(len(t.returns), header=header)
+                    rec.x, rec.y, rec.z = t.returns.x_m, t.returns.y_m, t.z_orthometric_m
+                    rec.classification = t.returns.las_class
                     writer.write_points(rec)
         tmp.replace(paths.lidar)
     finally:
