@@ -70,7 +70,7 @@ def with_gcp_errors_as_they_are(adj: AbsoluteOrientation, obs: Observations,
                                     absorbed=(jac, sigma, adj.covariance))
     cov = correlated_covariance(adj.covariance, jac, sigma, ground, east, north, error)
     mu2 = parallax_covariance(ground, v, col[:, 0], row[:, 0])
-    if ties is not None and ties.n >= 3 and ties.n_images == len(models):
+    if ties is not None and ties.n >= 3 and ties.n_images == len(models) and ties.complete:
         tie_ground, tie_v = tie_residuals(models, ties)
         mu2 += along_track_covariance(tie_ground, tie_v, ties.row)
     mu = float(np.sqrt(mu2))

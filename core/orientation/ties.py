@@ -3,7 +3,9 @@ the models' parameters alone.
 
 A tie point is one ground point seen in several images, whose ground position is unknown: with
 ``m`` images it gives ``2 m`` measurements for 3 unknowns, so ``2 m - 3`` equations on the
-models' parameters (one for a stereo pair: its parallax across the epipolar lines). Those
+models' parameters (one for a stereo pair: its parallax across the epipolar lines). In a block
+a point is seen in some of the images only (NaN in the others): its equations are those of the
+images that see it, the points grouped by the images they are seen in. Those
 equations are found per point without building the ground unknowns into the adjustment: the
 point is first intersected with the current models (Gauss-Newton on its ground position,
 measurements weighted by their sigma), then its whitened measurement equations are projected
@@ -33,8 +35,8 @@ FloatArray = NDArray[np.float64]
 
 @dataclass(frozen=True, eq=False)
 class TieObservations:
-    """Tie points measured in every image: ``col``/``row`` (n, n_img), 0-based pixel centres;
-    a starting ground position each (``lon_deg``, ``lat_deg``, ellipsoidal ``h_m``, e.g. the
+    """Tie points measured in two or more of the images: ``col``/``row`` (n, n_img), 0-based
+    pixel centres, NaN where an image does not see the point; a starting ground position each (``lon_deg``, ``lat_deg``, ellipsoidal ``h_m``, e.g. the
     relative orientation's intersection: it is refined in every iteration); ``sigma_px`` the
     matching precision (px, a-priori: the adjustment calibrates it as a variance component)."""
 
@@ -57,8 +59,9 @@ class TieObservations:
                                  f"expected ({n},)")
         if not self.sigma_px > 0:
             raise InputError(f"tie point sigma_px must be > 0, got {self.sigma_px}")
-        ok = (np.isfinite(col).all(axis=1) & np.isfinite(row).all(axis=1)
-              & np.isfinite(self.lon_deg) & np.isfinite(self.lat_deg) & np.isfinite(self.h_m))
+        seen = np.isfinite(col) & np.isfinite(row)
+        ok = ((seen.sum(axis=1) >= 2) & np.isfinite(self.lon_deg) & np.isfinite(self.lat_deg)
+              & np.isfinite(self.h_m))
         for name, v in (("col", col), ("row", row), ("lon_deg", self.lon_deg),
                         ("lat_deg", self.lat_deg), ("h_m", self.h_m)):
             object.__setattr__(self, name, np.asarray(v, np.float64)[ok])
@@ -72,9 +75,19 @@ class TieObservations:
         return int(self.col.shape[1])
 
     @property
+    def seen(self) -> NDArray[np.bool_]:
+        """(n, n_img): the images that see each point."""
+        return np.isfinite(self.col) & np.isfinite(self.row)
+
+    @property
+    def complete(self) -> bool:
+        """Every point seen in every image (a stereo pair's tie points)."""
+        return bool(self.seen.all())
+
+    @property
     def n_equations(self) -> int:
-        """Equations on the parameters: ``2 n_img - 3`` per tie point."""
-        return self.n * (2 * self.n_images - 3)
+        """Equations on the parameters: ``2 m - 3`` per tie point seen in ``m`` images."""
+        return int(np.sum(2 * self.seen.sum(axis=1) - 3))
 
     def ground(self) -> FloatArray:
         return np.stack([self.lon_deg, self.lat_deg, self.h_m])
@@ -93,23 +106,42 @@ class TieRows:
     design: FloatArray
 
 
-def _project_all(models: Sequence[SensorModel], ground: FloatArray) -> FloatArray:
-    """(n, 2 m): the ground points' (col, row) in every model, image by image."""
-    out = []
-    for model in models:
-        c, r = model.project(ground[0], ground[1], ground[2])
-        out += [np.asarray(c, np.float64), np.asarray(r, np.float64)]
-    return np.stack(out, axis=1)
+def _project_all(models: Sequence[SensorModel], ground: FloatArray,
+                 seen: NDArray[np.bool_] | None = None) -> FloatArray:
+    """(n, 2 m): the ground points' (col, row) in every model that sees them (``seen`` (n, m),
+    default all), image by image; 0 elsewhere."""
+    n = ground.shape[1]
+    out = np.zeros((n, 2 * len(models)))
+    for k, model in enumerate(models):
+        s = np.ones(n, dtype=bool) if seen is None else seen[:, k]
+        if s.any():
+            c, r = model.project(ground[0][s], ground[1][s], ground[2][s])
+            out[s, 2 * k], out[s, 2 * k + 1] = c, r
+    return out
 
 
-def _ground_design(models: Sequence[SensorModel], ground: FloatArray) -> FloatArray:
-    """(n, 2 m, 3): d(col, row)/d(east, north, up) in every model, px per metre."""
-    return np.concatenate([ground_jacobian(m, ground[0], ground[1], ground[2])
-                           for m in models], axis=1)
+def _ground_design(models: Sequence[SensorModel], ground: FloatArray,
+                   seen: NDArray[np.bool_] | None = None) -> FloatArray:
+    """(n, 2 m, 3): d(col, row)/d(east, north, up) in every model that sees the points, px
+    per metre; 0 elsewhere."""
+    n = ground.shape[1]
+    out = np.zeros((n, 2 * len(models), 3))
+    for k, model in enumerate(models):
+        s = np.ones(n, dtype=bool) if seen is None else seen[:, k]
+        if s.any():
+            out[s, 2 * k:2 * k + 2] = ground_jacobian(model, ground[0][s], ground[1][s],
+                                                      ground[2][s])
+    return out
 
 
 def _measured(ties: TieObservations) -> FloatArray:
-    return np.stack([ties.col, ties.row], axis=2).reshape(ties.n, -1)
+    """(n, 2 m) the measurements, image by image (col, row), 0 where not seen."""
+    return np.nan_to_num(np.stack([ties.col, ties.row], axis=2).reshape(ties.n, -1))
+
+
+def _seen2(ties: TieObservations) -> NDArray[np.bool_]:
+    """(n, 2 m): the measurements taken (col and row of each image that sees the point)."""
+    return np.repeat(ties.seen, 2, axis=1)
 
 
 def refine_ground(models: Sequence[SensorModel], ties: TieObservations, ground: ArrayLike,
@@ -120,11 +152,12 @@ def refine_ground(models: Sequence[SensorModel], ties: TieObservations, ground: 
     the ground design (n, 2 m, 3) used: ``design`` when given (a previous iteration's: the
     rays' directions hardly move between iterations), else computed at ``ground``."""
     g = np.array(ground, dtype=np.float64)
-    b = _ground_design(models, g) if design is None else design
+    seen = ties.seen
+    b = _ground_design(models, g, seen) if design is None else design
     meas = _measured(ties)
     btb_inv = np.linalg.inv(np.einsum("nki,nkj->nij", b, b))
     for _ in range(iterations):
-        r = meas - _project_all(models, g)
+        r = np.where(_seen2(ties), meas - _project_all(models, g, seen), 0.0)
         d = np.einsum("nij,nkj,nk->ni", btb_inv, b, r)
         m_lon, m_lat = metres_per_degree(g[1])
         g = g + np.stack([d[:, 0] / m_lon, d[:, 1] / m_lat, d[:, 2]])
@@ -145,23 +178,35 @@ def tie_rows(models: Sequence[SensorModel], ties: TieObservations, ground: Array
         raise InputError(f"tie points measured in {ties.n_images} images for "
                          f"{len(models)} models")
     g, b_px = refine_ground(models, ties, ground, design)
+    seen = ties.seen
     b = b_px / ties.sigma_px
-    r = (_measured(ties) - _project_all(models, g)) / ties.sigma_px
-    u_full, s, _ = np.linalg.svd(b, full_matrices=True)
-    if np.any(s[:, -1] <= 1e-9 * s[:, 0]):
-        raise GeometryError("a tie point's rays are parallel: the images do not form a stereo "
-                            "pair there")
-    u = u_full[:, :, 3:]  # (n, 2m, 2m - 3): the left null space of the ground design
-    n, k = ties.n, u.shape[2]
-    rr = np.einsum("nck,nc->nk", u, r).reshape(-1)
-    point = np.repeat(np.arange(n), k)
-    if not jacobian:
-        return TieRows(np.zeros((rr.size, int(offsets[-1]))), rr, point, g, b_px)
-    a = np.zeros((n, 2 * len(models), int(offsets[-1])))
-    for m, model in enumerate(models):
-        jac = np.asarray(model.jacobian(g[0], g[1], g[2]), np.float64)  # (n, 2, p_m)
-        a[:, 2 * m:2 * m + 2, offsets[m]:offsets[m + 1]] = jac / ties.sigma_px
-    ar = np.einsum("nck,ncp->nkp", u, a).reshape(-1, int(offsets[-1]))
+    r = (_measured(ties) - _project_all(models, g, seen)) / ties.sigma_px
+    n_par = int(offsets[-1])
+    a_parts, r_parts, p_parts = [], [], []
+    # the points grouped by the images that see them (one group for a pair's tie points)
+    patterns, which = np.unique(seen, axis=0, return_inverse=True)
+    for q, pattern in enumerate(patterns):
+        idx = np.flatnonzero(which.ravel() == q)
+        images = np.flatnonzero(pattern)
+        cols = np.ravel(np.stack([2 * images, 2 * images + 1], axis=1))
+        u_full, s, _ = np.linalg.svd(b[np.ix_(idx, cols)], full_matrices=True)
+        if np.any(s[:, -1] <= 1e-9 * s[:, 0]):
+            raise GeometryError("a tie point's rays are parallel: the images do not form a "
+                                "stereo pair there")
+        u = u_full[:, :, 3:]  # (p, 2k, 2k - 3): the left null space of the ground design
+        r_parts.append(np.einsum("nck,nc->nk", u, r[np.ix_(idx, cols)]).reshape(-1))
+        p_parts.append(np.repeat(idx, u.shape[2]))
+        if jacobian:
+            a = np.zeros((idx.size, cols.size, n_par))
+            for slot, m in enumerate(images):
+                gi = g[:, idx]
+                jac = np.asarray(models[m].jacobian(gi[0], gi[1], gi[2]), np.float64)
+                a[:, 2 * slot:2 * slot + 2, offsets[m]:offsets[m + 1]] = jac / ties.sigma_px
+            a_parts.append(np.einsum("nck,ncp->nkp", u, a).reshape(-1, n_par))
+    rr, point = np.concatenate(r_parts), np.concatenate(p_parts)
+    order = np.argsort(point, kind="stable")  # point by point, as the points were given
+    rr, point = rr[order], point[order]
+    ar = np.vstack(a_parts)[order] if jacobian else np.zeros((rr.size, n_par))
     return TieRows(ar, rr, point, g, b_px)
 
 
@@ -172,6 +217,6 @@ def tie_residuals(models: Sequence[SensorModel], ties: TieObservations
     metre east, north, up): what :func:`core.orientation.uncertainty.parallax_covariance`
     takes."""
     g, b = refine_ground(models, ties, ties.ground())
-    v = _measured(ties) - _project_all(models, g)
+    v = np.where(_seen2(ties), _measured(ties) - _project_all(models, g, ties.seen), np.nan)
     m = len(models)
     return b.reshape(ties.n, m, 2, 3), v.reshape(ties.n, m, 2)

@@ -135,3 +135,29 @@ def test_a_term_the_gcps_cannot_see_stays_held_by_its_prior(pair):
     assert abs(value) < 4.0 and 2.0 < sigma < 6.0, (value, sigma)
     value, sigma = k3_at_line_ends(free)
     assert abs(value) > 20.0 and sigma > 100.0, (value, sigma)
+
+
+def test_tie_points_seen_in_some_images_give_the_equations_of_those_images(pair):
+    """A block: three images, tie points seen in two of them (NaN in the third, where a
+    projection need not even exist) or in all three. The equations of a point seen in two
+    images are the pair's own (the third image's parameters untouched); a point seen in all
+    three has 2 x 3 - 3 = 3."""
+    delivered, truth = pair
+    third = truth[1].with_params(truth[1].params * 0.5)  # a third view of the same ground
+    models = (*delivered, delivered[1].with_params(delivered[1].params * 0.5))
+    offsets = np.concatenate([[0], np.cumsum([len(m.params) for m in models])])
+    rng = np.random.default_rng(5)
+    lon, lat, h, cols, rows = measured((*truth, third), 30, rng, 3000, 0.1)
+    col, row = np.stack(cols, 1), np.stack(rows, 1)
+    col[:20, 2] = row[:20, 2] = np.nan  # 20 points seen by images 0 and 1 only
+    ties = TieObservations(col, row, lon, lat, h)
+    assert ties.n == 30 and not ties.complete and ties.n_equations == 20 * 1 + 10 * 3
+    t = tie_rows(models, ties, ties.ground(), offsets)
+    assert t.a.shape == (50, offsets[-1])
+    two = TieObservations(col[:20, :2], row[:20, :2], lon[:20], lat[:20], h[:20])
+    pair_rows = tie_rows(models[:2], two, two.ground(), offsets[:3])
+    mine = np.isin(t.point, np.arange(20))
+    assert np.allclose(t.a[mine][:, :offsets[2]], pair_rows.a, atol=1e-9)
+    assert np.all(t.a[mine][:, offsets[2]:] == 0.0)
+    assert np.allclose(t.r[mine], pair_rows.r, atol=1e-9)
+    assert np.bincount(t.point).tolist() == [1] * 20 + [3] * 10
