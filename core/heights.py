@@ -16,12 +16,12 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
+from core.choices import DATUMS, VERTICAL_CHOICES
 from core.errors import InputError
 from core.geoid import GeoidGrid
 
 FloatArray = NDArray[np.float64]
 
-DATUMS = ("ellipsoidal", "egm96")
 #: metres per unit of the height units gcpfree reads
 Z_UNITS: dict[str, float] = {"m": 1.0, "ft": 0.3048, "us-ft": 1200.0 / 3937.0}
 UNIT_NAMES = {  # unit strings met in rasters and CRSs -> Z_UNITS key
@@ -83,7 +83,6 @@ def height_difference_m(dem_z: ArrayLike, dem: HeightFrame, ref_z: ArrayLike, re
 
 # ---- the vertical datum of a DEM: one rule ----------------------------------------------------
 
-VERTICAL_CHOICES = ("auto", *DATUMS)
 #: orthometric datums a DEM's heights may refer to (``h = H + N``), by name; ``orthometric``:
 #: heights above the geoid of the grid the user names (``--geoid``), whatever its model
 GEOID_DATUMS = {"egm96": "EGM96", "egm2008": "EGM2008", "orthometric": "orthometric"}

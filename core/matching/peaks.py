@@ -27,11 +27,13 @@ import cv2
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
+from core.choices import MEASURES
+
 FloatArray = NDArray[np.float64]
 
 #: the tie points' correlation measures (``TiePointConfig.measure``) and their names
-MEASURE_NAMES = {"ncc": "normalised cross-correlation", "orientation": "orientation correlation"}
-MEASURES = tuple(MEASURE_NAMES)
+MEASURE_NAMES = dict(zip(MEASURES, ("normalised cross-correlation", "orientation correlation"),
+                         strict=True))
 
 #: the value of an undefined correlation (nodata under the window, a flat patch)
 INVALID = -2.0

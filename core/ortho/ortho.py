@@ -35,6 +35,7 @@ import numpy as np
 from numpy.typing import NDArray
 from scipy.ndimage import maximum_filter
 
+from core.choices import RESAMPLINGS, Resampling
 from core.dem import GeoDEM, SurfaceGrid
 from core.errors import InputError
 from core.geoid import GeoidGrid
@@ -44,7 +45,6 @@ from core.sensors.base import SensorModel
 FloatArray = NDArray[np.float64]
 LonLatOf = Callable[[FloatArray, FloatArray], tuple[FloatArray, FloatArray]]
 
-RESAMPLINGS = ("nearest", "bilinear", "cubic")
 KERNEL_RADIUS = {"nearest": 1, "bilinear": 1, "cubic": 2}  # taps beyond the centre pixel
 MAX_CHECK_POINTS = 4096  # per check kind and refinement round
 
@@ -61,7 +61,7 @@ class OrthoConfig:
     ``occlusion_tol_m`` above the line of sight counting as hiding it.
     """
 
-    resampling: str = "bilinear"
+    resampling: Resampling = "bilinear"
     tol_px: float = 0.01
     step_px: int = 64
     degree: int = 2

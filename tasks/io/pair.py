@@ -13,12 +13,9 @@ from dataclasses import asdict, dataclass, replace
 from pathlib import Path
 from typing import Any
 
+from core.choices import TIE_MEASURES, VERTICAL_CHOICES, TieMeasure, VerticalChoice
 from core.errors import InputError
-from core.heights import VERTICAL_CHOICES
-from core.matching.peaks import MEASURES
 
-#: ``--tie-measure`` choices: auto, then the measures of core.matching.peaks
-TIE_MEASURES = ("auto", *MEASURES)
 PATHS = ("left", "right", "left_model", "right_model", "reference", "srtm_dir", "geoid")
 
 
@@ -46,9 +43,9 @@ class PairInputs:
     right_model: Path | None = None
     band: int | None = None
     reference: Path | None = None
-    reference_vertical: str = "auto"
+    reference_vertical: VerticalChoice = "auto"
     srtm_dir: Path | None = None
-    tie_measure: str = "auto"
+    tie_measure: TieMeasure = "auto"
     geoid: Path | None = None
 
     def __post_init__(self) -> None:

@@ -30,6 +30,7 @@ import pyproj
 from prefect import task
 from prefect.cache_policies import NO_CACHE
 
+from core.choices import Resampling, VerticalChoice
 from core.errors import CoverageError, InputError
 from core.geodesy import utm_epsg
 from core.heights import DatumDecision
@@ -152,10 +153,10 @@ class OrthoOptions:
     out: Path
     model: Path | None = None
     band: int | None = None
-    dem_vertical: str = "auto"
+    dem_vertical: VerticalChoice = "auto"
     resolution_m: float | None = None
     epsg: int | None = None
-    resampling: str = "bilinear"
+    resampling: Resampling = "bilinear"
     occlusion_mask: Path | None = None
     workers: int | None = None
 

@@ -1,0 +1,33 @@
+"""The string options' choices, each once: a ``Literal`` type for the configs that take it and
+the tuple of its values for their checks and the command line's ``choices`` (the standard
+library only, so that ``gcpfree --help`` builds its parser without NumPy).
+
+- ``Corrections``: the terms adjusted per image (``linear``: pushbroom attitude biases and
+  rates, RPC affine; ``offset``: biases, RPC shift);
+- ``Datum``, ``VerticalChoice``: a height's vertical datum, and what an option may say of a
+  DEM's (``auto``: decided by the one datum rule, :func:`core.heights.decide_datum`);
+- ``Resampling``: the ortho kernel's image resampling (:class:`core.ortho.ortho.OrthoConfig`);
+- ``Measure``, ``TieMeasure``: the tie points' correlation measures
+  (:mod:`core.matching.peaks`), and what ``--tie-measure`` may say (``auto``: chosen from the
+  two images' suns).
+"""
+
+from __future__ import annotations
+
+from typing import Literal, get_args
+
+Corrections = Literal["linear", "offset"]
+CORRECTIONS: tuple[Corrections, ...] = get_args(Corrections)
+
+Datum = Literal["ellipsoidal", "egm96"]
+DATUMS: tuple[Datum, ...] = get_args(Datum)
+VerticalChoice = Literal["auto", Datum]
+VERTICAL_CHOICES: tuple[VerticalChoice, ...] = get_args(VerticalChoice)
+
+Resampling = Literal["nearest", "bilinear", "cubic"]
+RESAMPLINGS: tuple[Resampling, ...] = get_args(Resampling)
+
+Measure = Literal["ncc", "orientation"]
+MEASURES: tuple[Measure, ...] = get_args(Measure)
+TieMeasure = Literal["auto", Measure]
+TIE_MEASURES: tuple[TieMeasure, ...] = get_args(TieMeasure)
