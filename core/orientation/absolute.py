@@ -99,19 +99,25 @@ class AbsoluteConfig(RobustAdjustment):
 def observation_sigmas_px(models: Sequence[SensorModel], obs: Observations,
                           matching_sigma_px: float) -> FloatArray:
     """(n_gcp, n_img) expected error of each measurement: matching plus the GCP's ground error
-    seen from that image (horizontal over the GSD, vertical times tan(incidence) over it)."""
+    seen from that image (horizontal over the GSD, vertical times tan(incidence) over it); NaN
+    where an image does not measure the GCP (never projected there: in a block it may lie far
+    outside that image)."""
     out = np.full(np.shape(obs.col), np.nan)
-    lon, lat, h = obs.lon_deg, obs.lat_deg, obs.h_m
-    g = np.stack(geodetic_to_ecef(lon, lat, h), axis=1)
+    seen = np.isfinite(np.asarray(obs.col)) & np.isfinite(np.asarray(obs.row))
     for m, model in enumerate(models):
+        s = seen[:, m]
+        if not s.any():
+            continue
+        lon, lat, h = obs.lon_deg[s], obs.lat_deg[s], obs.h_m[s]
+        g = np.stack(geodetic_to_ecef(lon, lat, h), axis=1)
         c, r = model.project(lon, lat, h)
         lon1, lat1 = model.localize(c + 1.0, r, h)
         gsd = np.linalg.norm(np.stack(geodetic_to_ecef(lon1, lat1, h), axis=1) - g, axis=1)
         lon_up, lat_up = model.localize(c, r, h + 100.0)
         shift = np.linalg.norm(np.stack(geodetic_to_ecef(lon_up, lat_up, h), axis=1) - g,
                                axis=1) / 100.0  # tan(incidence)
-        out[:, m] = np.sqrt(matching_sigma_px**2 + (obs.sigma_xy_m**2
-                                                    + (obs.sigma_h_m * shift) ** 2) / gsd**2)
+        out[s, m] = np.sqrt(matching_sigma_px**2 + (obs.sigma_xy_m[s]**2
+                                                    + (obs.sigma_h_m[s] * shift) ** 2) / gsd**2)
     return out
 
 

@@ -124,6 +124,7 @@ class Solution:
     reasons: dict[int, str]
     ground_error: CorrelatedGroundError
     frames_used: tuple[FramePrior, ...]
+    connectivity: Connectivity | None = None
 
     @property
     def models(self) -> tuple[SensorModel, ...]:
@@ -191,6 +192,59 @@ def check_points_in(model: SensorModel, points: CheckPointSet, name: str
     """The check points' residuals in image ``name`` under ``model`` (None: none there)."""
     arrays = _points_in(points, name)
     return check_point_stats(model, *arrays, name) if arrays else None
+
+
+@dataclass(frozen=True)
+class Connectivity:
+    """How a block holds together: the images measuring GCPs, those held only through tie
+    points to them, the components of the tie-point graph (images linked by tie points seen
+    in both), and each linked couple's number of tie points."""
+
+    with_gcps: tuple[str, ...]
+    ties_only: tuple[str, ...]
+    components: tuple[tuple[str, ...], ...]
+    links: tuple[tuple[str, str, int], ...]
+
+    def to_dict(self) -> dict[str, Any]:
+        return {"with_gcps": list(self.with_gcps), "ties_only": list(self.ties_only),
+                "components": [list(c) for c in self.components],
+                "links": [{"images": [a, b], "tie_points": n} for a, b, n in self.links]}
+
+
+def connectivity(names: tuple[str, ...], gcps: Sequence[ControlPoint],
+                 ties: TieObservations | None) -> Connectivity:
+    """The block's :class:`Connectivity`; InputError naming the images neither a GCP nor a
+    chain of tie points to an image with GCPs holds (they cannot be oriented)."""
+    with_gcps = {n for p in gcps for n in p.image_points}
+    links: list[tuple[str, str, int]] = []
+    if ties is not None and ties.n:
+        seen = ties.seen
+        for i in range(len(names)):
+            for j in range(i + 1, len(names)):
+                k = int(np.sum(seen[:, i] & seen[:, j]))
+                if k:
+                    links.append((names[i], names[j], k))
+    parent = {n: n for n in names}
+
+    def root(n: str) -> str:
+        while parent[n] != n:
+            n = parent[n]
+        return n
+
+    for a, b, _ in links:
+        parent[root(a)] = root(b)
+    groups: dict[str, list[str]] = {}
+    for n in names:
+        groups.setdefault(root(n), []).append(n)
+    components = tuple(tuple(g) for g in groups.values())
+    held = {n for c in components if with_gcps & set(c) for n in c}
+    loose = [n for n in names if n not in held]
+    if loose:
+        raise InputError(f"images {', '.join(loose)} have no GCP and no tie points to an image "
+                         "that has one: they cannot be oriented; give tie points between "
+                         "overlapping images (gcpfree block finds them) or GCPs in them")
+    return Connectivity(tuple(n for n in names if n in with_gcps),
+                        tuple(n for n in names if n not in with_gcps), components, tuple(links))
 
 
 @dataclass(frozen=True, eq=False)
@@ -287,6 +341,7 @@ def adjust(images: Sequence[ImageToAdjust], control: Sequence[ControlSet],
             frames[frames.index(p)] = replace(p, up_of=None)
     if len(frames) == 1:  # alone, a frame trades with the biases: considered, not estimated
         frames[0] = replace(frames[0], estimated=False)
+    links = connectivity(names, gcps, ties)
     models = [i.model.with_corrections(config.corrections)  # type: ignore[attr-defined]
               for i in images]
     obs = Observations.from_control_points(gcps, names, frame_of)
@@ -300,4 +355,5 @@ def adjust(images: Sequence[ImageToAdjust], control: Sequence[ControlSet],
         xy, h = with_correlated_error(obs.sigma_xy_m, obs.sigma_h_m, run.ground_error)
         run = _run(models, names, obs.with_sigmas(xy, h), used, config, ties)
     return Solution(names, tuple(i.size for i in images), run.adj, run.calib, run.at,
-                    tuple(gcps), tuple(kinds), run.kept, run.reasons, run.ground_error, used)
+                    tuple(gcps), tuple(kinds), run.kept, run.reasons, run.ground_error, used,
+                    links)

@@ -33,7 +33,7 @@ def with_gcp_errors_as_they_are(adj: AbsoluteOrientation, obs: Observations,
                                 kept: np.ndarray, config: AbsoluteConfig,
                                 ties: TieObservations | None = None
                                 ) -> tuple[AbsoluteOrientation, CorrelatedGroundError]:
-    """``adj`` with the uncertainties the GCPs measured in both images support: the model's own
+    """``adj`` with the uncertainties the GCPs measured in two images or more support: the model's own
     error only where their residuals show one their ground cannot have made (``uncertainty.
     parallax_covariance``; the smooth part of the raw residuals is mostly the reference's
     error, correlated over kilometres), that correlated ground error propagated into the
@@ -41,20 +41,22 @@ def with_gcp_errors_as_they_are(adj: AbsoluteOrientation, obs: Observations,
     the model's error that follows the time of imaging (jitter faster than the GCPs' spacing)
     from their parallax at points nearest in time (``along_track_covariance``). Unchanged
     with fewer than 3 such GCPs. Returned with the correlated ground error found."""
-    use = np.asarray(kept, dtype=bool) & np.isfinite(obs.col).all(axis=1) \
-        & np.isfinite(obs.row).all(axis=1)
+    taken = np.isfinite(np.asarray(obs.col)) & np.isfinite(np.asarray(obs.row))
+    use = np.asarray(kept, dtype=bool) & (taken.sum(axis=1) >= 2)
     if use.sum() < 3:
         return adj, NO_CORRELATION
     sub = obs.subset(use)
-    col, row = np.asarray(sub.col), np.asarray(sub.row)
+    col, row, seen = np.asarray(sub.col), np.asarray(sub.row), taken[use]
     models = adj.models
-    jac, ground = adj.gcp_design(sub, np.ones(col.shape, dtype=bool))
+    jac, ground = adj.gcp_design(sub, seen)
     here = sub.shifted(adj.frame_layout, adj.frame_params)
     lon, lat, h = here.lon_deg, here.lat_deg, here.h_m
-    v = np.empty(col.shape + (2,))
+    v = np.zeros(col.shape + (2,))
     for k, model in enumerate(models):
-        pc, pr = model.project(lon, lat, h)
-        v[:, k, 0], v[:, k, 1] = col[:, k] - pc, row[:, k] - pr
+        s = seen[:, k]
+        if s.any():
+            pc, pr = model.project(lon[s], lat[s], h[s])
+            v[s, k, 0], v[s, k, 1] = col[s, k] - pc, row[s, k] - pr
     m_lon, m_lat = metres_per_degree(float(np.mean(lat)))
     east, north = (lon - lon.mean()) * m_lon, (lat - lat.mean()) * m_lat
     sigma = np.repeat(observation_sigmas_px(models, sub, config.matching_sigma_px)[..., None],
@@ -66,10 +68,14 @@ def with_gcp_errors_as_they_are(adj: AbsoluteOrientation, obs: Observations,
         sigma = sigma * np.sqrt(comps.factor_of("gcp"))
     else:
         sigma = sigma * np.sqrt([comps.factor_of("gcp_col"), comps.factor_of("gcp_row")])
+    sigma = np.where(seen[..., None], sigma, np.inf)  # a block's GCP: its own images only
     error = correlated_ground_error(ground, v, east, north,
                                     absorbed=(jac, sigma, adj.covariance))
     cov = correlated_covariance(adj.covariance, jac, sigma, ground, east, north, error)
-    mu2 = parallax_covariance(ground, v, col[:, 0], row[:, 0])
+    if seen.all():
+        mu2 = parallax_covariance(ground, v, col[:, 0], row[:, 0])
+    else:
+        mu2 = _parallax_by_images(ground, v, seen, east, north)
     if ties is not None and ties.n >= 3 and ties.n_images == len(models) and ties.complete:
         tie_ground, tie_v = tie_residuals(models, ties)
         mu2 += along_track_covariance(tie_ground, tie_v, ties.row)
@@ -77,3 +83,21 @@ def with_gcp_errors_as_they_are(adj: AbsoluteOrientation, obs: Observations,
     residuals = tuple(replace(r, unmodelled_col_px=mu, unmodelled_row_px=mu)
                       for r in adj.residuals)
     return replace(adj, covariance=cov, residuals=residuals), error
+
+
+def _parallax_by_images(ground: FloatArray, v: FloatArray, seen: NDArray[np.bool_],
+                        east_m: FloatArray, north_m: FloatArray) -> float:
+    """:func:`~core.orientation.uncertainty.parallax_covariance` of a block's GCPs, each group
+    of GCPs seen by the same images on its own (neighbours sought on the ground, east and
+    north), weighted by the group's size; 0 with no group of 3."""
+    patterns, which = np.unique(seen, axis=0, return_inverse=True)
+    total, weight = 0.0, 0
+    for q, pattern in enumerate(patterns):
+        idx = np.flatnonzero(which.ravel() == q)
+        images = np.flatnonzero(pattern)
+        if idx.size < 3 or images.size < 2:
+            continue
+        mu2 = parallax_covariance(ground[np.ix_(idx, images)], v[np.ix_(idx, images)],
+                                  east_m[idx], north_m[idx])
+        total, weight = total + mu2 * idx.size, weight + idx.size
+    return total / weight if weight else 0.0

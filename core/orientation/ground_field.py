@@ -224,11 +224,15 @@ def own_variance(covariance: ArrayLike, param_jac: ArrayLike, sigma_px: ArrayLik
         rg = gk - af @ (c @ (wa.T @ gk))
         shown += vk * np.sum((rg @ r) * rg, axis=1)
     redundancy = 1.0 - np.sum((af @ c) * wa, axis=1)  # R_ii
+    taken = np.isfinite(s2.reshape(-1))  # an infinite sigma: a measurement not taken (blocks)
+    redundancy = np.where(taken, redundancy, 0.0)
     lam = np.ones(af.shape[0])
     for axis in (slice(0, None, 2), slice(1, None, 2)):  # columns, rows
         red = float(np.sum(redundancy[axis]))
         if red > 1e-9:  # else the residuals told nothing: the weights as they are
-            lam[axis] = 1.0 - np.sum(shown[axis] / s2.reshape(-1)[axis]) / red
+            s2a, sh = s2.reshape(-1)[axis], shown[axis]
+            ok = taken[axis]
+            lam[axis] = 1.0 - np.sum(sh[ok] / s2a[ok]) / red
     return (np.clip(lam, 0.0, 1.0) * s2.reshape(-1)).reshape(shape)
 
 
@@ -257,7 +261,10 @@ def correlated_covariance(covariance: ArrayLike, param_jac: ArrayLike, sigma_px:
     var = np.asarray(error.variance_m2, dtype=np.float64)
     f = sum(vk * fk[:, k, :].T @ r @ fk[:, k, :] for k, vk in enumerate(var))
     own = own_variance(c, a, np.sqrt(s2), ground_jac, east_m, north_m, error)
-    f = f + np.einsum("nmau,nma,nmav->uv", wa, own - s2, wa)
+    taken = np.isfinite(s2)  # not taken (infinite sigma): nothing
+    less = np.zeros_like(s2)
+    less[taken] = own[taken] - s2[taken]
+    f = f + np.einsum("nmau,nma,nmav->uv", wa, less, wa)
     return c + c @ f @ c
 
 
