@@ -55,7 +55,7 @@ class DsmParams:
     workers: int | None = None
     progress: bool = True
     images: tuple[Path, ...] = ()  # N views (the pair's left and right are the first two)
-    fusion: str = "weighted"  # of the views' pairs: core.matching.fusion.FUSION_METHODS
+    fusion: str = "weighted_median"  # of the views' pairs: core.matching.fusion.FUSION_METHODS
 
     def fusion_config(self) -> FusionConfig:
         """How the views' pairs are fused (checked: a bad value raises InputError)."""
@@ -179,7 +179,10 @@ def oriented_views(params: DsmParams) -> OrientedViews:
 def match_views(v: OrientedViews, params: DsmParams, cfg: DenseConfig) -> list[MatchedViewPair]:
     """Every overlapping pair of the views planned (the ROI of the first image in each pair's
     left one), matched and, after a joint orientation, triangulated with the delivered models
-    too, into ``.<out>.work/I-J``."""
+    too, into ``.<out>.work/I-J``. Without a reference DEM or a height range given, the
+    search spans the tie points' heights and ``margin_m`` (an RPC's own range, 1050 m on the
+    Marseille triplet, made the wide pair search 528 disparities, 120 with the tie points',
+    and its heights noisier)."""
     from core.sensors.footprint import scene_height_range_m
     from tasks.dense.dem import match_tiles, plan_dense, retriangulate_tiles
     from tasks.dense.multiview import b_over_h, pair_roi, unify_plans
@@ -188,8 +191,11 @@ def match_views(v: OrientedViews, params: DsmParams, cfg: DenseConfig) -> list[M
     out, views = Path(params.out), list(v.views)
     h_range = scene_height_range_m([m.model for m in views], params.height_range_m,
                                    any_terrain=v.reference is not None)
-    h_roi = h_range if v.h_range_m is None else (v.h_range_m[0] - cfg.margin_m,
-                                                 v.h_range_m[1] + cfg.margin_m)
+    if v.h_range_m is not None:  # the tie points' heights: the search without a reference
+        h_roi = (v.h_range_m[0] - cfg.margin_m, v.h_range_m[1] + cfg.margin_m)
+        h_range = h_roi if v.reference is None and params.height_range_m is None else h_range
+    else:
+        h_roi = h_range
     pairs = overlapping_pairs(views, 0.5 * sum(h_range), h_range)
     plans = unify_plans([plan_dense(views[i], views[j], pair_roi(views, i, params.roi, h_roi),
                                     v.reference, h_range, v.reference_vertical, cfg)

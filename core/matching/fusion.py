@@ -2,26 +2,35 @@
 for three or more views).
 
 Each pair's matched points give a cell the median of their heights
-(:func:`core.matching.grid.median_per_cell`), and the pairs' heights of a cell are fused:
+(:func:`core.matching.grid.median_per_cell`), and the pairs' heights of a cell are fused, each
+pair weighted by (B/H)^2 (one matching error in pixels is a height error inversely
+proportional to B/H: (B/H)^2 is the inverse of a pair's height variance):
 
-- ``weighted`` (the default): the mean of the pairs' heights weighted by (B/H)^2, over the
-  pairs within ``k_sigma`` robust sigmas of their weighted median. One matching precision in
-  pixels is a height error inversely proportional to B/H, so (B/H)^2 is the inverse of each
-  pair's height variance; the weighted median (robust: half the weight on either side) says
-  where the cell is, and a pair far from it (a mismatch, a side of a wall one pair sees) is
-  left out. A pair's robust sigma is its NMAD about the weighted median over the cells it
-  shares with another pair in the block.
+- ``weighted_median`` (the default): the weighted median, the height where half the weight
+  lies on either side. Where one pair's geometry outweighs the others it is that pair's
+  height (its blunders too, as in its own DSM), elsewhere the median of comparable pairs;
+  the others' blunders never move it.
+- ``weighted_mean``: the weighted mean of the pairs within ``k_sigma`` robust sigmas of the
+  weighted median (a pair's sigma: its NMAD about it over the cells it shares with another
+  pair in the block). The best when the pairs' errors are independent.
 - ``median``: the median of the pairs' heights (each pair counts alike).
 
-Measured on the Pleiades Marseille triplet after the joint relative orientation (pairs of B/H
-0.11, 0.12 and 0.23; 0.5 m cells): the noise of a DSM, as the NMAD of its discrete Laplacian
-over the cells the three pairs share, is 0.41 m for each narrow pair and 0.28 m for the wide
-one; the median of the three makes it 0.31 m (worse than the wide pair alone: the median
-follows the noisier pairs), the weighted fusion 0.24 m. The matcher keeps no per-pixel
-correlation in its point files, so the pairs are weighted by their geometry alone.
+Why the default. On a triplet of one pass the pairs' errors are not independent: the two
+narrow pairs share the middle image, and their heights average into the wide pair's (both
+measure the outer images' parallax). Measured on the Pleiades Marseille triplet after the
+joint relative orientation (B/H 0.11, 0.11, 0.23; 0.5 m cells), the noise of each DSM as the
+NMAD of its discrete Laplacian over the 227 000 cells where the three pairs have heights
+throughout the stencil: the narrow pairs 0.41 m each, the wide one 0.21 m; fused, the
+weighted median 0.21 m (it keeps the wide pair's heights where it has them), the weighted
+mean 0.21 m (0.214: the narrow pairs add noise, not information), the median 0.31 m (it
+follows the noisier pairs). With independent errors (a synthetic test) the weighted mean is
+the best of the three and the weighted median only the best pair's; the matcher keeps no
+per-pixel correlation in its point files, so the pairs are weighted by their geometry alone.
 
-A cell's count of views is the number of images among the pairs it kept. The heights of each
-pair are also kept per cell, to compare the pairs (:func:`difference_histograms`). No I/O here.
+A cell's count of views is the number of images among the pairs that agree with its height
+(within ``k_sigma`` robust sigmas of the weighted median; every pair with a height for the
+median). The heights of each pair are also kept per cell, to compare the pairs
+(:func:`difference_histograms`). No I/O here.
 """
 
 from __future__ import annotations
@@ -35,7 +44,7 @@ from core.errors import InputError
 from core.matching.grid import median_per_cell
 
 FloatArray = NDArray[np.float64]
-FUSION_METHODS = ("weighted", "median")
+FUSION_METHODS = ("weighted_median", "weighted_mean", "median")
 #: bins of the pairs' height differences (m): 5 mm, over +-100 m
 DIFF_EDGES_M = np.linspace(-100.0, 100.0, 40001)
 
@@ -43,11 +52,12 @@ DIFF_EDGES_M = np.linspace(-100.0, 100.0, 40001)
 @dataclass(frozen=True)
 class FusionConfig:
     """How the pairs' heights of a cell are fused (module docstring): ``method`` one of
-    :data:`FUSION_METHODS`; ``k_sigma`` the robust sigmas beyond which a pair is left out of
-    the weighted mean; a pair sharing fewer than ``min_shared_cells`` cells with another in a
-    block is never left out there (its sigma unknown)."""
+    :data:`FUSION_METHODS`; ``k_sigma`` the robust sigmas beyond which a pair disagrees with
+    the weighted median (left out of the weighted mean and of the count of views); a pair
+    sharing fewer than ``min_shared_cells`` cells with another in a block is never left out
+    there (its sigma unknown)."""
 
-    method: str = "weighted"
+    method: str = "weighted_median"
     k_sigma: float = 3.0
     min_shared_cells: int = 100
 
@@ -142,6 +152,8 @@ def fuse_heights(z_pairs: ArrayLike, weights: ArrayLike, pair_images: ArrayLike,
     if cfg.method == "median":
         keep = np.isfinite(z)
         fused = median_of_pairs(z)
+    elif cfg.method == "weighted_median":
+        keep, fused = _kept(z, w, cfg)
     else:
         keep, _ = _kept(z, w, cfg)
         wk = np.where(keep, w[:, None, None], 0.0)

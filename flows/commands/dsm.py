@@ -29,10 +29,13 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
                         "beside them): one joint relative orientation (the first fixed), "
                         "every overlapping pair matched, their heights fused per cell; "
                         "OUT_views.tif counts the images behind each cell")
-    p.add_argument("--fusion", choices=("weighted", "median"), default="weighted",
-                   help="with --images: weighted (default), the pairs' heights weighted by "
-                        "(B/H)^2 within 3 robust sigmas of their weighted median; median: "
-                        "their median")
+    p.add_argument("--fusion", choices=("weighted_median", "weighted_mean", "median"),
+                   default="weighted_median",
+                   help="with --images, a cell's height from its pairs' (each weighted by "
+                        "(B/H)^2): weighted_median (default; on a one-pass triplet the widest "
+                        "pair's, the others where it has none), weighted_mean (of the pairs "
+                        "within 3 robust sigmas of the weighted median; best when the pairs' "
+                        "errors are independent) or median")
     p.add_argument("--roi", type=int, nargs=4, default=None,
                    metavar=("COL", "ROW", "WIDTH", "HEIGHT"),
                    help="region of the left (first) image (pixels); default the whole image")

@@ -44,22 +44,29 @@ def three_pairs(shape=(200, 200), seed=0):
     return truth, z, blunder
 
 
-def test_weighted_fusion_beats_the_median_and_leaves_blunders_out():
-    """(B/H)^2 weights over the pairs near the weighted median: an error below the best
-    pair's and the median's, the blunders left out; the median of the three follows the
-    noisier pairs."""
+def test_the_three_fusions_with_independent_errors_and_blunders():
+    """Independent errors: the weighted mean of the pairs near the weighted median beats the
+    best pair and the median; the weighted median keeps the best pair's heights (its weight
+    outweighs the others'), the others' where it has none; a pair's blunders are left out by
+    both; the median of the three follows the noisier pairs."""
     truth, z, blunder = three_pairs()
-    weighted = fuse_heights(z, B_H**2, PAIRS)
-    median = fuse_heights(z, B_H**2, PAIRS, FusionConfig(method="median"))
+    fused = {m: fuse_heights(z, B_H**2, PAIRS, FusionConfig(method=m))
+             for m in ("weighted_median", "weighted_mean", "median")}
     inner = (slice(None), slice(20, -20))
-    err_w = (weighted.z_m - truth)[inner]
-    err_m = (median.z_m - truth)[inner]
-    err_best = (z[2] - truth)[inner]
-    # noise 1.36, 1.25 and 0.65 m: measured 0.54 m weighted (the inverse-variance optimum,
-    # 0.53), 0.67 m for the median, 0.65 m for the best pair alone
-    assert nmad(err_w) < 0.85 * nmad(err_best) and nmad(err_w) < 0.85 * nmad(err_m)
-    assert np.abs(weighted.z_m - truth)[blunder].max() < 5.0  # blunders of 10-30 m out
-    assert np.isfinite(weighted.z_m).all() and np.isfinite(median.z_m).all()
+    err = {m: nmad((f.z_m - truth)[inner]) for m, f in fused.items()}
+    best = nmad((z[2] - truth)[inner])
+    # noise 1.36, 1.25 and 0.65 m: measured 0.54 m for the weighted mean (the inverse-variance
+    # optimum, 0.53), 0.67 m for the median, 0.65 m for the best pair alone
+    assert err["weighted_mean"] < 0.85 * best and err["weighted_mean"] < 0.85 * err["median"]
+    np.testing.assert_array_equal(fused["weighted_median"].z_m, z[2])
+    gap = z.copy()
+    gap[2, :10, 50:60] = np.nan  # where the best pair has none, the others'
+    got = fuse_heights(gap, B_H**2, PAIRS).z_m[:10, 50:60]
+    assert ((got == z[0, :10, 50:60]) | (got == z[1, :10, 50:60])).all()
+    for m in ("weighted_median", "weighted_mean"):
+        assert np.abs(fused[m].z_m - truth)[blunder].max() < 5.0  # blunders of 10-30 m out
+    assert all(np.isfinite(f.z_m).all() for f in fused.values())
+    weighted = fused["weighted_mean"]
     # views: three images where pairs 0-1 or 0-2 join 1-2, two where 1-2 is alone
     assert (weighted.views[:, 20:-20][~blunder[:, 20:-20]] == 3).all()
     assert (weighted.views[:, -20:] == 2).all()
@@ -68,7 +75,8 @@ def test_weighted_fusion_beats_the_median_and_leaves_blunders_out():
     # a blunder of 0-2 left out: 0-1 and 1-2 still see three images, 1-2 alone two
     assert (weighted.views[blunder & np.isfinite(z[0])] == 3).mean() > 0.99
     assert (weighted.views[:, :20][blunder[:, :20]] == 2).mean() > 0.99
-    assert (median.views[:, 20:-20] == 3).all()
+    np.testing.assert_array_equal(fused["weighted_median"].views, weighted.views)
+    assert (fused["median"].views[:, 20:-20] == 3).all()
 
 
 def test_weighted_median_and_median_against_sorting():
