@@ -21,11 +21,14 @@ AGAIN = "write the catalog again with gcpfree scenes"
 
 @dataclass(frozen=True)
 class SceneEntry:
-    """A scene: its id, image and model (None: the image's own RPC tags)."""
+    """A scene: its id, image and model (None: the image's own RPC tags), and its footprint
+    as ``gcpfree scenes`` computed it (lon, lat of the corner pixels; empty when the catalog
+    gives none)."""
 
     id: str
     image: Path
     model: Path | None = None
+    footprint: tuple[tuple[float, float], ...] = ()
 
 
 @dataclass(frozen=True)
@@ -71,6 +74,19 @@ def _names(value: Any, known: set[str], what: str, where: str) -> tuple[str, ...
     return tuple(value)
 
 
+def _footprint(value: Any, where: str) -> tuple[tuple[float, float], ...]:
+    """A scene's ``footprint``: three or more [lon, lat] in degrees (none when absent)."""
+    if value is None:
+        return ()
+    if not isinstance(value, list) or len(value) < 3 or not all(
+            isinstance(p, list) and len(p) == 2
+            and all(isinstance(v, (int, float)) and not isinstance(v, bool) for v in p)
+            for p in value):
+        raise InputError(f"{where}: footprint must be a list of three or more [lon, lat] in "
+                         f"degrees; {AGAIN}")
+    return tuple((float(p[0]), float(p[1])) for p in value)
+
+
 def _scenes(doc: dict[str, Any], path: Path, resolve: Callable[[str], Path],
             checked_id: Callable[[str, str], str]) -> tuple[SceneEntry, ...]:
     scenes = []
@@ -82,7 +98,8 @@ def _scenes(doc: dict[str, Any], path: Path, resolve: Callable[[str], Path],
                              "null)")
         model = s.get("model")
         scenes.append(SceneEntry(checked_id(s["id"], where), resolve(s["image"]),
-                                 None if model is None else resolve(model)))
+                                 None if model is None else resolve(model),
+                                 _footprint(s.get("footprint"), where)))
     if len({s.id for s in scenes}) < len(scenes):
         raise InputError(f"catalog {path}: a scene id appears twice; ids must be unique")
     return tuple(scenes)
