@@ -8,8 +8,9 @@ per pair inside a Dask task (:func:`tasks.archive.runs.process_pair`, on prefect
 an existing cluster given its scheduler address) -> ``ROOT/summary.csv`` and
 ``ROOT/summary.json`` -> Prefect artifacts (the summary table, a markdown account).
 
-A pair that fails (bad input, terrain too flat, any exception) is recorded with its one-line
-reason and never stops the others; a rerun processes only the pairs missing or failed. Only I/O
+A pair that the method refuses (terrain too flat, too small) or that fails (bad input, any
+exception) is recorded as ``refused`` or ``failed`` with its one-line reason and never stops the
+others; a rerun processes only the pairs missing, refused or failed. Only I/O
 tasks retry (catalog reading, summary writing); the orientation never does, since it would fail
 the same way again.
 
@@ -63,8 +64,9 @@ class ArchiveOutcome:
     def lines(self) -> list[str]:
         out = [(f"pairs                 {len(self.rows)}: {self.count('done')} done, "
                 f"{self.count('skipped')} skipped (already complete), "
-                f"{self.count('failed')} failed")]
-        out += [f"failed {r.id:<15} {r.reason}" for r in self.rows if r.status == "failed"]
+                f"{self.count('refused')} refused, {self.count('failed')} failed")]
+        out += [f"{r.status} {r.id:<15} {r.reason}" for r in self.rows
+                if r.status in ("refused", "failed")]
         out += [f"summary               {self.summary_csv}",
                 f"                      {self.summary_json}"]
         return out

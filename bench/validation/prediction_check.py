@@ -2,8 +2,8 @@
 
 ``report.json``'s prediction beyond the reference term (the parameters' covariance, with the
 GCPs' ground error correlated over kilometres, and the model's own error) is compared with the
-check points beyond the GCPs' common error (``bench/validation/beyond_shift.py``), with what the GCPs'
-true errors say, and with what chance allows:
+check points beyond the GCPs' common error (:func:`bench.common.beyond_shift`), with what the
+GCPs' true errors say, and with what chance allows:
 
 - ``measured``: the check points beyond the GCPs' common error;
 - ``realised``: the GCPs' true errors (triangulated with the scene's true models) propagated
@@ -13,7 +13,8 @@ true errors say, and with what chance allows:
 - ``ties``: the tie points' true errors (their measurements against the true models, the
   ground unknowns removed as the adjustment removes them) propagated the same way; their
   mean (a y-parallax common to all, e.g. from two dates' illumination) printed beside;
-- ``model``: ``report.json``'s adjustment term (parameters' covariance), no unmodelled term;
+- ``model``: ``report.json``'s adjustment term relative to the frame (the parameters'
+  covariance with the reference's registration known, :func:`relative`), no unmodelled term;
 - ``jackknife``: a spatial block jackknife of the GCPs (k-means blocks, one left out at a time,
   linearised), which assumes no field shape, plus the unmodelled term;
 - ``perfect``: measured / predicted beyond the common error if the prediction were right
@@ -24,91 +25,166 @@ true errors say, and with what chance allows:
   fitted correlated error, no reference term) with the used GCPs' mean error taken out as the
   measurement takes it out (:func:`predicted_beyond_common`), and measured over it.
 
-Run: ``.venv/bin/python bench/validation/prediction_check.py SCENE_DIR ORIENT_DIR [SCENE_DIR ORIENT_DIR
-...]`` (the simulator's output and ``gcpfree orient --self-calibrate --checkpoints
-SCENE_DIR/truth/checkpoints.json``'s). The adjustment is run again from ``ORIENT_DIR``'s GCPs
-and tie points with the settings in its ``report.json`` (deterministic: the same models).
-GCPFREE_PREDICTION_OUT=FILE writes every scene's figures there as JSON. Ends with, per group
-of scenes (and issue 19's cases, spot and hrs with realistic errors): the ratios within
-0.7-1.5 against how many a right prediction puts there and how often it puts all of them
-there; per axis the PITs (uniform if the predictions are true) and realised / true stats
-(above 1: a pattern in the GCPs' errors that no stationary field states, however fitted);
-see :func:`summary`. ``prediction_check.py --summary
-FILE`` prints that again from a saved (or merged) FILE. Prints figures, asserts nothing.
+    .venv/bin/python bench/validation/prediction_check.py SCENE ORIENT [SCENE ORIENT ...]
+        [--out FILE.json]
+    .venv/bin/python bench/validation/prediction_check.py --summary FILE.json
+
+SCENE and ORIENT: the simulator's output and ``gcpfree orient --self-calibrate --checkpoints
+SCENE/truth/checkpoints.json``'s (SRTM-only). The adjustment is run again from ORIENT's GCPs and
+tie points with the settings in its ``report.json`` (deterministic: the same models), with the
+product's estimator (:func:`core.orientation.adjust.adjust`), and once more without its
+uncertainty step to see what that step worked on (:func:`adjusted`). ``--out FILE`` writes
+every scene's figures there as JSON (``bench/results/prediction_check.json``, which the docs
+read). Ends with, per group of scenes (and issue 19's cases, spot and hrs with realistic
+errors): the ratios within 0.7-1.5 against how many a right prediction puts there and how often
+it puts all of them there; per axis the PITs (uniform if the predictions are true) and realised
+/ true stats (above 1: a pattern in the GCPs' errors that no stationary field states, however
+fitted); see :func:`summary`. ``--summary FILE`` prints that again from a saved (or merged)
+FILE. Prints figures, asserts nothing.
 """
 
 from __future__ import annotations
 
+import argparse
 import json
-import os
 import sys
-import tempfile
 from dataclasses import replace
 from pathlib import Path
 from typing import Any
 
 import numpy as np
+from scipy.spatial.distance import cdist
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[2]))
 
-import core.orientation.absolute as absolute  # noqa: E402
-import tasks.absolute.orientation as orientation  # noqa: E402
-from beyond_shift import beyond_shift  # noqa: E402
-from core.geodesy import metres_per_degree  # noqa: E402
-from core.intersection import triangulate  # noqa: E402
-from core.orientation.absolute import AbsoluteConfig  # noqa: E402
-from core.orientation.ground_field import (  # noqa: E402
-    CorrelatedGroundError,
-    _distances,
-    correlated_ground_error,
+from bench.common import (
+    NAMES,
+    beyond_shift,
+    orientation_inputs,
+    read_checkpoints,
+    read_model_file,
+    write_results,
 )
-from core.orientation.uncertainty import ground_jacobian  # noqa: E402
-from core.orientation.ties import TieObservations, tie_residuals, tie_rows  # noqa: E402
-from core.sensors.pushbroom import PushbroomModel  # noqa: E402
-from tasks.absolute.surface_match import TieGround  # noqa: E402
-from tasks.io.products import GCPS  # noqa: E402
-from tasks.io.sensors import load_model, read_model_file  # noqa: E402
+from core.geodesy import metres_per_degree
+from core.intersection import triangulate
+from core.orientation.absolute import observation_sigmas_px
+from core.orientation.adjust import ControlSet, adjust
+from core.orientation.gcp_errors import with_gcp_errors_as_they_are
+from core.orientation.ground_field import (
+    CorrelatedGroundError,
+    correlated_covariance,
+    correlated_ground_error,
+    with_correlated_error,
+)
+from core.orientation.observations import Observations
+from core.orientation.ties import TieObservations, tie_residuals, tie_rows
+from core.orientation.uncertainty import ground_jacobian
 
-NAMES = orientation.NAMES
 BLOCKS = 16
 DRAWS = 4000
 
 
+def _distances(east_m: np.ndarray, north_m: np.ndarray) -> np.ndarray:
+    xy = np.column_stack([east_m, north_m])
+    return cdist(xy, xy)
+
+
+def correlated_inputs(adj: Any, obs: Observations, kept: np.ndarray, matching_sigma_px: float
+                      ) -> dict[str, Any]:
+    """What the uncertainty step (:func:`core.orientation.gcp_errors.with_gcp_errors_as_they_are`)
+    gives :func:`core.orientation.ground_field.correlated_covariance` for the adjustment ``adj``
+    of the GCPs ``obs`` (``kept``): the covariance ``c`` it starts from, the GCPs' design ``a``
+    (n, m, 2, u) and ground Jacobian ``g`` (n, m, 2, 3), their weights' sigmas ``s`` (px, scaled
+    by the variance components) and their ``east``/``north`` (m) about their mean."""
+    use = np.asarray(kept, dtype=bool) & np.isfinite(obs.col).all(axis=1) \
+        & np.isfinite(obs.row).all(axis=1)
+    sub = obs.subset(use)
+    jac, ground = adj.gcp_design(sub, np.ones(np.shape(sub.col), dtype=bool))
+    here = sub.shifted(adj.frame_layout, adj.frame_params)
+    m_lon, m_lat = metres_per_degree(float(np.mean(here.lat_deg)))
+    sigma = np.repeat(observation_sigmas_px(adj.models, sub, matching_sigma_px)[..., None], 2,
+                      axis=2)
+    comps = adj.components
+    if comps is None:
+        sigma = sigma * max(adj.sigma0, 1e-12)
+    elif "gcp" in comps.names:
+        sigma = sigma * np.sqrt(comps.factor_of("gcp"))
+    else:
+        sigma = sigma * np.sqrt([comps.factor_of("gcp_col"), comps.factor_of("gcp_row")])
+    return {"c": adj.covariance, "a": jac, "s": sigma, "g": ground,
+            "east": (here.lon_deg - here.lon_deg.mean()) * m_lon,
+            "north": (here.lat_deg - here.lat_deg.mean()) * m_lat}
+
+
 def adjusted(scene: Path, out: Path) -> dict[str, Any]:
-    """The orientation of ``out`` run again, with what its uncertainty step worked on."""
-    rep = json.loads((out / "report.json").read_text())
-    s = rep["settings"]
-    a = {k: tuple(v) if isinstance(v, list) else v for k, v in s["absolute"].items()}
-    config = AbsoluteConfig(**a)
-    left = load_model(scene / "left.tif")
-    rel = json.loads((out / "relative" / "rel.json").read_text())
-    right = replace(load_model(scene / "right.tif"),
-                    model=PushbroomModel.from_dict(rel["right_model"]))
-    gcps = GCPS.read(out / "gcps.json").points
-    ties = TieGround.from_tiepoints_json(out / "relative" / "rel.tiepoints.json")
-    seen: dict[str, Any] = {}
-    inner, cov = orientation.with_gcp_errors_as_they_are, absolute.correlated_covariance
+    """The orientation of ``out`` run again (:func:`core.orientation.adjust.adjust`), with what
+    its uncertainty step worked on.
 
-    def uncertainty(*args: Any, **kw: Any) -> Any:
-        seen.update(adj=args[0], obs=args[1], kept=args[2], ties=args[4] if len(args) > 4
-                    else kw.get("ties"))
-        res = inner(*args, **kw)
-        seen.update(final=res[0], error=res[1])
-        return res
+    The estimator's last pass weighs each GCP with its share of the correlated ground error its
+    first pass found (:func:`core.orientation.ground_field.with_correlated_error`), then takes
+    the error into the covariance (:func:`core.orientation.gcp_errors.
+    with_gcp_errors_as_they_are`). Both passes are run here without that step (the first
+    pass's error found on it with the public function), which gives the adjustment the last
+    step started from (``adj``: the same GCPs kept, the same models); the step's inputs are
+    computed from it (:func:`correlated_inputs`) and checked: their correlated covariance must
+    be the solution's, else this copy no longer follows the product's step."""
+    inp = orientation_inputs(scene, out)
+    if len(inp.control) != 1:
+        raise SystemExit(f"{out}: {len(inp.control)} control sets; this check takes an "
+                         "SRTM-only orientation")
+    solution = adjust(inp.images, inp.control, inp.ties, inp.config)
+    names = tuple(i.name for i in inp.images)
+    cfg = inp.config.absolute
+    alone = replace(inp.config, correlated_ground_error=False, frames_from_scatter=False)
+    first = adjust(inp.images, inp.control, inp.ties, alone)
+    points = tuple(first.gcps)
+    _, error = with_gcp_errors_as_they_are(first.adjustment,
+                                           Observations.from_control_points(points, names),
+                                           first.kept, cfg, inp.ties)
+    if any(error.variance_m2):  # the last pass: each GCP with its share of the error
+        xy, h = with_correlated_error([p.sigma_xy_m for p in points],
+                                      [p.sigma_h_m for p in points], error)
+        points = tuple(replace(p, sigma_xy_m=float(a), sigma_h_m=float(b))
+                       for p, a, b in zip(points, xy, h, strict=True))
+        last = adjust(inp.images, [ControlSet(inp.control[0].kind, points,
+                                              solution.frames_used[0])], inp.ties, alone)
+    else:
+        last = first
+    adj, final = last.adjustment, solution.adjustment
+    obs = Observations.from_control_points(points, names)
+    seen: dict[str, Any] = {"adj": adj, "obs": obs, "kept": last.kept, "ties": inp.ties,
+                            "final": final, "error": solution.ground_error,
+                            **correlated_inputs(adj, obs, last.kept, cfg.matching_sigma_px)}
+    again = correlated_covariance(seen["c"], seen["a"], seen["s"], seen["g"], seen["east"],
+                                  seen["north"], seen["error"])
+    scale = float(np.max(np.abs(final.covariance)))
+    if not np.array_equal(last.kept, solution.kept) or not np.allclose(
+            again, final.covariance, rtol=1e-9, atol=1e-12 * scale):
+        raise SystemExit(f"{out}: the uncertainty step's inputs computed here do not give the "
+                         "solution's covariance (max difference "
+                         f"{np.max(np.abs(again - final.covariance)) / scale:.1e} of its "
+                         "largest term): core.orientation.adjust or gcp_errors changed, update "
+                         "adjusted and correlated_inputs")
+    return relative(seen)
 
-    def covariance(c, a_, s_, g, e, n, err):  # type: ignore[no-untyped-def]
-        seen.update(c=c, a=a_, s=s_, g=g, east=e, north=n)
-        return cov(c, a_, s_, g, e, n, err)
 
-    orientation.with_gcp_errors_as_they_are = uncertainty
-    absolute.correlated_covariance = covariance
-    try:
-        with tempfile.TemporaryDirectory() as tmp:
-            orientation.orient_absolute.fn(left, right, gcps, Path(tmp), s["corrections"],
-                                           s["self_calibrate"], config, ties, s["along_track"])
-    finally:
-        orientation.with_gcp_errors_as_they_are, absolute.correlated_covariance = inner, cov
-    return seen
+def relative(seen: dict[str, Any]) -> dict[str, Any]:
+    """``seen`` reduced to the images' parameters with the control's frame known, as the
+    measurement beyond the GCPs' common error takes the frame out: ``c`` the conditional
+    covariance (the inverse of the normal equations' block of the images' parameters: the
+    estimator's response to the GCPs' errors with the frame held), ``a`` without the frame's
+    columns, and ``final_cov`` the correlated covariance of that response, ``c + c F c`` with
+    ``F`` the solution's (``C_final = C + C F C`` over every parameter). Its diagonal is the
+    report's relative part (:meth:`core.orientation.result.AbsoluteOrientation.
+    split_covariance`) to 1e-6."""
+    c, final = seen["c"], seen["final"].covariance
+    p = seen["adj"].n_model_params
+    d = np.sqrt(np.diag(c))
+    normal = np.linalg.inv(c / np.outer(d, d)) / np.outer(d, d)  # scaled: units differ
+    f = normal @ (final - c) @ normal
+    cr = c[:p, :p] - c[:p, p:] @ np.linalg.pinv(c[p:, p:], hermitian=True) @ c[p:, :p]
+    cr = 0.5 * (cr + cr.T)
+    return {**seen, "c": cr, "a": seen["a"][..., :p], "final_cov": cr + cr @ f[:p, :p] @ cr}
 
 
 def used(seen: dict[str, Any]) -> tuple[np.ndarray, ...]:
@@ -166,7 +242,7 @@ def check_maps(scene: Path, seen: dict[str, Any], n: int) -> list[dict[str, np.n
     from the GCPs' errors to the check points' error beyond their mean."""
     final, c = seen["final"], seen["c"]
     m = params_from_errors(seen)
-    pts = orientation.read_checkpoints(scene / "truth" / "checkpoints.json").points
+    pts = read_checkpoints(scene / "truth" / "checkpoints.json").points
     maps, start = [], 0
     for k, name in enumerate(NAMES):
         u = len(final.param_names[k])
@@ -209,7 +285,7 @@ def beyond_common_covariance(seen: dict[str, Any], maps: list[dict[str, np.ndarr
     y = j @ caw
     z = np.concatenate([mp["G"] for mp in maps]).reshape(-1, 3) @ pbar
     zs = z @ sigma
-    cov = j @ seen["final"].covariance @ j.T + zs @ z.T - zs @ y.T - y @ zs.T
+    cov = j @ seen["final_cov"] @ j.T + zs @ z.T - zs @ y.T - y @ zs.T
     return cov.reshape(len(cov) // 2, 2, len(cov) // 2, 2)
 
 
@@ -229,9 +305,9 @@ def predicted_beyond_common(cov: np.ndarray, maps: list[dict[str, np.ndarray]]
 def tie_errors(truths: list[Any], seen: dict[str, Any]) -> tuple[np.ndarray, float]:
     """The parameters' error the tie points' true errors make (their reduced equations at the
     adjusted models, weighted by their variance component), and the mean reduced error (px)."""
-    ties, adj = seen["ties"], seen["adj"]
+    ties, adj, c = seen["ties"], seen["adj"], seen["c"]
     if ties is None or not ties.n:
-        return np.zeros(adj.covariance.shape[0]), float("nan")
+        return np.zeros(c.shape[0]), float("nan")
     sizes = [len(p) for p in adj.param_names]
     offsets = np.concatenate([[0], np.cumsum(sizes)])
     rows = tie_rows(adj.models, ties, ties.ground(), offsets)
@@ -240,7 +316,7 @@ def tie_errors(truths: list[Any], seen: dict[str, Any]) -> tuple[np.ndarray, flo
                                                                  + len(truths[1].params)]),
                          jacobian=False)  # whitened: in units of ties.sigma_px
     factor = adj.components.factor_of("tie") if adj.components is not None else 1.0
-    step = adj.covariance @ (rows.a.T @ true_rows.r) / factor
+    step = c @ (rows.a.T @ true_rows.r) / factor
     return step, mean_y_parallax(truths, ties)
 
 
@@ -329,7 +405,7 @@ def one(scene: Path, out: Path) -> dict[str, Any]:
         tie = -np.einsum("pau,u->pa", mp["J"], tie_step)
         real = np.sqrt(np.mean(gcp**2, axis=0))
         expect = rms(mp["T"], stats)
-        model = rms(mp["J"], seen["final"].covariance)
+        model = rms(mp["J"], seen["final_cov"])
         jk = np.sqrt(rms(mp["J"], jack) ** 2 + mu**2)
         print(f"  {name:5s} columns / rows: measured {fmt(meas)}; realised {fmt(real)}, ties "
               f"{fmt(np.sqrt(np.mean(tie**2, axis=0)))}, both "
@@ -410,23 +486,28 @@ def summary(doc: dict[str, Any]) -> None:
             print(line)
 
 
-def main() -> None:
-    args = sys.argv[1:]
-    if len(args) == 2 and args[0] == "--summary":
-        summary(json.loads(Path(args[1]).read_text()))
+def main(argv: list[str] | None = None) -> None:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("dirs", nargs="*", type=Path, help="SCENE ORIENT pairs")
+    ap.add_argument("--summary", type=Path, default=None, metavar="FILE",
+                    help="print the summary of a saved FILE (no scene needed)")
+    ap.add_argument("--out", type=Path, default=None, metavar="FILE",
+                    help="write every scene's figures there as JSON")
+    args = ap.parse_args(argv)
+    if args.summary is not None:
+        if args.dirs:
+            ap.error("give SCENE ORIENT pairs or --summary FILE, not both")
+        summary(json.loads(args.summary.read_text()))
         return
-    if not args or len(args) % 2:
-        sys.exit("usage: prediction_check.py SCENE_DIR ORIENT_DIR [SCENE_DIR ORIENT_DIR ...] | "
-                 "--summary FILE")
-    rows = [one(Path(scene), Path(out)) for scene, out in zip(args[::2], args[1::2],
-                                                              strict=True)]
+    if not args.dirs or len(args.dirs) % 2:
+        ap.error("give SCENE ORIENT pairs")
+    rows = [one(scene, out) for scene, out in zip(args.dirs[::2], args.dirs[1::2], strict=True)]
     ratios = np.array([r["images"][name]["ratio"] for r in rows for name in NAMES])
     doc = {"scenes": rows, "within_0.7_1.5": int(np.sum((ratios >= 0.7) & (ratios <= 1.5))),
            "n_ratios": int(ratios.size)}
     summary(doc)
-    dest = os.environ.get("GCPFREE_PREDICTION_OUT")
-    if dest:  # every ratio, and how many lie within 0.7-1.5
-        Path(dest).write_text(json.dumps(doc, indent=1))
+    if args.out is not None:  # every ratio, and how many lie within 0.7-1.5
+        write_results(args.out, doc)
 
 
 if __name__ == "__main__":

@@ -26,7 +26,6 @@ from __future__ import annotations
 import argparse
 import json
 import sys
-from dataclasses import replace
 from pathlib import Path
 from typing import Any
 
@@ -34,21 +33,9 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[2]))
 
-from core.geodesy import metres_per_degree  # noqa: E402
-from core.orientation.absolute import AbsoluteConfig  # noqa: E402
-from core.orientation.adjust import (  # noqa: E402
-    AdjustConfig,
-    ControlSet,
-    ImageToAdjust,
-    Solution,
-    adjust,
-)
-from core.orientation.frames import REFERENCE, FramePrior  # noqa: E402
-from core.sensors.pushbroom import PushbroomModel  # noqa: E402
-from tasks.absolute.orientation import NAMES, read_checkpoints, tie_observations  # noqa: E402
-from tasks.absolute.surface_match import TieGround  # noqa: E402
-from tasks.io.products import GCPS  # noqa: E402
-from tasks.io.sensors import load_model, read_model_file  # noqa: E402
+from bench.common import NAMES, read_checkpoints, read_model_file, solution_again
+from core.geodesy import metres_per_degree
+from core.orientation.adjust import Solution
 
 DRAWS = 4000
 LOW, HIGH = 0.5, 1.5
@@ -56,26 +43,6 @@ LOW, HIGH = 0.5, 1.5
 
 def _rms(v: np.ndarray) -> float:
     return float(np.sqrt(np.mean(v**2)))
-
-
-def solution_again(scene: Path, out: Path) -> Solution:
-    """The orientation of ``out`` run again from its GCPs, tie points and settings."""
-    rep = json.loads((out / "report.json").read_text())
-    s = rep["settings"]
-    a = {k: tuple(v) if isinstance(v, list) else v for k, v in s["absolute"].items()}
-    absolute = AbsoluteConfig(**a)
-    left = load_model(scene / "left.tif")
-    rel = json.loads((out / "relative" / "rel.json").read_text())
-    right = replace(load_model(scene / "right.tif"),
-                    model=PushbroomModel.from_dict(rel["right_model"]))
-    gcps = GCPS.read(out / "gcps.json").points
-    ties = TieGround.from_tiepoints_json(out / "relative" / "rel.tiepoints.json")
-    control = [ControlSet("surface", gcps, FramePrior(REFERENCE, absolute.reference_sigma_m))]
-    cfg = AdjustConfig(absolute=absolute, corrections=s["corrections"],
-                       lens=s["self_calibrate"], along_track=s["along_track"])
-    return adjust([ImageToAdjust(n, m.model, m.size) for n, m in (("left", left),
-                                                                  ("right", right))],
-                  control, tie_observations(ties, absolute), cfg)
 
 
 def right_chance(solution: Solution, k: int, lon: np.ndarray, lat: np.ndarray,

@@ -56,7 +56,9 @@ OPTIONAL = ("left_model", "right_model", "lidar", "landcover", "checkpoints", "s
 COLUMNS = REQUIRED + OPTIONAL
 IMAGE_SUFFIXES = (".tif", ".tiff", ".jp2")
 PAIR_ID = re.compile(r"[A-Za-z0-9_][A-Za-z0-9._-]*")
-STATUSES = ("done", "skipped", "failed")
+#: ``refused``: the method refused the pair's data with its reason (too flat, too small, too few
+#: points: :data:`tasks.archive.runs.REFUSALS`), not a failure of the run
+STATUSES = ("done", "skipped", "refused", "failed")
 SUMMARY_FORMAT = "gcpfree.archive"
 #: a scenes catalog's pair keys beyond the columns: its two scenes, its block, its figures
 SCENE_PAIR_KEYS = ("left_scene", "right_scene", "block", "figures")
@@ -384,13 +386,13 @@ def _number(v: Any) -> float | None:
 def pair_row(entry_id: str, status: str, out: Path, reason: str = "") -> PairRow:
     """The summary line of a pair: its figures read from ``out/report.json``
     (:func:`tasks.absolute.report.read_report`) and ``out/eval.json``
-    (:class:`core.evaluation.evaluation_report.EvaluationReport`) when they read back; a failed pair
-    reports only its reason."""
+    (:class:`core.evaluation.evaluation_report.EvaluationReport`) when they read back; a failed or
+    refused pair reports only its reason."""
     from tasks.absolute.report import read_report
     from tasks.archive.pair import read_evaluation_stats
 
     figures: dict[str, Any] = {}
-    if status != "failed":
+    if status not in ("failed", "refused"):
         try:
             report = read_report(Path(out) / "report.json")
         except GcpFreeError:
@@ -440,16 +442,18 @@ def write_summary(rows: tuple[PairRow, ...], root: Path, catalog: Path) -> tuple
 
 
 def summary_markdown(rows: list[PairRow] | tuple[PairRow, ...], root: Path) -> str:
-    """A short account of the run: counts, the failures and their reasons, where it is."""
+    """A short account of the run: counts, the refusals and failures with their reasons,
+    where it is."""
     counts = {s: sum(r.status == s for r in rows) for s in STATUSES}
     lines = [f"# Archive reprocessing: {len(rows)} pairs", "",
              (f"{counts['done']} done, {counts['skipped']} skipped (already complete), "
-              f"{counts['failed']} failed."), "",
+              f"{counts['failed']} failed, {counts['refused']} refused."), "",
              f"Products in `{root}`; the table is `{Path(root) / 'summary.csv'}`."]
-    failed = [r for r in rows if r.status == "failed"]
-    if failed:
-        lines += ["", "## Failed pairs", "", "| pair | reason |", "|---|---|"]
-        lines += [f"| {r.id} | {r.reason.replace('|', '/')} |" for r in failed]
+    for status, title in (("refused", "Refused pairs"), ("failed", "Failed pairs")):
+        listed = [r for r in rows if r.status == status]
+        if listed:
+            lines += ["", f"## {title}", "", "| pair | reason |", "|---|---|"]
+            lines += [f"| {r.id} | {r.reason.replace('|', '/')} |" for r in listed]
     return "\n".join(lines) + "\n"
 
 

@@ -132,7 +132,7 @@ def test_summary_files_agree_with_the_products(archive):
     assert (fin["gcps"], fin["cp_right_rms_row_px"], fin["gcp_left_rms_row_px"],
             fin["le68_m"]) == ("41", "0.0625", "0.5", "3.5")
     assert rows["broken"]["gcps"] == "" and "does not exist" in rows["broken"]["reason"]
-    assert doc["counts"] == {"done": 1, "skipped": 1, "failed": 2}
+    assert doc["counts"] == {"done": 1, "skipped": 1, "refused": 0, "failed": 2}
     assert [(p["id"], p["status"], p["reason"]) for p in doc["pairs"]] == [
         (r["id"], r["status"], r["reason"]) for r in rows.values()]
     assert doc["pairs"][3]["cp_left_rms_col_px"] == report["check_points"]["left"]["rms_col_px"]

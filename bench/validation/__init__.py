@@ -1,0 +1,1 @@
+"""Accuracy studies behind the documentation's validation tables (each writes a results file)."""
