@@ -181,8 +181,7 @@ def match_views(v: OrientedViews, params: DsmParams, cfg: DenseConfig) -> list[M
     left one), matched and, after a joint orientation, triangulated with the delivered models
     too, into ``.<out>.work/I-J``. Without a reference DEM or a height range given, the
     search spans the tie points' heights and ``margin_m`` (an RPC's own range, 1050 m on the
-    Marseille triplet, made the wide pair search 528 disparities, 120 with the tie points',
-    and its heights noisier)."""
+    Marseille triplet, made the wide pair search 528 disparities, 144 with the tie points')."""
     from core.sensors.footprint import scene_height_range_m
     from tasks.dense.dem import match_tiles, plan_dense, retriangulate_tiles
     from tasks.dense.multiview import b_over_h, pair_roi, unify_plans
@@ -204,7 +203,7 @@ def match_views(v: OrientedViews, params: DsmParams, cfg: DenseConfig) -> list[M
     for (i, j), plan in zip(pairs, plans, strict=True):
         work = out.parent / f".{out.name}.work" / f"{i}-{j}"
         stats = match_tiles(plan, views[i], views[j], work, cfg)
-        bh = b_over_h(views[i], views[j], 0.5 * sum(h_roi))
+        bh = b_over_h(views[i], views[j], 0.5 * sum(plan.h_range_m))
         if not params.orient:
             matched.append(MatchedViewPair((i, j), plan, stats, work, bh))
             continue

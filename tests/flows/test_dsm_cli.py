@@ -198,6 +198,33 @@ def test_three_views_of_the_marseille_triplet(prefect_harness, data_dir, tmp_pat
     assert not any(tmp_path.glob(".views.tif.work*"))  # the pairs' points are removed
 
 
+def test_two_views_give_the_pair_dsm(prefect_harness, data_dir, tmp_path):
+    """``--images L R`` is the pair: the same heights, cell for cell, as ``--left L --right
+    R`` (its one pair's heights fused are its own), and a count of two views where there is
+    a measured height (models as delivered on both: the orientation's N = 2 case has its own
+    tests; with it, measured, the same DSM bytes too)."""
+    d = data_dir / "pleiades_ventoux"
+    left, right = str(d / "left_image.tif"), str(d / "right_image.tif")
+    common = ("--reference", str(SRTM), "--no-orient", "--no-progress")
+    assert dsm.run(parse("--left", left, "--right", right, *common, "--out",
+                         str(tmp_path / "pair.tif"))) == 0
+    assert dsm.run(parse("--images", left, right, *common, "--out",
+                         str(tmp_path / "views.tif"))) == 0
+    zs = []
+    for name in ("pair", "views"):
+        with rasterio.open(tmp_path / f"{name}.tif") as src:
+            zs.append((src.read(1), src.transform))
+    assert zs[0][1] == zs[1][1] and np.isfinite(zs[0][0]).sum() > 10_000
+    np.testing.assert_array_equal(zs[0][0], zs[1][0])
+    with rasterio.open(tmp_path / "views_views.tif") as src:
+        views = src.read(1)
+    finite = np.isfinite(zs[1][0])
+    assert not views[~finite].any() and set(np.unique(views[finite])) <= {0, 2}
+    assert (views[finite] == 2).mean() > 0.97  # 0: small holes filled from their neighbours
+    doc = json.loads((tmp_path / "views.json").read_text())
+    assert doc["pairwise_median_m"] == {} and doc["pairs"][0]["images"] == [0, 1]
+
+
 def test_bad_input_is_one_line_before_anything_runs(tmp_path, data_dir):
     d = data_dir / "pleiades_ventoux"
     base = ["--left", str(d / "left_image.tif"), "--right", str(d / "right_image.tif"),
