@@ -210,7 +210,7 @@ def test_pair_row_reads_the_products(tmp_path: Path):
 def test_summary_files_round_trip(tmp_path: Path):
     _report(tmp_path / "a")
     rows = (pair_row("a", "done", tmp_path / "a"),
-            pair_row("b", "failed", tmp_path / "b", "too flat, 3 windows of 8 needed"),
+            pair_row("b", "refused", tmp_path / "b", "too flat, 3 windows of 8 needed"),
             pair_row("c, \"quoted\"", "skipped", tmp_path / "c"))
     csv_path, json_path = write_summary.fn(rows, tmp_path, tmp_path / "cat.csv")
     assert sorted(p.name for p in tmp_path.iterdir()) == ["a", "summary.csv", "summary.json"]
@@ -218,12 +218,12 @@ def test_summary_files_round_trip(tmp_path: Path):
         back = list(csv.DictReader(f))
     assert tuple(back[0]) == FIELDS
     assert [r["id"] for r in back] == ["a", "b", "c, \"quoted\""]
-    assert [r["status"] for r in back] == ["done", "failed", "skipped"]
+    assert [r["status"] for r in back] == ["done", "refused", "skipped"]
     assert back[1]["reason"] == "too flat, 3 windows of 8 needed"
     assert float(back[0]["cp_right_rms_row_px"]) == 0.94 and back[0]["gcps"] == "37"
     assert float(back[0]["le68_m"]) == 4.25 and back[1]["le68_m"] == ""
     doc = json.loads(json_path.read_text())
-    assert doc["counts"] == {"done": 1, "skipped": 1, "failed": 1}
+    assert doc["counts"] == {"done": 1, "skipped": 1, "refused": 1, "failed": 0}
     assert [PairRow(**r) for r in doc["pairs"]] == list(rows)
     assert summary_csv(rows) == csv_path.read_text()
 
