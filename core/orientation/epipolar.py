@@ -15,7 +15,7 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from core.errors import InputError
+from core.orientation.tracks import TrackGroup, fit_group
 from core.robust import nmad
 from core.sensors.base import SensorModel
 
@@ -48,43 +48,20 @@ class EpipolarFit:
     px_per_m: FloatArray
 
 
-def _curve(left: SensorModel, right: SensorModel, lc: FloatArray, lr: FloatArray,
-           h: FloatArray, dh: float) -> tuple[FloatArray, FloatArray, FloatArray, FloatArray]:
-    """E(h) (n, 2), dE/dh (n, 2) by a central difference, and the ground point (lon, lat)."""
-    lon, lat = left.localize(np.concatenate([lc, lc, lc]), np.concatenate([lr, lr, lr]),
-                             np.concatenate([h, h + dh, h - dh]))
-    c, r = right.project(lon, lat, np.concatenate([h, h + dh, h - dh]))
-    n = lc.size
-    e = np.stack([c[:n], r[:n]], axis=1)
-    d = np.stack([c[n:2 * n] - c[2 * n:], r[n:2 * n] - r[2 * n:]], axis=1) / (2 * dh)
-    return e, d, lon[:n], lat[:n]
-
-
 def epipolar_fit(left: SensorModel, right: SensorModel, left_col: ArrayLike,
                  left_row: ArrayLike, right_col: ArrayLike, right_row: ArrayLike,
                  h0_m: ArrayLike, *, dh_m: float = 10.0, max_iter: int = 10,
                  tol_m: float = 1e-3) -> EpipolarFit:
-    """Each point's height along its left ray and its y-parallax in the right image."""
+    """Each point's height along its left ray and its y-parallax in the right image: the
+    track of two images of :func:`core.orientation.tracks.fit_group`."""
     lc, lr, rc, rr = (np.atleast_1d(np.asarray(a, dtype=np.float64))
                       for a in (left_col, left_row, right_col, right_row))
-    h = np.broadcast_to(np.asarray(h0_m, dtype=np.float64), lc.shape).copy()
-    obs = np.stack([rc, rr], axis=1)
-    for _ in range(max_iter):
-        e, d, _, _ = _curve(left, right, lc, lr, h, dh_m)
-        step = np.einsum("ni,ni->n", d, obs - e) / np.einsum("ni,ni->n", d, d)
-        h += step
-        if np.max(np.abs(step)) < tol_m:
-            break
-    e, d, lon, lat = _curve(left, right, lc, lr, h, dh_m)
-    speed = np.linalg.norm(d, axis=1)
-    if np.any(speed < 1e-9):
-        raise InputError("the two images look along the same direction at some tie points "
-                         "(no parallax with height): they are not a stereo pair")
-    t = d / speed[:, None]
-    n = np.stack([-t[:, 1], t[:, 0]], axis=1)
-    res = obs - e
-    return EpipolarFit(h, lon, lat, np.einsum("ni,ni->n", n, res),
-                       np.einsum("ni,ni->n", t, res), t, n, speed)
+    fit = fit_group((left, right), TrackGroup(np.arange(lc.size), 0, (1,)),
+                    np.stack([lc, rc], axis=1), np.stack([lr, rr], axis=1), h0_m, dh_m=dh_m,
+                    max_iter=max_iter, tol_m=tol_m)
+    return EpipolarFit(fit.h_m, fit.lon_deg, fit.lat_deg, fit.y[:, 0],
+                       np.einsum("ni,ni->n", fit.tangent[:, 0], fit.residual[:, 0]),
+                       fit.tangent[:, 0], fit.normal[:, 0], fit.speed[:, 0])
 
 
 def local_value(col: ArrayLike, row: ArrayLike, y: ArrayLike, use: ArrayLike,

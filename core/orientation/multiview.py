@@ -243,7 +243,7 @@ def _build(models: Sequence[SensorModel], groups: list[TrackGroup], tracks: Trac
     fits, a, y, point, kind, j, j_point = [], [], [], [], [], [], []
     base = 0
     for g in groups:
-        fit = fit_group(models, g, tracks, h[g.idx], dh_m=dh_m)
+        fit = fit_group(models, g, tracks.col, tracks.row, h[g.idx], dh_m=dh_m)
         fits.append(fit)
         n_eq = 2 * g.k - 1
         y.append(fit.y.ravel())
@@ -488,7 +488,7 @@ def fix_along_joint(models: Sequence[SensorModel], fixed: int, tracks: Tracks,
     h0 = np.where(np.isfinite(href), href, 0.0)
     c_parts, d_parts, h_parts, speed_of = [], [], [], {m: [] for m in offsets}
     for g in track_groups(tracks, fixed):
-        fit = fit_group(models, g, tracks, h0[g.idx])
+        fit = fit_group(models, g, tracks.col, tracks.row, h0[g.idx])
         sel = use[g.idx]
         if not sel.any():
             continue

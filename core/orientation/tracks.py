@@ -233,12 +233,15 @@ def _along_basis(speed: FloatArray) -> FloatArray:
     return np.transpose(house[:, :, 1:], (0, 2, 1))
 
 
-def fit_group(models: Sequence[SensorModel], g: TrackGroup, tracks: Tracks, h0_m: ArrayLike,
-              *, dh_m: float = 10.0, max_iter: int = 10, tol_m: float = 1e-3) -> GroupFit:
-    """Each track's height along its source ray, closest to its targets' pixels together,
-    and its equations (module docstring). With one target, :func:`epipolar_fit`."""
-    col, row = tracks.col[g.idx, g.source], tracks.row[g.idx, g.source]
-    obs = np.stack([tracks.col[g.idx][:, g.targets], tracks.row[g.idx][:, g.targets]], axis=2)
+def fit_group(models: Sequence[SensorModel], g: TrackGroup, col_px: FloatArray,
+              row_px: FloatArray, h0_m: ArrayLike, *, dh_m: float = 10.0, max_iter: int = 10,
+              tol_m: float = 1e-3) -> GroupFit:
+    """Each track of the group (pixels ``col_px``, ``row_px`` (n, N) of all the tracks, e.g.
+    :attr:`Tracks.col`) at its height along its source ray, closest to its targets' pixels
+    together, and its equations (module docstring). With one target (a pair), the height
+    and y-parallax of :func:`core.orientation.epipolar.epipolar_fit`, which is this."""
+    col, row = col_px[g.idx, g.source], row_px[g.idx, g.source]
+    obs = np.stack([col_px[g.idx][:, g.targets], row_px[g.idx][:, g.targets]], axis=2)
     h = np.broadcast_to(np.asarray(h0_m, dtype=np.float64), col.shape).copy()
     for _ in range(max_iter):
         e, d, _, _ = _curves(models, g, col, row, h, dh_m)

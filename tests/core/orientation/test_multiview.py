@@ -134,7 +134,7 @@ def test_equations_jacobian_against_numeric(triplet):
     p0 = np.concatenate([m.params for m in models[1:]])
     for key in ((1, (2,)), (0, (1, 2))):
         g = groups[key]
-        fit = fit_group(models, g, tracks, tracks.h0_m[g.idx])
+        fit = fit_group(models, g, tracks.col, tracks.row, tracks.h0_m[g.idx])
         a = equations_of(fit, motion(models, g, fit, offsets, n_p))
         num = np.empty_like(a)
         for k in range(n_p):
@@ -144,7 +144,7 @@ def test_equations_jacobian_against_numeric(triplet):
             for sign in (1.0, -1.0):
                 p = p0 + sign * step
                 ms = [models[0], models[1].with_params(p[:3]), models[2].with_params(p[3:])]
-                y.append(fit_group(ms, g, tracks, fit.h_m).y)
+                y.append(fit_group(ms, g, tracks.col, tracks.row, fit.h_m).y)
             num[:, :, k] = (y[0] - y[1]) / 4e-7
         scale = np.abs(num).max(axis=(0, 1))
         np.testing.assert_allclose(a / scale, num / scale, atol=2e-3)

@@ -40,20 +40,27 @@ def tie_points(left, right_truth, n=300, noise_px=0.1, seed=0):
     return lc, lr, rc + rng.normal(0, noise_px, n), rr + rng.normal(0, noise_px, n), h
 
 
+def epipolar_direction(left, right, lc, lr, h):
+    """The right pixels (n, 2) of the left pixels' ground at heights h, and the unit tangent
+    and normal (n, 2) of their epipolar curves there, from the left ray at h and h + 50 m:
+    projections only, nothing of the code under test."""
+    lon, lat = left.localize(lc, lr, h)
+    c, r = right.project(lon, lat, h)
+    lon2, lat2 = left.localize(lc, lr, h + 50.0)
+    c2, r2 = right.project(lon2, lat2, h + 50.0)
+    t = np.stack([c2 - c, r2 - r], axis=1)
+    t /= np.linalg.norm(t, axis=1, keepdims=True)
+    return np.stack([c, r], axis=1), t, np.stack([-t[:, 1], t[:, 0]], axis=1)
+
+
 def moved_px(left, before, after, lc, lr, h):
     """How ``after`` moves the projections of the ground points seen at left pixels (lc, lr)
     at heights h from where ``before`` projects them, split across and along the epipolar
-    curve of (left, before) there, whose direction comes from the left ray at h and h + 50 m:
-    projections only, nothing of the code under test."""
+    curve of (left, before) there."""
+    p0, t, nrm = epipolar_direction(left, before, lc, lr, h)
     lon, lat = left.localize(lc, lr, h)
-    c0, r0 = before.project(lon, lat, h)
-    c1, r1 = after.project(lon, lat, h)
-    lon2, lat2 = left.localize(lc, lr, h + 50.0)
-    c2, r2 = before.project(lon2, lat2, h + 50.0)
-    t = np.stack([c2 - c0, r2 - r0], axis=1)
-    t /= np.linalg.norm(t, axis=1, keepdims=True)
-    d = np.stack([c1 - c0, r1 - r0], axis=1)
-    return d[:, 1] * t[:, 0] - d[:, 0] * t[:, 1], np.einsum("ni,ni->n", d, t)
+    d = np.stack(after.project(lon, lat, h), axis=1) - p0
+    return np.einsum("ni,ni->n", d, nrm), np.einsum("ni,ni->n", d, t)
 
 
 def grid_points(h=900.0, n=9):
@@ -73,15 +80,9 @@ def test_parallax_is_the_distance_across_the_epipolar_curve(across):
     across it has exactly that parallax."""
     left, right, _, _ = across
     lc, lr, h = np.array([100.0, 400.0]), np.array([250.0, 50.0]), np.array([700.0, 1500.0])
-    lon, lat = left.localize(lc, lr, h)
-    c, r = right.project(lon, lat, h)
-    lon2, lat2 = left.localize(lc, lr, h + 50.0)
-    c2, r2 = right.project(lon2, lat2, h + 50.0)
-    t = np.stack([c2 - c, r2 - r], axis=1)
-    t /= np.linalg.norm(t, axis=1, keepdims=True)
-    nrm = np.stack([-t[:, 1], t[:, 0]], axis=1)
-    fit = epipolar_fit(left, right, lc, lr, c + 0.7 * nrm[:, 0] + 3 * t[:, 0],
-                       r + 0.7 * nrm[:, 1] + 3 * t[:, 1], 1000.0)
+    p, t, nrm = epipolar_direction(left, right, lc, lr, h)
+    moved = p + 0.7 * nrm + 3 * t
+    fit = epipolar_fit(left, right, lc, lr, moved[:, 0], moved[:, 1], 1000.0)
     np.testing.assert_allclose(np.abs(fit.parallax_px), 0.7, atol=2e-3)
     np.testing.assert_allclose(fit.along_px, 0.0, atol=1e-6)
 
