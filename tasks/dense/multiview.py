@@ -137,10 +137,11 @@ class ViewsDemSummary:
                 f"cells alone" for p in self.pairs for i, j in [p["images"]]]
         for v in self.pairwise_median_m.values():
             (a, b), (c, d) = v["pairs"]
-            before = "n/a" if v["before"] is None else f"{v['before']:+.2f} m"
+            said = (f"{v['after']:+.2f} m, the models as delivered (not oriented)"
+                    if v["before"] is None else f"{v['before']:+.2f} m before the joint "
+                    f"orientation, {v['after']:+.2f} m after")
             out.append(f"{names[a]}-{names[b]} minus {names[c]}-{names[d]}: median height "
-                       f"difference {before} before the joint orientation, {v['after']:+.2f} m "
-                       f"after ({v['cells']} cells)")
+                       f"difference {said} ({v['cells']} cells)")
         return out
 
 
