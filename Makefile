@@ -9,7 +9,7 @@ OUT    ?= out
 # flows/_env.py (the CLI and the test suite call it)
 export PREFECT_HOME ?= $(CURDIR)/.prefect
 
-.PHONY: demo test bench docs venv clean
+.PHONY: demo test bench bench-full docs venv clean
 
 venv: $(STAMP)
 
@@ -39,9 +39,16 @@ demo: $(STAMP)
 test: $(STAMP)
 	$(PY) -m pytest -q
 
+# the speed benchmarks (bench/perf): the quick ratios against the peers measured in the same run
+# (rpcm, GDAL; xdem and CARS where bench/peers installed them), under 20 minutes on 2 cores;
+# bench-full adds the long ones (a whole spot pair, the archive, hrg: hours)
 bench: $(STAMP)
-	$(PY) -m pip install --quiet --no-deps "rpcm>=1.4"
-	$(PY) bench/run_all.py
+	$(PY) -m pip install --quiet --no-deps "rpcm>=1.4" || echo "rpcm not installed: its ratio is skipped"
+	$(PY) bench/perf/run.py
+
+bench-full: $(STAMP)
+	$(PY) -m pip install --quiet --no-deps "rpcm>=1.4" || echo "rpcm not installed: its ratio is skipped"
+	$(PY) bench/perf/run.py --full
 
 # the documentation site (Sphinx + MyST, docs/) into site/; strict: a warning fails the build
 docs: $(STAMP)

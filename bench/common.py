@@ -27,9 +27,9 @@ import tempfile
 import time
 from collections.abc import Iterator, Sequence
 from contextlib import contextmanager
-from dataclasses import dataclass, replace
+from dataclasses import asdict, dataclass, replace
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
@@ -37,25 +37,9 @@ REPO = Path(__file__).resolve().parents[1]
 if str(REPO) not in sys.path:
     sys.path.insert(0, str(REPO))
 
-from core.geodesy import metres_per_degree
-from core.intersection import triangulate
-from core.orientation.absolute import AbsoluteConfig
-from core.orientation.adjust import (
-    AdjustConfig,
-    ControlSet,
-    ImageToAdjust,
-    Solution,
-    adjust,
-)
-from core.orientation.frames import REFERENCE, FramePrior
-from core.orientation.ties import TieObservations
-from core.orientation.uncertainty import ground_jacobian, predicted_rms_px
-from core.sensors.pushbroom import PushbroomModel
-from tasks.absolute.orientation import NAMES, read_checkpoints, tie_observations
-from tasks.absolute.surface_match import TieGround
-from tasks.io.products import GCPS
-from tasks.io.sensors import load_model, read_model_file
-
+if TYPE_CHECKING:
+    from core.orientation.adjust import AdjustConfig, ControlSet, ImageToAdjust, Solution
+    from core.orientation.ties import TieObservations
 #: the simulator's error models (``gcpfree simulate --errors``)
 ERRORS = ("realistic", "simple")
 
@@ -103,6 +87,26 @@ def simulate(scene: Path, env: dict[str, str], preset: str, seed: int | str,
     return refusal(r) if r.returncode else None
 
 
+def given_or_simulated(given: Path | None, tmp: Path, env: dict[str, str], preset: str,
+                       seed: int, *options: str) -> Path:
+    """A benchmark's scene: the folder ``given`` (checked: a ``gcpfree simulate`` output), or
+    one simulated into ``tmp/PRESET`` (``gcpfree simulate --preset PRESET --seed SEED
+    OPTIONS``; reused when already there)."""
+    if given is not None:
+        if not (given / "left.tif").is_file() or not (given / "reference.tif").is_file():
+            raise SystemExit(f"{given} holds no left.tif and reference.tif: give a folder "
+                             "written by gcpfree simulate")
+        return given
+    scene = tmp / preset
+    t0 = time.perf_counter()
+    refused = simulate(scene, env, preset, seed, *options)
+    if refused is not None:
+        raise SystemExit(f"gcpfree simulate --preset {preset}: {refused}")
+    print(f"scene {scene} (--preset {preset} --seed {seed} {' '.join(options)}) in "
+          f"{time.perf_counter() - t0:.0f} s; {load()}", flush=True)
+    return scene
+
+
 def orient(scene: Path, out: Path, env: dict[str, str], *options: str
            ) -> tuple[float, str | None]:
     """``gcpfree orient --self-calibrate`` of the simulated ``scene`` (no GCP, its reference,
@@ -113,6 +117,19 @@ def orient(scene: Path, out: Path, env: dict[str, str], *options: str
              str(scene / "truth" / "checkpoints.json"), "--self-calibrate", "--no-progress",
              *options, "--out", str(out)], env)
     return time.perf_counter() - t0, (refusal(r) if r.returncode else None)
+
+
+def pair_args(scene: Path, out: Path, workers: int) -> list[str]:
+    """``gcpfree pair`` on the simulated ``scene`` as the benchmarks time it: its reference and
+    check points, lens self-calibration, the truth lidar and land cover when the scene has them,
+    ``workers`` workers."""
+    truth = scene / "truth"
+    lidar = (["--lidar", str(truth / "lidar.laz"), "--landcover", str(truth / "landcover.tif")]
+             if (truth / "lidar.laz").exists() else [])
+    return ["pair", "--left", str(scene / "left.tif"), "--right", str(scene / "right.tif"),
+            "--reference", str(scene / "reference.tif"), "--checkpoints",
+            str(truth / "checkpoints.json"), "--self-calibrate", *lidar, "--workers",
+            str(workers), "--no-progress", "--out", str(out)]
 
 
 def read_report(out: Path) -> dict[str, Any]:
@@ -134,6 +151,31 @@ def reference_shift_m(scene: Path) -> list[float]:
     """The simulated reference's drawn misregistration (east, north; m)."""
     err = json.loads((scene / "truth" / "reference_errors.json").read_text())
     return [err["shift_east_m"], err["shift_north_m"]]
+
+
+@dataclass(frozen=True)
+class Comparison:
+    """One speed figure against a peer measured in the same run: what was timed, the peer,
+    both times (s, the same work on the same data)."""
+
+    what: str
+    peer: str
+    gcpfree_s: float
+    peer_s: float
+
+    @property
+    def ratio(self) -> float:
+        """gcpfree's time over the peer's (below 1: gcpfree is faster)."""
+        return self.gcpfree_s / self.peer_s
+
+
+def write_comparisons(path: Path | None, bench: str, rows: Sequence[Comparison]) -> None:
+    """A benchmark's comparisons as JSON at ``path`` (nothing when None), with the load."""
+    if path is None:
+        return
+    path.parent.mkdir(parents=True, exist_ok=True)
+    path.write_text(json.dumps({"bench": bench, "load": load(), "comparisons": [
+        {**asdict(r), "ratio": r.ratio} for r in rows]}, indent=1))
 
 
 def place(text: str) -> tuple[str, str, str]:
@@ -166,6 +208,11 @@ def _rms(v: np.ndarray) -> float:
 def gcp_common_error(scene: Path, out: Path) -> tuple[float, float, float]:
     """The used GCPs' mean error (east, north, up; m) against the truth: each GCP's image
     points triangulated with the scene's true models give its true ground."""
+    from core.geodesy import metres_per_degree
+    from core.intersection import triangulate
+    from tasks.absolute.orientation import NAMES
+    from tasks.io.sensors import read_model_file
+
     rep = read_report(out)
     rejected = {r["id"] for r in rep["gcps"]["rejected_ids"]}
     pts = [p for p in json.loads((out / "gcps.json").read_text())["points"]
@@ -185,6 +232,8 @@ def carried(truth: Any, lon: np.ndarray, lat: np.ndarray, h: np.ndarray,
     """What a common ground error ``e`` (east, north, up; m) of the GCPs leaves in check points'
     residuals: the adjusted model takes X + e to the image of X, so a check point at X computes
     the image of X - e and its residual holds truth(X) - truth(X - e)."""
+    from core.geodesy import metres_per_degree
+
     m_lon, m_lat = metres_per_degree(lat)
     tc, tr = truth.project(lon, lat, h)
     sc, sr = truth.project(lon - e[0] / m_lon, lat - e[1] / m_lat, h - e[2])
@@ -193,6 +242,8 @@ def carried(truth: Any, lon: np.ndarray, lat: np.ndarray, h: np.ndarray,
 
 def check_point_arrays(scene: Path, name: str) -> tuple[np.ndarray, ...]:
     """lon, lat, h, col, row of the scene's check points measured in image ``name``."""
+    from tasks.absolute.orientation import read_checkpoints
+
     points = read_checkpoints(scene / "truth" / "checkpoints.json")
     pts = [p for p in points.points if name in p.image_points]
     return tuple(np.array(v, dtype=float) for v in zip(
@@ -209,6 +260,10 @@ def beyond_shift(scene: Path, out: Path) -> dict[str, dict[str, Any]]:
     ``predicted_col_px``/``predicted_row_px`` as report.json states them and
     ``predicted_beyond_col_px``/``predicted_beyond_row_px`` without their reference term (the
     reference's stated registration sigma through the ground's partial derivatives)."""
+    from core.orientation.uncertainty import ground_jacobian, predicted_rms_px
+    from tasks.absolute.orientation import NAMES
+    from tasks.io.sensors import read_model_file
+
     rep = read_report(out)
     shift = reference_shift_m(scene)
     sigma = np.asarray(rep["settings"]["absolute"]["reference_sigma_m"], dtype=float)
@@ -291,6 +346,15 @@ class OrientationInputs:
 
 def orientation_inputs(scene: Path, out: Path) -> OrientationInputs:
     """:class:`OrientationInputs` of the orientation in ``out`` of the simulated ``scene``."""
+    from core.orientation.absolute import AbsoluteConfig
+    from core.orientation.adjust import AdjustConfig, ControlSet, ImageToAdjust
+    from core.orientation.frames import REFERENCE, FramePrior
+    from core.sensors.pushbroom import PushbroomModel
+    from tasks.absolute.orientation import tie_observations
+    from tasks.absolute.surface_match import TieGround
+    from tasks.io.products import GCPS
+    from tasks.io.sensors import load_model
+
     s = read_report(out)["settings"]
     absolute = AbsoluteConfig(**{k: tuple(v) if isinstance(v, list) else v
                                  for k, v in s["absolute"].items()})
@@ -311,5 +375,7 @@ def orientation_inputs(scene: Path, out: Path) -> OrientationInputs:
 def solution_again(scene: Path, out: Path) -> Solution:
     """The orientation of ``out`` run again from its GCPs, tie points and settings
     (deterministic: the solution ``gcpfree orient`` wrote)."""
+    from core.orientation.adjust import adjust
+
     inp = orientation_inputs(scene, out)
     return adjust(inp.images, inp.control, inp.ties, inp.config)

@@ -15,17 +15,18 @@ of this process, and the load average beside the figures (the machine is shared:
 the same invocation, not across invocations). Prints figures, asserts nothing but the outcome
 (every pair done).
 
-Environment: GCPFREE_BENCH_PAIRS (default 6), GCPFREE_BENCH_SCENE (an existing tiny scene
-folder, else one is simulated, about 40 s), GCPFREE_BENCH_SEEDED=1 (each pair folder starts
-with the orientation and ortho products of one real run, so a pair only writes its report,
-STAC and manifest: the throughput of resumed pairs), GCPFREE_BENCH_RUNS (comma list among
-1,2,kill; default all three).
+    .venv/bin/python bench/perf/bench_archive.py [--pairs 6] [--scene DIR] [--seeded]
+        [--runs 1 2 kill]
 
-    .venv/bin/python bench/perf/bench_archive.py
+``--pairs``: the catalog's pairs (default 6); ``--scene``: an existing tiny scene folder, else
+one is simulated (about 40 s); ``--seeded``: each pair folder starts with the orientation and
+ortho products of one real run, so a pair only writes its report, STAC and manifest (the
+throughput of resumed pairs); ``--runs``: which of the three runs (default all).
 """
 
 from __future__ import annotations
 
+import argparse
 import os
 import resource
 import shutil
@@ -38,17 +39,14 @@ from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[2]))
 
+from bench.common import load
+
 SEEDED_PRODUCTS = ("report.json", "left.json", "right.json", "gcps.json", "windows.json",
                    "dsm.tif", "dsm.json", "dsm_mask.tif", "dsm_egm96.tif", "dsm_egm96.json",
                    "dsm_egm96_mask.tif", "relative_dem.tif", "relative_dem.json",
                    "relative_dem_mask.tif", "relative", "ortho_left.tif", "ortho_left.json",
                    "ortho_right.tif", "ortho_right.json", "ortho_compare.json",
                    "ortho_discrepancy.tif", "ortho_discrepancy.png")
-
-
-def load() -> str:
-    one, five, fifteen = os.getloadavg()
-    return f"load {one:.1f} {five:.1f} {fifteen:.1f}"
 
 
 def peak_rss_mb() -> float:
@@ -65,10 +63,9 @@ def peak_rss_mb() -> float:
     return resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0
 
 
-def scene_dir(tmp: Path) -> Path:
-    given = os.environ.get("GCPFREE_BENCH_SCENE")
-    if given:
-        return Path(given)
+def scene_dir(given: Path | None, tmp: Path) -> Path:
+    if given is not None:
+        return given
     from tests.scenes import run_scene
 
     out = tmp / "scene"
@@ -150,19 +147,27 @@ def one_run(label: str, base: Path, scene: Path, n: int, workers: int, seed: Pat
     return rate
 
 
-def main() -> None:
+def main(argv: list[str] | None = None) -> None:
     from flows._env import configure_environment
 
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--pairs", type=int, default=6, help="pairs in the catalog (default 6)")
+    ap.add_argument("--scene", type=Path, default=None, help="an existing tiny scene folder")
+    ap.add_argument("--seeded", action="store_true",
+                    help="pairs start with one run's products (resumed pairs)")
+    ap.add_argument("--runs", nargs="+", choices=("1", "2", "kill"), default=["1", "2", "kill"],
+                    help="1 worker, 2 workers, 2 workers with one killed (default all)")
+    args = ap.parse_args(argv)
+    if args.pairs < 1:
+        ap.error("--pairs must be >= 1")
+    n, runs, seeded = args.pairs, args.runs, args.seeded
     tmp = Path(tempfile.mkdtemp(prefix="gcpfree-bench-archive-"))
     configure_environment(prefect_home=tmp / "prefect")
-    n = int(os.environ.get("GCPFREE_BENCH_PAIRS", "6"))
-    runs = os.environ.get("GCPFREE_BENCH_RUNS", "1,2,kill").split(",")
-    seeded = os.environ.get("GCPFREE_BENCH_SEEDED") == "1"
     from prefect.settings import PREFECT_API_URL
     from prefect.testing.utilities import prefect_test_harness
 
     try:
-        scene = scene_dir(tmp)
+        scene = scene_dir(args.scene, tmp)
         with prefect_test_harness(server_startup_timeout=120):
             # worker processes report to this server instead of starting one each (~5 s)
             os.environ["PREFECT_API_URL"] = PREFECT_API_URL.value()

@@ -16,8 +16,12 @@ process (the fit alone on arrays in memory, median of ``--repeat``; target issue
 xdem process fitting all the pairs (import and reading included; target: ours faster), with
 the CPU seconds of each beside the wall time, and the load average.
 
-    bash bench/peers/xdem/install.sh                        # once: xdem in bench/peers/xdem/.venv
+    bash bench/peers/xdem/install.sh           # once: xdem in bench/peers/xdem/.venv
     .venv/bin/python bench/perf/bench_coregister.py [--reunion-dsm DSM.tif] [--repeat 3]
+        [--rounds 2] [--json FILE]
+
+``--json`` writes the fit times (medians) and the last shell round, ours and xdem's (what
+``bench/perf/run.py`` prints).
 """
 
 from __future__ import annotations
@@ -40,6 +44,9 @@ from scipy.ndimage import shift as nd_shift
 
 REPO = Path(__file__).resolve().parents[2]
 sys.path.insert(0, str(REPO))
+
+from bench.common import Comparison, load, write_comparisons
+
 XDEM_PY = REPO / "bench" / "peers" / "xdem" / ".venv" / "bin" / "python"
 XDEM_FIT = REPO / "bench" / "peers" / "xdem" / "fit_pairs.py"
 SRTM = REPO / "tasks" / "data" / "N44E005.hgt"
@@ -151,7 +158,9 @@ def main() -> None:
     ap.add_argument("--repeat", type=int, default=3, help="in-process fits per pair (default 3)")
     ap.add_argument("--rounds", type=int, default=2,
                     help="shell rounds (both sides each round, default 2)")
+    ap.add_argument("--json", type=Path, default=None, help="write the comparisons there")
     args = ap.parse_args()
+    comparisons = []
     if not XDEM_PY.exists():
         raise SystemExit(f"{XDEM_PY} is missing: run bash bench/peers/xdem/install.sh first")
     with tempfile.TemporaryDirectory(prefix="bench-coregister-") as tmp_name:
@@ -159,10 +168,10 @@ def main() -> None:
         dsm = args.reunion_dsm or reunion_dsm(tmp)
         pairs = make_pairs(tmp, dsm)
         paths = [p for pair in pairs.values() for p in pair]
-        print(f"{os.cpu_count()} cores; load average {os.getloadavg()[0]:.1f}; noise "
+        print(f"{os.cpu_count()} cores; {load()}; noise "
               f"{NOISE_M} m; shifts (col px, row px, dz m) {SHIFTS}")
         for name, (ref, dem) in pairs.items():  # the two sides in turn, pair by pair
-            load = os.getloadavg()[0]
+            before = load()
             (xd,), _, _ = xdem_process([ref, dem], args.repeat)
             ours = ours_in_process(ref, dem, args.repeat)
             x_fit, x_cpu = statistics.median(xd["fit_s"]), statistics.median(xd["fit_cpu_s"])
@@ -172,13 +181,15 @@ def main() -> None:
             print(f"  gcpfree {errors(ours, SHIFTS[name])}; fit {ours['fit_s']:.2f} s "
                   f"({ours['fit_cpu_s']:.2f} s CPU)")
             print(f"  xdem    {errors(xd, SHIFTS[name])}; fit {x_fit:.2f} s ({x_cpu:.2f} s CPU)")
+            comparisons.append(Comparison(f"coregistration fit, {name} ({shape[1]} x "
+                                          f"{shape[0]} cells)", "xdem", ours["fit_s"], x_fit))
             print(f"  fit time ratio gcpfree / xdem {ours['fit_s'] / x_fit:.2f} wall, "
-                  f"{ours['fit_cpu_s'] / x_cpu:.2f} CPU (target <= 0.5; load average "
-                  f"{load:.1f} before, {os.getloadavg()[0]:.1f} after)")
+                  f"{ours['fit_cpu_s'] / x_cpu:.2f} CPU (target <= 0.5; "
+                  f"{before} before, {load()} after)")
         print(f"from the shell: {len(pairs)} gcpfree coregister processes vs one xdem process "
               "fitting all pairs")
         for i in range(args.rounds):
-            load = os.getloadavg()[0]
+            before = load()
             ours_wall = ours_cpu = 0.0
             for name, (ref, dem) in pairs.items():
                 w, c = gcpfree_process(ref, dem, tmp / f"{name}.json")
@@ -186,8 +197,12 @@ def main() -> None:
             _, x_wall, x_cpu = xdem_process(paths, 1)
             print(f"  round {i + 1}: gcpfree {ours_wall:.2f} s ({ours_cpu:.2f} s CPU), xdem "
                   f"{x_wall:.2f} s ({x_cpu:.2f} s CPU): ratio {ours_wall / x_wall:.2f} wall, "
-                  f"{ours_cpu / x_cpu:.2f} CPU (load average {load:.1f} before, "
-                  f"{os.getloadavg()[0]:.1f} after)")
+                  f"{ours_cpu / x_cpu:.2f} CPU ({before} before, {load()} after)")
+        if args.rounds:
+            comparisons.append(Comparison(
+                f"coregister from the shell, {len(pairs)} pairs (last round)", "xdem",
+                ours_wall, x_wall))
+        write_comparisons(args.json, "bench_coregister", comparisons)
 
 
 if __name__ == "__main__":

@@ -10,28 +10,27 @@ is printed too: figures taken while other work shares the cores are slower. Then
 truth DSM after the best-fit 3-D offset and tilt: NMAD per land-cover class (target <= 1 GSD
 on bare soil), and the % mismatched.
 
-    .venv/bin/python bench/perf/bench_dsm.py [SCENE_DIR]
+    .venv/bin/python bench/perf/bench_dsm.py [--scene DIR] [--preset spot]
 
-SCENE_DIR is a simulated scene (``gcpfree simulate --preset spot --no-lidar --out DIR``,
-about 8 minutes); without it one is simulated into a temporary folder. GCPFREE_BENCH_PRESET
-picks another preset for that. Prints figures, asserts nothing.
+``--scene`` is a simulated scene (``gcpfree simulate --preset spot --no-lidar --out DIR``,
+about 8 minutes); without it one is simulated into a temporary folder (``--preset`` picks
+another preset for that). Prints figures, asserts nothing.
 """
 
 from __future__ import annotations
 
+import argparse
 import json
 import os
-import subprocess
 import sys
-import tempfile
-import time
-from collections.abc import Iterator
 from pathlib import Path
 
 import numpy as np
 
-REPO = Path(__file__).resolve().parents[2]
-sys.path.insert(0, str(REPO))
+sys.path.insert(0, str(Path(__file__).resolve().parents[2]))
+
+from bench.common import given_or_simulated, load, workspace
+from bench.perf.meters import watch
 
 CHILD = """
 import json, sys, time
@@ -53,67 +52,17 @@ print("RESULT " + json.dumps({"seconds": dt, "summary": s.to_dict()}))
 """
 
 
-def _status_kb(pid: int, key: str = "VmRSS") -> float:
-    try:
-        for line in Path(f"/proc/{pid}/status").read_text().splitlines():
-            if line.startswith(key):
-                return float(line.split()[1])
-    except OSError:
-        pass
-    return 0.0
-
-
-def tree_pids(root: int) -> Iterator[int]:
-    """A process and its descendants, Prefect's temporary API server (uvicorn) left out (its
-    children still walked); a process gone meanwhile is skipped with its children."""
-    todo, seen = [root], set()
-    while todo:
-        pid = todo.pop()
-        if pid in seen:
-            continue
-        seen.add(pid)
-        try:
-            cmd = Path(f"/proc/{pid}/cmdline").read_bytes()
-        except OSError:
-            continue
-        if b"uvicorn" not in cmd:
-            yield pid
-        for f in Path(f"/proc/{pid}/task").glob("*/children"):
-            try:
-                todo += [int(x) for x in f.read_text().split()]
-            except OSError:
-                pass
-
-
-def tree_rss_mb(root: int) -> float:
-    """Resident memory of a process and its descendants, Prefect's temporary API server
-    (uvicorn) left out: what the DEM itself holds, its worker processes included."""
-    return sum(_status_kb(pid) for pid in tree_pids(root)) / 1024.0
-
-
 def run_child(scene: Path, out: Path, roi: list[int] | None, home: Path) -> dict:
+    """One DEM in a child process: its flow's seconds and summary, the process's wall time and
+    the peak memory of its process tree."""
     from tasks.io.geoid import BUNDLED_SRTM_DIR
 
     env = dict(os.environ, PREFECT_HOME=str(home), DASK_TEMPORARY_DIRECTORY=str(home / "dask"))
     extra = {"reference": str(BUNDLED_SRTM_DIR / "N44E005.hgt")}
-    t0 = time.perf_counter()
-    proc = subprocess.Popen([sys.executable, "-c", CHILD, str(scene), str(out),
-                             json.dumps(roi), json.dumps(extra)], stdout=subprocess.PIPE,
-                            stderr=subprocess.PIPE, text=True, env=env, cwd=REPO)
-    peak = 0.0
-    while proc.poll() is None:
-        peak = max(peak, tree_rss_mb(proc.pid))
-        time.sleep(0.25)
-    stdout, stderr = proc.communicate()
-    wall = time.perf_counter() - t0
-    if proc.returncode != 0:
-        print(stdout[-3000:], stderr[-3000:])
-        raise SystemExit("dsm failed")
+    wall, peak, stdout, _ = watch([sys.executable, "-c", CHILD, str(scene), str(out),
+                                   json.dumps(roi), json.dumps(extra)], env, "dsm")
     line = next(ln for ln in stdout.splitlines() if ln.startswith("RESULT "))
-    res = json.loads(line[len("RESULT "):])
-    res["wall_s"] = wall
-    res["peak_mb"] = peak
-    return res
+    return {**json.loads(line[len("RESULT "):]), "wall_s": wall, "peak_mb": peak}
 
 
 def accuracy(scene: Path, dem_path: Path) -> dict[str, float]:
@@ -149,18 +98,13 @@ def accuracy(scene: Path, dem_path: Path) -> dict[str, float]:
     return out
 
 
-def main() -> None:
-    with tempfile.TemporaryDirectory() as tmp:
-        tmp_path = Path(tmp)
-        if len(sys.argv) > 1:
-            scene = Path(sys.argv[1])
-        else:
-            scene = tmp_path / "scene"
-            preset = os.environ.get("GCPFREE_BENCH_PRESET", "spot")
-            subprocess.run([sys.executable, "-m", "flows.cli", "simulate", "--preset", preset,
-                            "--seed", "1", "--no-lidar", "--out", str(scene)], check=True,
-                           cwd=REPO, capture_output=True,
-                           env=dict(os.environ, PREFECT_HOME=str(tmp_path / "sim")))
+def main(argv: list[str] | None = None) -> None:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--scene", type=Path, default=None, help="a simulated scene folder")
+    ap.add_argument("--preset", default="spot", help="the preset simulated without --scene")
+    args = ap.parse_args(argv)
+    with workspace() as (tmp_path, env):
+        scene = given_or_simulated(args.scene, tmp_path, env, args.preset, 1, "--no-lidar")
         from core.simulation.scene import SceneDef
 
         sdef = SceneDef.from_json((scene / "truth" / "scene.json").read_text())
@@ -168,7 +112,7 @@ def main() -> None:
         gsd = spec.gsd_m
         runs = [("half", [0, 0, spec.n_cols, spec.n_rows // 2]), ("full", None)]
         print(f"scene {scene} (preset {sdef.preset}, {spec.n_cols} x {spec.n_rows} px, "
-              f"{gsd:g} m), {os.cpu_count()} cores, load average {os.getloadavg()[0]:.1f}")
+              f"{gsd:g} m), {os.cpu_count()} cores, {load()}")
         for name, roi in runs:
             out = tmp_path / f"dem_{name}.tif"
             res = run_child(scene, out, roi, tmp_path / f"prefect_{name}")
@@ -178,7 +122,7 @@ def main() -> None:
             print(f"{name:5s} {px / 1e6:5.1f} Mpx: flow {res['seconds']:6.1f} s "
                   f"({px / 1e6 / res['seconds']:.2f} Mpx/s; process {res['wall_s']:.1f} s with "
                   f"Prefect start), peak RSS {res['peak_mb']:.0f} MB; {s['n_tiles']} tiles; "
-                  f"load average now {os.getloadavg()[0]:.1f}")
+                  f"{load()}")
             print(f"      matched {s['match_rate_pct']:.1f} %, mismatched {s['mismatched_pct']:.1f} "
                   f"%, occluded {s['occluded_pct']:.1f} %; completeness "
                   f"{s['completeness_pct']:.1f} %; y residual <= {s['y_residual_max_px']:.3f} px")

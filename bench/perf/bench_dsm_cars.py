@@ -12,8 +12,11 @@ Prints both wall times (each a fresh process, Prefect's temporary server include
 both completenesses over the ROI footprint, and the median and NMAD of ours minus CARS's.
 Targets (issue 10): our time <= 1/5 of CARS's, completeness >= CARS's, NMAD <= 0.5 m.
 
-    bash bench/peers/cars/install.sh                   # once: CARS in bench/peers/cars/.venv
+    bash bench/peers/cars/install.sh             # once: CARS in bench/peers/cars/.venv
     .venv/bin/python bench/perf/bench_dsm_cars.py [--initial-elevation H] [--keep DIR]
+        [--json FILE]
+
+``--json`` writes both times (what ``bench/perf/run.py`` prints).
 """
 
 from __future__ import annotations
@@ -31,6 +34,9 @@ import numpy as np
 
 REPO = Path(__file__).resolve().parents[2]
 sys.path.insert(0, str(REPO))
+
+from bench.common import Comparison, load, write_comparisons
+
 DATA = REPO / "tests" / "data" / "pleiades_reunion"
 CARS = REPO / "bench" / "peers" / "cars" / ".venv" / "bin" / "cars"
 ROI = (150, 150, 700, 700)
@@ -173,6 +179,7 @@ def main() -> None:
                     help="CARS's constant initial elevation (m, EGM96; default 1290, the "
                          "issue's figure: the RPC's height offset)")
     ap.add_argument("--keep", type=Path, default=None, help="keep the products in this folder")
+    ap.add_argument("--json", type=Path, default=None, help="write the comparison there")
     args = ap.parse_args()
     if not CARS.exists():
         raise SystemExit(f"{CARS} is missing: run bash bench/peers/cars/install.sh first")
@@ -197,7 +204,9 @@ def main() -> None:
         print(f"time ratio   {t_ours / t_cars:.2f} (target <= 0.2)")
         print(f"ours - CARS  median {figures['median_m']:+.2f} m, NMAD {figures['nmad_m']:.2f} m,"
               f" 90 % of |dz - median| <= {figures['p90_abs_m']:.2f} m over "
-              f"{figures['n_cells']} cells (both EGM96; target NMAD <= 0.5 m)")
+              f"{figures['n_cells']} cells (both EGM96; target NMAD <= 0.5 m); {load()}")
+        write_comparisons(args.json, "bench_dsm_cars", [Comparison(
+            "DSM of the Pleiades Reunion ROI, from the shell", "CARS", t_ours, t_cars)])
 
 
 if __name__ == "__main__":

@@ -7,10 +7,13 @@ order, the worst case for the DEM windows. Each evaluation runs in a child proce
 Prefect: the task's own function) whose peak RSS is read from
 ``getrusage(RUSAGE_CHILDREN)``. Memory should not grow with the point count. Prints figures,
 asserts nothing.
+
+    .venv/bin/python bench/perf/bench_evaluate.py [--millions 2 20]
 """
 
 from __future__ import annotations
 
+import argparse
 import os
 import resource
 import subprocess
@@ -89,8 +92,11 @@ def measure(dem: Path, laz: Path) -> tuple[float, float, str]:
     return float(r.stdout.split()[0]), peak / 1024, r.stdout.strip()
 
 
-def main() -> None:
-    sizes = [2_000_000, 20_000_000]
+def main(argv: list[str] | None = None) -> None:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--millions", type=float, nargs="+", default=[2, 20],
+                    help="point counts in millions, smallest first (default 2 20)")
+    sizes = sorted(int(m * 1e6) for m in ap.parse_args(argv).millions)
     with tempfile.TemporaryDirectory() as tmp:
         tmp = Path(tmp)
         dem = tmp / "dsm.tif"

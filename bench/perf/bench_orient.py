@@ -1,40 +1,40 @@
-"""Time of `gcpfree orient` on the `spot` pair, and of its step 3-4 alone: surface matching of
-all windows against the reference and the absolute orientation (with lens self-calibration).
+"""Time of ``gcpfree orient`` on the ``spot`` pair, and of its steps 3-4 alone: surface matching
+of all windows against the reference and the absolute orientation (with lens self-calibration).
 
 Target (issue 11): surface matching + adjustment under 60 s on 2 cores. The scene is simulated
-once into a temp dir (about 9 minutes) unless GCPFREE_BENCH_SCENE names an existing `gcpfree
-simulate --preset spot` output (with its reference.tif). The CLI runs in a child process (peak
-RSS from getrusage); steps 3-4 are then timed again in this process on the CLI's own relative
-DEM and tie points. Prints figures, asserts nothing.
+once into a temporary folder (about 9 minutes) unless ``--scene`` names an existing ``gcpfree
+simulate --preset spot`` output (with its reference.tif). The command runs in a child process
+(peak RSS from getrusage); steps 3-4 are then timed again in this process on the command's own
+relative DEM and tie points, through the tasks ``gcpfree orient`` calls. Prints figures,
+asserts nothing.
+
+    .venv/bin/python bench/perf/bench_orient.py [--scene DIR]
 """
 
 from __future__ import annotations
 
+import argparse
 import json
-import os
 import resource
-import subprocess
 import sys
 import tempfile
 import time
+from dataclasses import replace
 from pathlib import Path
 
+sys.path.insert(0, str(Path(__file__).resolve().parents[2]))
 
-def run(cmd: list[str], env: dict[str, str]) -> float:
-    t0 = time.perf_counter()
-    r = subprocess.run(cmd, capture_output=True, text=True, env=env, check=False)
-    if r.returncode != 0:
-        print(r.stdout[-2000:], r.stderr[-2000:])
-        raise SystemExit(f"{cmd[3]} failed")
-    return time.perf_counter() - t0
+from bench.common import given_or_simulated, orient, read_report, workspace
 
 
 def steps_3_4(scene: Path, out: Path) -> None:
     """Surface matching of every window and the adjustment, timed in-process."""
-    from dataclasses import replace
-
+    from core.geodesy import ARCSEC
     from core.matching.surface import SurfaceMatchConfig
+    from core.orientation.absolute import AbsoluteConfig
+    from core.orientation.adjust import AdjustConfig
     from core.sensors.pushbroom import PushbroomModel
+    from tasks.absolute.control import ground_control
     from tasks.absolute.orientation import orient_absolute
     from tasks.absolute.surface_match import TieGround, match_surfaces
     from tasks.io.dem import read_reference
@@ -48,48 +48,48 @@ def steps_3_4(scene: Path, out: Path) -> None:
     dem = json.loads((out / "relative_dem.json").read_text())
     cfg = SurfaceMatchConfig()
     t0 = time.perf_counter()
-    box = pair_box(left, right, (dem["h_min_m"], dem["h_max_m"])).expanded(25 / 3600)
+    margin = (cfg.shift_max_arcsec + 5.0) * ARCSEC  # as gcpfree orient reads it
+    box = pair_box(left, right, (dem["h_min_m"], dem["h_max_m"])).expanded(margin)
     reference = read_reference(scene / "reference.tif", box, "ellipsoidal")
     ties = TieGround.from_tiepoints_json(out / "relative" / "rel.tiepoints.json")
     t1 = time.perf_counter()
-    matched = match_surfaces.fn(out / "relative_dem.tif", ties, reference, cfg)
+    windows = match_surfaces.fn(out / "relative_dem.tif", ties, reference, cfg,
+                                models=(left.model, right.model))
     t2 = time.perf_counter()
-    with tempfile.TemporaryDirectory() as tmp:
-        absolute = orient_absolute.fn(left, right, matched.gcps, Path(tmp), lens=True,
-                                      ties=ties, along_track=True)  # as the CLI does
+    absolute = AbsoluteConfig()
+    control = ground_control.fn(windows, windows.verdict(cfg, 8, reference.cell_size_m()), None,
+                                absolute)
+    with tempfile.TemporaryDirectory() as tmp:  # as the command does
+        result = orient_absolute.fn((("left", left), ("right", right)), control.sets, Path(tmp),
+                                    AdjustConfig(absolute=absolute, lens=True, along_track=True),
+                                    ties)
     t3 = time.perf_counter()
     print(f"steps 3-4 in-process: reference read {t1 - t0:.1f} s, surface matching "
-          f"{len(matched.matches)} windows ({len(matched.gcps)} GCPs) {t2 - t1:.1f} s, "
+          f"{len(windows.matches)} windows ({len(windows.gcps)} GCPs) {t2 - t1:.1f} s, "
           f"adjustment with self-calibration, tie points and along-track {t3 - t2:.1f} s; "
-          f"total {t3 - t0:.1f} s "
-          f"(target < 60 s); sigma0 {absolute.adjustment.sigma0:.2f}")
+          f"total {t3 - t0:.1f} s (target < 60 s); sigma0 {result.adjustment.sigma0:.2f}")
 
 
-def main() -> None:
-    with tempfile.TemporaryDirectory() as tmp:
-        env = dict(os.environ, PREFECT_HOME=str(Path(tmp) / "prefect"))
-        scene = os.environ.get("GCPFREE_BENCH_SCENE")
-        if scene is None:
-            scene = str(Path(tmp) / "spot")
-            run([sys.executable, "-m", "flows.cli", "simulate", "--preset", "spot", "--seed", "2",
-                 "--lens", "--date-change", "0.1", "--no-lidar", "--out", scene], env)
-        scene_dir = Path(scene)
-        out = Path(tmp) / "orient"
+def main(argv: list[str] | None = None) -> None:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--scene", type=Path, default=None, help="a simulated spot scene folder")
+    args = ap.parse_args(argv)
+    with workspace() as (tmp, env):
+        scene = given_or_simulated(args.scene, tmp, env, "spot", 2, "--lens", "--date-change",
+                                   "0.1", "--no-lidar")
+        out = tmp / "orient"
         before = resource.getrusage(resource.RUSAGE_CHILDREN).ru_maxrss
-        dt = run([sys.executable, "-m", "flows.cli", "orient", "--left",
-                  str(scene_dir / "left.tif"), "--right", str(scene_dir / "right.tif"),
-                  "--reference", str(scene_dir / "reference.tif"), "--checkpoints",
-                  str(scene_dir / "truth" / "checkpoints.json"), "--self-calibrate",
-                  "--no-progress", "--out", str(out)], env)
+        dt, refused = orient(scene, out, env)
+        if refused is not None:
+            raise SystemExit(f"gcpfree orient: {refused}")
         peak = max(resource.getrusage(resource.RUSAGE_CHILDREN).ru_maxrss, before)
-        r = json.loads((out / "report.json").read_text())
-        cp = r.get("check_points", {})
-        print(f"orient (pushbroom, self-calibration) on {scene_dir.name}: {dt:.1f} s, peak RSS "
+        r = read_report(out)
+        print(f"orient (pushbroom, self-calibration) on {scene.name}: {dt:.1f} s, peak RSS "
               f"{peak / 1024:.0f} MB; {r['gcps']['used']} GCPs used, {r['gcps']['rejected']} "
               "rejected; check points " + ", ".join(
                   f"{n} P {c['rms_col_px']:.2f} L {c['rms_row_px']:.2f} px"
-                  for n, c in cp.items()))
-        steps_3_4(scene_dir, out)
+                  for n, c in r.get("check_points", {}).items()))
+        steps_3_4(scene, out)
 
 
 if __name__ == "__main__":

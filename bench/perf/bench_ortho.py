@@ -30,12 +30,13 @@ the clock starts; the first-call time is printed). Throughput is in output cells
 shares the cores are slower, and the ratio of two runs taken one after the other is what
 to read. ``--repeat N`` times each pair N times (alternating ours and GDAL's).
 
-    .venv/bin/python bench/perf/bench_ortho.py [SCENE_DIR] [--crop 4000] [--repeat 1]
-        [--no-pushbroom]
+    .venv/bin/python bench/perf/bench_ortho.py [--scene DIR] [--preset spot] [--crop 4000]
+        [--repeat 1] [--no-pushbroom] [--json FILE]
 
-SCENE_DIR is a simulated scene (``gcpfree simulate --preset spot --no-lidar --out DIR``, about
-8 minutes); without it one is simulated into a temporary folder (GCPFREE_BENCH_PRESET picks
-another preset). Prints figures, asserts nothing.
+``--scene`` is a simulated scene (``gcpfree simulate --preset spot --no-lidar --out DIR``, about
+8 minutes); without it one is simulated into a temporary folder (``--preset`` picks another
+preset). ``--json`` writes each case's medians, ours and GDAL's (what ``bench/perf/run.py``
+prints). Prints figures, asserts nothing.
 """
 
 from __future__ import annotations
@@ -43,17 +44,14 @@ from __future__ import annotations
 import argparse
 import json
 import os
-import subprocess
+import statistics
 import sys
-import tempfile
-import time
 from pathlib import Path
 
-REPO = Path(__file__).resolve().parents[2]
-sys.path.insert(0, str(REPO))
-sys.path.insert(0, str(Path(__file__).parent))
+sys.path.insert(0, str(Path(__file__).resolve().parents[2]))
 
-from bench_dsm import tree_rss_mb
+from bench.common import Comparison, given_or_simulated, load, workspace, write_comparisons
+from bench.perf.meters import watch
 
 CHILD = """
 import dataclasses, json, sys, time
@@ -123,29 +121,14 @@ print("RESULT " + json.dumps({"seconds": dt, "warm_s": warm, "summary": summary}
 """
 
 
-def load() -> str:
-    return f"load average {os.getloadavg()[0]:.1f}"
-
-
 def run_child(scene: Path, out: Path, kind: str, crop: int, home: Path) -> dict:
+    """One ortho in a child process: its seconds (planning and writing included), summary
+    and kernel warm-up time, the process's wall time and the peak memory of its tree."""
     env = dict(os.environ, PREFECT_HOME=str(home), DASK_TEMPORARY_DIRECTORY=str(home / "dask"))
-    t0 = time.perf_counter()
-    proc = subprocess.Popen([sys.executable, "-c", CHILD, str(scene), str(out), kind, str(crop)],
-                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, env=env,
-                            cwd=REPO)
-    peak = 0.0
-    while proc.poll() is None:
-        peak = max(peak, tree_rss_mb(proc.pid))
-        time.sleep(0.25)
-    stdout, stderr = proc.communicate()
-    if proc.returncode != 0:
-        print(stdout[-3000:], stderr[-3000:])
-        raise SystemExit(f"{kind} failed")
+    wall, peak, stdout, _ = watch([sys.executable, "-c", CHILD, str(scene), str(out), kind,
+                                   str(crop)], env, kind, quiet=True)
     line = next(ln for ln in stdout.splitlines() if ln.startswith("RESULT "))
-    res = json.loads(line[len("RESULT "):])
-    res["wall_s"] = time.perf_counter() - t0
-    res["peak_mb"] = peak
-    return res
+    return {**json.loads(line[len("RESULT "):]), "wall_s": wall, "peak_mb": peak}
 
 
 def describe(kind: str, res: dict) -> str:
@@ -180,59 +163,52 @@ def agreement(a: Path, b: Path) -> str:
             f"{s.median_norm_px:.3f} px, RMS {s.rms_norm_px:.3f} px ({s.n_valid} windows)")
 
 
-def main() -> None:
+def main(argv: list[str] | None = None) -> None:
     from flows._env import configure_environment
 
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("scene", nargs="?", type=Path, help="a simulated scene folder")
+    ap.add_argument("--scene", type=Path, default=None, help="a simulated scene folder")
+    ap.add_argument("--preset", default="spot", help="the preset simulated without --scene")
     ap.add_argument("--crop", type=int, default=4000,
                     help="cells per side of the crop case (0: whole grid only)")
     ap.add_argument("--repeat", type=int, default=1, help="timed pairs per case")
     ap.add_argument("--no-pushbroom", action="store_true", help="skip the pushbroom run")
-    args = ap.parse_args()
+    ap.add_argument("--json", type=Path, default=None, help="write the comparisons there")
+    args = ap.parse_args(argv)
     if args.crop < 0 or args.repeat < 1:
-        print("--crop must be >= 0 and --repeat >= 1", file=sys.stderr)
-        raise SystemExit(2)
-    if args.scene is not None and not (args.scene / "left.tif").exists():
-        print(f"{args.scene} holds no left.tif; give a folder written by gcpfree simulate",
-              file=sys.stderr)
-        raise SystemExit(2)
-
-    with tempfile.TemporaryDirectory() as tmp:
-        tmp_path = Path(tmp)
+        ap.error("--crop must be >= 0 and --repeat >= 1")
+    with workspace() as (tmp_path, env):
         configure_environment(prefect_home=tmp_path / "prefect_main")
-        if args.scene is not None:
-            scene = args.scene
-        else:
-            scene = tmp_path / "scene"
-            preset = os.environ.get("GCPFREE_BENCH_PRESET", "spot")
-            subprocess.run([sys.executable, "-m", "flows.cli", "simulate", "--preset", preset,
-                            "--seed", "1", "--no-lidar", "--out", str(scene)], check=True,
-                           cwd=REPO, capture_output=True,
-                           env=dict(os.environ, PREFECT_HOME=str(tmp_path / "sim")))
+        scene = given_or_simulated(args.scene, tmp_path, env, args.preset, 1, "--no-lidar")
         print(f"scene {scene}, {os.cpu_count()} cores, {load()}")
         cases = ([("crop", args.crop)] if args.crop else []) + [("whole", 0)]
-        summary = []
+        summary, comparisons = [], []
         for case, crop in cases:
             print(f"{case}" + (f" ({crop} x {crop} cells)" if crop else ""))
-            ratios = []
+            times: dict[str, list[float]] = {"rpc": [], "gdal": []}
             for k in range(args.repeat):
                 res = {}
                 for kind in ("rpc", "gdal"):
                     out = tmp_path / f"{case}_{kind}_{k}.tif"
                     res[kind] = run_child(scene, out, kind, crop, tmp_path / f"prefect_{kind}")
+                    times[kind].append(res[kind]["seconds"])
                     print(describe(kind, res[kind]))
-                ratios.append(res["gdal"]["seconds"] / res["rpc"]["seconds"])
-                print(f"  speed ratio GDAL time / ours (RPC, same grid): {ratios[-1]:.2f}")
+                print(f"  speed ratio GDAL time / ours (RPC, same grid): "
+                      f"{res['gdal']['seconds'] / res['rpc']['seconds']:.2f}")
             print(agreement(tmp_path / f"{case}_rpc_0.tif", tmp_path / f"{case}_gdal_0.tif"))
-            summary.append(f"{case}: ours / GDAL speed " + ", ".join(f"{r:.2f}x" for r in ratios)
-                           + " (target >= 2)")
+            s = res["rpc"]["summary"]
+            ours, gdal = statistics.median(times["rpc"]), statistics.median(times["gdal"])
+            summary.append(f"{case}: ours / GDAL speed {gdal / ours:.2f}x (target >= 2)")
+            comparisons.append(Comparison(
+                f"ortho, {s['width']} x {s['height']} cells ({case})", "GDAL RPC warp", ours,
+                gdal))
         if not args.no_pushbroom:
             res = run_child(scene, tmp_path / "pushbroom.tif", "pushbroom", 0,
                             tmp_path / "prefect_pushbroom")
             print("whole grid, truth pushbroom on the truth DSM, occlusion mask")
             print(describe("pushbroom", res))
         print("\n".join(summary) + f"; {load()}")
+        write_comparisons(args.json, "bench_ortho", comparisons)
 
 
 if __name__ == "__main__":

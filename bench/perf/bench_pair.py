@@ -2,7 +2,7 @@
 lidar evaluation, report, STAC) with 1 and with 2 workers; time, peak memory and speed-up.
 
 Targets: <= 10 min and <= 4 GB with 2 workers, speed-up >= 1.7 (issue 21.5). The scene is
-simulated once (about 9 minutes, with lidar) unless GCPFREE_BENCH_SCENE names an existing
+simulated once (about 9 minutes, with lidar) unless ``--scene`` names an existing
 `gcpfree simulate --preset spot` output. Each run is a child process; its peak memory is the
 resident memory of the whole process tree (worker processes included, Prefect's temporary API
 server left out), sampled every 0.25 s. Where the time goes: each run has its own PREFECT_HOME,
@@ -11,44 +11,32 @@ into a table of seconds and peak memory per step, 1 worker beside 2 ("rest": the
 work between tasks, the API server's and Python's start-up). Each home's database is made
 before its run, untimed, as for every run after a user's first (the first run's making of it,
 about 7 s here, is measured by bench_dsm_wall.py). The load average is printed beside
-each run; GCPFREE_BENCH_REPEAT=N repeats the 1-then-2 pair N times. Prints figures, asserts
-nothing.
+each run; ``--repeat N`` repeats the 1-then-2 pair N times. Prints figures, asserts nothing.
+
+    .venv/bin/python bench/perf/bench_pair.py [--scene DIR] [--repeat 1]
 """
 
 from __future__ import annotations
 
+import argparse
 import json
 import math
-import os
-import resource
 import shutil
 import subprocess
 import sys
-import tempfile
-import time
 from pathlib import Path
 
-sys.path.insert(0, str(Path(__file__).resolve().parent))
-from bench_hrg import load, step_memory, watch
+sys.path.insert(0, str(Path(__file__).resolve().parents[2]))
 
-
-def run(cmd: list[str], env: dict[str, str], tmp: Path) -> tuple[float, float]:
-    """(seconds, peak RSS in MB) of one child."""
-    timer = shutil.which("time") or ("/usr/bin/time" if Path("/usr/bin/time").exists() else None)
-    rss_file = tmp / "rss.txt"
-    full = [timer, "-f", "%M", "-o", str(rss_file), *cmd] if timer else cmd
-    before = resource.getrusage(resource.RUSAGE_CHILDREN).ru_maxrss
-    t0 = time.perf_counter()
-    r = subprocess.run(full, capture_output=True, text=True, env=env, check=False)
-    dt = time.perf_counter() - t0
-    if r.returncode != 0:
-        print(r.stdout[-2000:], r.stderr[-2000:])
-        raise SystemExit(f"{' '.join(cmd[3:5])} failed")
-    if timer:
-        rss = float(rss_file.read_text().split()[-1]) / 1024.0
-    else:  # only a rise of the children's maximum is visible this way
-        rss = max(resource.getrusage(resource.RUSAGE_CHILDREN).ru_maxrss, before) / 1024.0
-    return dt, rss
+from bench.common import (
+    given_or_simulated,
+    load,
+    pair_args,
+    read_report,
+    workspace,
+    worst_check_rms,
+)
+from bench.perf.meters import step_memory, watch
 
 
 def step_table(steps: dict[int, dict[str, tuple[float, float, float]]],
@@ -75,55 +63,42 @@ def step_table(steps: dict[int, dict[str, tuple[float, float, float]]],
     return lines
 
 
-def main() -> None:
-    with tempfile.TemporaryDirectory() as tmp_name:
-        tmp = Path(tmp_name)
-        env = dict(os.environ, PREFECT_HOME=str(tmp / "prefect"),
-                   PREFECT_SERVER_ANALYTICS_ENABLED="false",
-                   PREFECT_SERVER_EPHEMERAL_STARTUP_TIMEOUT_SECONDS="300")
-        scene = Path(os.environ.get("GCPFREE_BENCH_SCENE") or tmp / "spot")
-        if not (scene / "left.tif").exists():
-            run([sys.executable, "-m", "flows.cli", "simulate", "--preset", "spot", "--seed",
-                 "2", "--lens", "--date-change", "0.1", "--out", str(scene)], env, tmp)
-        truth = scene / "truth"
-        repeats = int(os.environ.get("GCPFREE_BENCH_REPEAT", "1"))
-        for rep in range(repeats):
+def main(argv: list[str] | None = None) -> None:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--scene", type=Path, default=None, help="a simulated spot scene folder")
+    ap.add_argument("--repeat", type=int, default=1, help="rounds of 1 then 2 workers")
+    args = ap.parse_args(argv)
+    with workspace() as (tmp, env):
+        env["PREFECT_SERVER_EPHEMERAL_STARTUP_TIMEOUT_SECONDS"] = "300"
+        scene = given_or_simulated(args.scene, tmp, env, "spot", 2, "--lens", "--date-change",
+                                   "0.1")
+        for _ in range(args.repeat):
             times: dict[int, float] = {}
             steps: dict[int, dict[str, tuple[float, float, float]]] = {}
             cpus: dict[int, float] = {}
             for workers in (1, 2):
-                out = tmp / f"pair_{workers}_{rep}"
-                home = tmp / f"prefect_{workers}_{rep}"
-                args = [sys.executable, "-m", "flows.cli", "pair", "--left",
-                        str(scene / "left.tif"), "--right", str(scene / "right.tif"),
-                        "--reference", str(scene / "reference.tif"), "--checkpoints",
-                        str(truth / "checkpoints.json"), "--self-calibrate", "--workers",
-                        str(workers), "--no-progress", "--out", str(out)]
-                if (truth / "lidar.laz").exists():
-                    args[-2:-2] = ["--lidar", str(truth / "lidar.laz"), "--landcover",
-                                   str(truth / "landcover.tif")]
+                out, home = tmp / f"pair_{workers}", tmp / f"prefect_{workers}"
                 subprocess.run([sys.executable, "-m", "prefect", "server", "database", "upgrade",
                                 "-y"], env=dict(env, PREFECT_HOME=str(home)), check=True,
                                capture_output=True)
                 before = load()
-                dt, rss, _, samples = watch(args, dict(env, PREFECT_HOME=str(home)),
+                dt, rss, _, samples = watch([sys.executable, "-m", "flows.cli",
+                                             *pair_args(scene, out, workers)],
+                                            dict(env, PREFECT_HOME=str(home)),
                                             f"pair with {workers} worker(s)")
                 times[workers] = dt
                 cpus[workers] = samples[-1][2] if samples else math.nan
                 steps[workers] = step_memory(home / "prefect.db", samples)
-                report = json.loads((out / "report.json").read_text())
-                cp = report.get("check_points", {})
-                worst = max((max(c["rms_col_px"], c["rms_row_px"]) for c in cp.values()),
-                            default=float("nan"))
+                worst = worst_check_rms(read_report(out))
                 le68 = (json.loads((out / "eval.json").read_text())["all"]["le68"]
                         if (out / "eval.json").exists() else float("nan"))
                 cmp = json.loads((out / "ortho_compare.json").read_text())["px"]["median_norm"]
                 print(f"pair on {scene.name}, {workers} worker(s): {dt:.1f} s, peak RSS "
                       f"{rss:.0f} MB; check points worst RMS {worst:.2f} px, orthos median "
                       f"{cmp:.2f} px, LE68 {le68:.2f} m (targets: 600 s, 4096 MB, peak of the "
-                      f"process tree); load before "
-                      f"{before}, after {load()}", flush=True)
+                      f"process tree); before: {before}, after: {load()}", flush=True)
                 shutil.rmtree(out, ignore_errors=True)
+                shutil.rmtree(home, ignore_errors=True)
             print("\n".join(step_table(steps, times, cpus)))
             print(f"speed-up of 2 workers over 1: {times[1] / times[2]:.2f}x (target >= 1.7)",
                   flush=True)

@@ -2,10 +2,13 @@
 
 A SPOT-like 6000x6000 scene at 10 m, 25 deg incidence, heights -400..4800 m. Prints figures,
 asserts nothing.
+
+    .venv/bin/python bench/perf/bench_pushbroom.py [--n 100000]
 """
 
 from __future__ import annotations
 
+import argparse
 import time
 
 import numpy as np
@@ -13,10 +16,12 @@ import numpy as np
 from core.sensors.pushbroom_synthetic import SyntheticSpec, synthetic_pushbroom
 
 
-def main() -> None:
+def main(argv: list[str] | None = None) -> None:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--n", type=int, default=100_000, help="points (default 100000)")
+    n = ap.parse_args(argv).n
     m = synthetic_pushbroom(SyntheticSpec(5.0, 44.0, incidence_deg=25.0))
     rng = np.random.default_rng(0)
-    n = 100_000
     col, row, h = rng.uniform(0, 5999, n), rng.uniform(0, 5999, n), rng.uniform(-400, 4800, n)
     t0 = time.perf_counter()
     lon, lat = m.localize(col, row, h)

@@ -3,10 +3,13 @@
 The tiles are synthetic copies (a smooth surface with a few voids) written as
 .hgt; the CLI runs in a child process and its peak RSS is read from
 ``getrusage(RUSAGE_CHILDREN)``. Target: below 1 GB. Prints figures, asserts nothing.
+
+    .venv/bin/python bench/perf/bench_reference.py
 """
 
 from __future__ import annotations
 
+import argparse
 import os
 import resource
 import subprocess
@@ -30,7 +33,8 @@ def write_tiles(folder: Path, lon0: int, lat0: int, n: int = 3) -> None:
             H.tofile(folder / f"N{la:02d}E{lo:03d}.hgt")
 
 
-def main() -> None:
+def main(argv: list[str] | None = None) -> None:
+    argparse.ArgumentParser(description=__doc__.splitlines()[0]).parse_args(argv)
     with tempfile.TemporaryDirectory() as tmp:
         tmp = Path(tmp)
         (tmp / "srtm").mkdir()

@@ -2,51 +2,51 @@
 pair, both sensor families.
 
 Target (issue 9): under 60 s and 1.5 GB on 2 cores. The scene is simulated once into a temp
-dir (about 8 minutes) unless GCPFREE_BENCH_SCENE names an existing `gcpfree simulate --preset
-spot` output. The CLI runs in a child process; its peak RSS is read from getrusage. Prints
-figures, asserts nothing.
+dir (about 8 minutes) unless ``--scene`` names an existing `gcpfree simulate --preset spot`
+output. The CLI runs in a child process; its peak RSS is read from getrusage. Prints figures,
+asserts nothing.
+
+    .venv/bin/python bench/perf/bench_relative.py [--scene DIR]
 """
 
 from __future__ import annotations
 
+import argparse
 import json
-import os
 import resource
-import subprocess
 import sys
-import tempfile
 import time
 from pathlib import Path
 
-SRTM = Path(__file__).resolve().parents[2] / "tasks" / "data" / "N44E005.hgt"
+sys.path.insert(0, str(Path(__file__).resolve().parents[2]))
+
+from bench.common import REPO, cli, given_or_simulated, refusal, workspace
+
+SRTM = REPO / "tasks" / "data" / "N44E005.hgt"
 
 
-def run(cmd: list[str], env: dict[str, str]) -> float:
+def run(args: list[str], env: dict[str, str]) -> float:
     t0 = time.perf_counter()
-    r = subprocess.run(cmd, capture_output=True, text=True, env=env, check=False)
+    r = cli(args, env)
     if r.returncode != 0:
-        print(r.stdout[-2000:], r.stderr[-2000:])
-        raise SystemExit(f"{cmd[3]} failed")
+        raise SystemExit(f"gcpfree {args[0]}: {refusal(r)}")
     return time.perf_counter() - t0
 
 
-def main() -> None:
-    with tempfile.TemporaryDirectory() as tmp:
-        env = dict(os.environ, PREFECT_HOME=str(Path(tmp) / "prefect"))
-        scene = os.environ.get("GCPFREE_BENCH_SCENE")
-        if scene is None:
-            scene = str(Path(tmp) / "spot")
-            run([sys.executable, "-m", "flows.cli", "simulate", "--preset", "spot", "--seed", "2",
-                 "--lens", "--out", scene], env)
-        scene_dir = Path(scene)
+def main(argv: list[str] | None = None) -> None:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--scene", type=Path, default=None, help="a simulated spot scene folder")
+    args = ap.parse_args(argv)
+    with workspace() as (tmp, env):
+        scene_dir = given_or_simulated(args.scene, tmp, env, "spot", 2, "--lens")
         for family, extra in (("pushbroom", []),
                               ("rpc", ["--left-model", str(scene_dir / "left.tif"),
                                        "--right-model", str(scene_dir / "right.tif")])):
-            out = Path(tmp) / f"rel_{family}.json"
+            out = tmp / f"rel_{family}.json"
             before = resource.getrusage(resource.RUSAGE_CHILDREN).ru_maxrss
-            dt = run([sys.executable, "-m", "flows.cli", "relative", "--left",
-                      str(scene_dir / "left.tif"), "--right", str(scene_dir / "right.tif"),
-                      "--reference", str(SRTM), "--out", str(out), *extra], env)
+            dt = run(["relative", "--left", str(scene_dir / "left.tif"), "--right",
+                      str(scene_dir / "right.tif"), "--reference", str(SRTM), "--out", str(out),
+                      *extra], env)
             peak = resource.getrusage(resource.RUSAGE_CHILDREN).ru_maxrss
             doc = json.loads(out.read_text())
             search = doc["tie_point_search"]

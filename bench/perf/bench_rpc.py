@@ -2,7 +2,7 @@
 
 Run from the repository root::
 
-    .venv/bin/python bench/perf/bench_rpc.py [--n 1000000] [--repeat 3]
+    .venv/bin/python bench/perf/bench_rpc.py [--n 1000000] [--repeat 3] [--json FILE]
 
 Prints best-of-``repeat`` wall times, ratios (with the load average: the machine's other work
 slows every figure; read the ratios of one run) and the largest disagreement; asserts nothing.
@@ -10,7 +10,7 @@ slows every figure; read the ratios of one run) and the largest disagreement; as
 ``gcpfree NumPy`` the same model evaluated with NumPy, the reference the kernel is tested
 against. The first call's time (Numba's import, then loading the kernel from its on-disk
 cache, or compiling it the first time) is printed apart.
-rpcm is optional (``pip install --no-deps rpcm``). Its package ``__init__`` imports ``srtm4``
+rpcm is optional (``bench/peers/rpcm``: ``pip install --no-deps "rpcm>=1.4"``). Its package ``__init__`` imports ``srtm4``
 (which does not build here) and ``geojson``, so only its ``rpc_model`` module is loaded, through
 a bare package stub that skips that ``__init__``.
 """
@@ -30,6 +30,7 @@ from rasterio.transform import RPCTransformer
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[2]))
 
+from bench.common import Comparison, write_comparisons
 from core.sensors.rpc import RPCModel
 from tests.peers import rpcm_model_module
 
@@ -49,6 +50,7 @@ def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--n", type=int, default=1_000_000)
     ap.add_argument("--repeat", type=int, default=3)
+    ap.add_argument("--json", type=Path, default=None, help="write the comparisons there")
     args = ap.parse_args()
 
     model = RPCModel.from_geom(GEOM.read_text())
@@ -90,6 +92,12 @@ def main() -> None:
     if "rpcm" in results:
         print(f"gcpfree is {results['rpcm'] / t_ours:.1f}x rpcm (target >= 10); load average "
               f"{os.getloadavg()[0]:.1f}")
+
+    what = f"RPC projection, {n:,} points"
+    write_comparisons(args.json, "bench_rpc", [
+        Comparison(what, peer, t_ours, results[name])
+        for name, peer in (("rpcm", "rpcm"), ("GDAL RPCTransformer", "GDAL RPC transformer"))
+        if name in results])
 
     # localisation, for information (Newton on project, from the affine first guess)
     t_loc, _ = best_time(lambda: model.localize(c_ours, r_ours, h), args.repeat)

@@ -1,22 +1,24 @@
-"""Time and peak memory of `gcpfree simulate --preset spot` over the bundled N44E005 tile.
+"""Time and peak memory of ``gcpfree simulate --preset spot`` over the bundled N44E005 tile.
 
 Target (issue 4): peak memory below 3 GB. The simulation runs in a child process; its peak is
 the resident memory of the child and its descendants (Prefect's temporary API server left
-out), sampled every 0.25 s (bench/perf/bench_dsm.py's tree_rss_mb). Prints figures, asserts
-nothing. Set GCPFREE_BENCH_PRESET=hrs, hrg or tiny to measure another preset (the flow is
-called directly, so any preset of core.simulation.scene.PRESETS works), GCPFREE_BENCH_LIDAR=0
-to skip the lidar.
+out), sampled every 0.25 s (:mod:`bench.perf.meters`). Prints figures, asserts nothing.
+``--preset`` measures another preset (hrs, hrg or tiny: the flow is called directly, so any
+preset of ``core.simulation.scene.PRESETS`` works), ``--no-lidar`` skips the lidar.
+
+    .venv/bin/python bench/perf/bench_simulate_preset.py [--preset spot] [--no-lidar]
 """
 
 from __future__ import annotations
 
-import os
+import argparse
 import sys
-import tempfile
 from pathlib import Path
 
-sys.path.insert(0, str(Path(__file__).resolve().parent))
-from bench_hrg import load, watch
+sys.path.insert(0, str(Path(__file__).resolve().parents[2]))
+
+from bench.common import load, workspace
+from bench.perf.meters import watch
 
 CHILD = """
 import sys
@@ -29,20 +31,20 @@ print("\\n".join(s.lines()))
 """
 
 
-def main() -> None:
-    preset = os.environ.get("GCPFREE_BENCH_PRESET", "spot")
-    lidar = os.environ.get("GCPFREE_BENCH_LIDAR", "1")
-    with tempfile.TemporaryDirectory() as tmp:
-        out = Path(tmp) / "scene"
-        env = dict(os.environ, PREFECT_HOME=str(Path(tmp) / "prefect"),
-                   PREFECT_SERVER_ANALYTICS_ENABLED="false",
-                   PREFECT_SERVER_EPHEMERAL_STARTUP_TIMEOUT_SECONDS="300")
-        cmd = [sys.executable, "-c", CHILD, str(out), preset, lidar]
+def main(argv: list[str] | None = None) -> None:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--preset", default="spot", help="the preset simulated (default spot)")
+    ap.add_argument("--no-lidar", dest="lidar", action="store_false", help="skip the lidar")
+    args = ap.parse_args(argv)
+    with workspace() as (tmp, env):
+        env["PREFECT_SERVER_EPHEMERAL_STARTUP_TIMEOUT_SECONDS"] = "300"
+        cmd = [sys.executable, "-c", CHILD, str(tmp / "scene"), args.preset,
+               "1" if args.lidar else "0"]
         dt, peak_mb, stdout, _ = watch(cmd, env, "simulate")
         summary = [ln for ln in stdout.splitlines() if not ln[:2].isdigit()]
         print("\n".join(summary))
-        print(f"simulate --preset {preset}: {dt:.0f} s, peak tree RSS {peak_mb:.0f} MB "
-              f"(target < 3072 MB); load {load()}")
+        print(f"simulate --preset {args.preset}: {dt:.0f} s, peak tree RSS {peak_mb:.0f} MB "
+              f"(target < 3072 MB); {load()}")
 
 
 if __name__ == "__main__":

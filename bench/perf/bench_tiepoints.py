@@ -1,8 +1,8 @@
 """Time and peak memory of the tie-point search on the simulated `spot` pair (6000x6000, 10 m).
 
 Target (issue 9, with the relative orientation): under 60 s and 1.5 GB on 2 cores. The pair is
-simulated once into a temporary folder (about 8 min) unless GCPFREE_BENCH_SCENE names the
-folder of an existing `gcpfree simulate --preset spot` scene. The reference DEM is the bundled
+simulated once into a temporary folder (about 8 min) unless ``--scene`` names the folder of an
+existing `gcpfree simulate --preset spot` scene. The reference DEM is the bundled
 SRTM tile made ellipsoidal by prepare-reference's tasks. The search runs in a child process
 (its own peak RSS, VmHWM at its end: getrusage's ru_maxrss, in the child or in the parent,
 keeps what the forked child held before its exec, the parent's 2 GB after the one-block timing
@@ -10,20 +10,26 @@ below); then the tie points are scored against
 the scene's truth here: with the measure ``--tie-measure auto`` takes for the pair (orientation
 correlation on the spot preset's two suns), then with NCC when that was another. Prints
 figures, asserts nothing.
+
+    .venv/bin/python bench/perf/bench_tiepoints.py [--scene DIR]
 """
 
 from __future__ import annotations
 
+import argparse
 import json
 import os
 import resource
 import subprocess
 import sys
-import tempfile
 import time
 from pathlib import Path
 
 import numpy as np
+
+sys.path.insert(0, str(Path(__file__).resolve().parents[2]))
+
+from bench.common import REPO, given_or_simulated, workspace
 
 CHILD = """
 import json, resource, sys, time
@@ -43,16 +49,6 @@ peak = float(hwm[0]) if hwm else resource.getrusage(resource.RUSAGE_SELF).ru_max
 print(json.dumps({"seconds": time.perf_counter() - t0, "measure": measure,
                   "peak_mb": peak / 1024}))
 """
-
-
-def simulate(out: Path) -> None:
-    cmd = [sys.executable, "-m", "flows.cli", "simulate", "--preset", "spot", "--out", str(out),
-           "--seed", "1", "--lens", "--jitter", "--date-change", "0.1", "--no-lidar"]
-    env = dict(os.environ, PREFECT_HOME=str(out.parent / "prefect"))
-    r = subprocess.run(cmd, capture_output=True, text=True, env=env, check=False)
-    if r.returncode != 0:
-        print(r.stdout[-3000:], r.stderr[-3000:])
-        raise SystemExit("simulate failed")
 
 
 def score(scene: Path, tie_json: Path) -> str:
@@ -111,31 +107,28 @@ def one_tile(scene: Path, ref: Path, measure: str) -> float:
     return time.perf_counter() - t0
 
 
-def main() -> None:
+def main(argv: list[str] | None = None) -> None:
     from core.geodesy import BBox
     from tasks.io.geoid import BUNDLED_SRTM_DIR
     from tasks.io.reference import build_reference, locate_tiles
 
-    with tempfile.TemporaryDirectory() as tmp:
-        tmp_path = Path(tmp)
-        given = os.environ.get("GCPFREE_BENCH_SCENE")
-        scene = Path(given) if given else tmp_path / "spot"
-        if not given:
-            t0 = time.perf_counter()
-            simulate(scene)
-            print(f"simulated the spot pair in {time.perf_counter() - t0:.0f} s")
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--scene", type=Path, default=None, help="a simulated spot scene folder")
+    args = ap.parse_args(argv)
+    with workspace() as (tmp_path, env):
+        scene = given_or_simulated(args.scene, tmp_path, env, "spot", 1, "--lens", "--jitter",
+                                   "--date-change", "0.1", "--no-lidar")
         ref = tmp_path / "ref.tif"
         box = BBox(5.0, 44.0, 6.0, 45.0)  # the bundled tile
         build_reference.fn(locate_tiles.fn(BUNDLED_SRTM_DIR, box), box, ref)
         out = tmp_path / "tiepoints.json"
-        env = dict(os.environ, PREFECT_HOME=str(tmp_path / "prefect"))
         from core.matching.tiepoint_results import TiePointResult
 
         for asked in ("auto", "ncc"):  # auto: orientation correlation on a two-sun pair
             before = resource.getrusage(resource.RUSAGE_CHILDREN)
             r = subprocess.run([sys.executable, "-c", CHILD, str(scene), str(ref), str(out),
                                 asked], capture_output=True, text=True, env=env, check=False,
-                               cwd=Path(__file__).resolve().parents[2])
+                               cwd=REPO)
             if r.returncode != 0:
                 print(r.stdout[-3000:], r.stderr[-3000:])
                 raise SystemExit("tie points failed")

@@ -57,14 +57,7 @@ from scipy.spatial.distance import cdist
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[2]))
 
-from bench.common import (
-    NAMES,
-    beyond_shift,
-    orientation_inputs,
-    read_checkpoints,
-    read_model_file,
-    write_results,
-)
+from bench.common import beyond_shift, orientation_inputs, write_results
 from core.geodesy import metres_per_degree
 from core.intersection import triangulate
 from core.orientation.absolute import observation_sigmas_px
@@ -79,6 +72,8 @@ from core.orientation.ground_field import (
 from core.orientation.observations import Observations
 from core.orientation.ties import TieObservations, tie_residuals, tie_rows
 from core.orientation.uncertainty import ground_jacobian
+from tasks.absolute.orientation import NAMES, read_checkpoints
+from tasks.io.sensors import read_model_file
 
 BLOCKS = 16
 DRAWS = 4000

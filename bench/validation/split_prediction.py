@@ -33,9 +33,11 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[2]))
 
-from bench.common import NAMES, read_checkpoints, read_model_file, solution_again
-from core.geodesy import metres_per_degree
-from core.orientation.adjust import Solution
+from bench.common import solution_again
+from core.geodesy import metres_per_degree  # noqa: E402
+from core.orientation.adjust import Solution  # noqa: E402
+from tasks.absolute.orientation import NAMES, read_checkpoints  # noqa: E402
+from tasks.io.sensors import read_model_file  # noqa: E402
 
 DRAWS = 4000
 LOW, HIGH = 0.5, 1.5

@@ -1,7 +1,7 @@
 #!/usr/bin/env bash
 # xdem (GlacioHack's DEM analysis library, the reference implementation of Nuth & Kaab's
-# coregistration) in its own virtual environment, bench/peers/xdem/.venv (ignored by git): nothing
-# of xdem is part of gcpfree. xdem 0.2.3 installs from PyPI with pip.
+# coregistration) in its own virtual environment, bench/peers/xdem/.venv (ignored by git):
+# nothing of xdem is part of gcpfree. xdem 0.2.3 installs from PyPI with pip.
 set -euo pipefail
 here="$(cd "$(dirname "${BASH_SOURCE[0]}")" && pwd)"
 python="${PYTHON:-python3.11}"
