@@ -208,7 +208,7 @@ def test_nearly_flat_terrain_is_refused_with_the_relief_figures(tmp_path_factory
     windows promise the precision: the relief found and needed) or, when the windows' relief
     passes it, because none of them correlates (their fate and the relief); never an
     orientation. (With the realistic errors and reference the same relief orients to 0.44 px:
-    ``bench/relief_sweep.py``.)"""
+    ``bench/validation/relief_sweep.py``.)"""
     from flows.orient import OrientParams, orient_flow
     from tests.scenes import run_scene
 

@@ -21,24 +21,31 @@ RESULTS = ROOT / "bench" / "results"
 
 # the command behind each results file (the benches' own docstrings say the same)
 COMMANDS = {
-    "relief_sweep.json": "python bench/relief_sweep.py",
-    "relief_sweep_simple.json": "GCPFREE_RELIEF_ERRORS=simple python bench/relief_sweep.py",
-    "realistic_table.json": "python bench/realistic_table.py",
+    "relief_sweep.json": "python bench/validation/relief_sweep.py --out bench/results/relief_sweep.json",
+    "relief_sweep_simple.json": (
+        "python bench/validation/relief_sweep.py --errors simple "
+        "--out bench/results/relief_sweep_simple.json"),
+    "realistic_table.json": (
+        "python bench/validation/realistic_table.py --out bench/results/realistic_table.json"),
     "realistic_table_spot_seeds.json": (
-        "GCPFREE_TABLE_CASES=spot:3:realistic,spot:4:realistic,spot:5:realistic "
-        "python bench/realistic_table.py"),
+        "python bench/validation/realistic_table.py --cases spot:3:realistic spot:4:realistic "
+        "spot:5:realistic --out bench/results/realistic_table_spot_seeds.json"),
     "realistic_table_hrs_seeds.json": (
-        "GCPFREE_TABLE_CASES=hrs:2:realistic,hrs:3:realistic python bench/realistic_table.py"),
-    "independent_reference.json": "python bench/independent_reference.py",
+        "python bench/validation/realistic_table.py --cases hrs:2:realistic hrs:3:realistic "
+        "--out bench/results/realistic_table_hrs_seeds.json"),
+    "independent_reference.json": (
+        "python bench/validation/independent_reference.py "
+        "--out bench/results/independent_reference.json"),
     "independent_reference_harsh.json": (
-        "GCPFREE_INDEPENDENT_CANOPY=0.7 GCPFREE_INDEPENDENT_SHIFT_M=15 "
-        "GCPFREE_INDEPENDENT_NOISE_M=6 python bench/independent_reference.py"),
-    "uncertainty_sweep.json": "python bench/uncertainty_sweep.py",
+        "python bench/validation/independent_reference.py --canopy 0.7 --shift-m 15 "
+        "--noise-m 6 --out bench/results/independent_reference_harsh.json"),
+    "uncertainty_sweep.json": (
+        "python bench/validation/uncertainty_sweep.py --out bench/results/uncertainty_sweep.json"),
     "prediction_check.json": (
-        "python bench/prediction_check.py --summary bench/results/prediction_check.json"),
-    "dsm_wall.txt": "python bench/bench_dsm_wall.py --repeat 3",
-    "bench_pair_spot.txt": "GCPFREE_BENCH_SCENE=DIR python bench/bench_pair.py",
-    "bench_hrg_pool.txt": "python bench/bench_hrg.py",
+        "python bench/validation/prediction_check.py --summary bench/results/prediction_check.json"),
+    "dsm_wall.txt": "python bench/perf/bench_dsm_wall.py --repeat 3",
+    "bench_pair_spot.txt": "python bench/perf/bench_pair.py --scene DIR",
+    "bench_hrg_pool.txt": "python bench/perf/bench_hrg.py",
 }
 
 
@@ -239,13 +246,13 @@ def pair_rounds(text: str) -> list[dict[str, float]]:
 # stated in the README when measured, not kept in bench/results by their benches yet
 STATED = [
     ("RPC projection of 1 M points", "gcpfree 8 ms, 16.9x faster than rpcm (load 3.5)",
-     "python bench/bench_rpc.py"),
+     "python bench/perf/bench_rpc.py"),
     ("ortho of a 4000x4000 spot crop", "gcpfree 2.7 s, GDAL's RPC warp 7.1 s (2.67x)",
-     "python bench/bench_ortho.py SCENE_DIR --crop 4000"),
+     "python bench/perf/bench_ortho.py --scene SCENE_DIR --crop 4000"),
     ("ortho of a whole spot scene (7574x7474)", "gcpfree 7.0 s, GDAL 23.1 s (3.30x)",
-     "python bench/bench_ortho.py SCENE_DIR"),
+     "python bench/perf/bench_ortho.py --scene SCENE_DIR"),
     ("DEM coregistration (Nuth & Kaab), SRTM tile", ("fit time 0.49x xdem 0.2.3's; shift error "
-     "0.0004 px against xdem's 0.0035 px"), "python bench/bench_coregister.py"),
+     "0.0004 px against xdem's 0.0035 px"), "python bench/perf/bench_coregister.py"),
 ]
 
 # the same, as gcpfree's time over the peer's (what, peer, ratio)

@@ -160,7 +160,7 @@ def test_a_coarse_relative_dem_is_placed_where_its_cells_are():
     window then finds the shift within a metre, whole or cut by the DEM's edge, once each
     lattice cell's height is placed where its cells are. Placed at the lattice cells' centres
     (before), the same windows were 1.2 m RMS off whole (0.8 m of it a bias east) and 2.9 m
-    cut; over the eight tiny scenes of ``bench/uncertainty_sweep.py`` the windows the DEM's
+    cut; over the eight tiny scenes of ``bench/validation/uncertainty_sweep.py`` the windows the DEM's
     edge cuts put their GCPs 1.8 m inwards on average, 0.6 m now."""
     ref = reference(noise_m=0.0)
     errors = []

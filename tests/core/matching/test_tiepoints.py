@@ -143,7 +143,8 @@ def test_under_two_suns_orientation_correlation_scatters_less():
     standard deviation over 4 px) both keep 0.04-0.05 px in rows (orientation correlation
     halves the columns' -0.05); with a third of the relief, more albedo contrast or a relief
     twice as smooth it cuts the rows' 0.035-0.044 px to 0.013-0.023 (four seeds each), and on
-    the simulator's scenes the tie points' y-parallax (``bench/illumination_bias.py``)."""
+    the simulator's scenes the tie points' y-parallax (``bench/illumination_bias.py``, removed in
+    0.2.0: ``git show c6fc9f8:bench/illumination_bias.py``)."""
     rng = np.random.default_rng(0)
     z = ndimage.gaussian_filter(rng.normal(size=(400, 400)), 4.0)
     z *= 3.0 / z.std()

@@ -423,7 +423,7 @@ def test_bad_json_other_cases(spot: PushbroomModel):
 
 # -- batches --------------------------------------------------------------------------------------
 def test_project_solves_a_large_batch_at_once(spot: PushbroomModel):
-    """100k points in one call (the vectorised Newton); timing lives in bench/bench_pushbroom.py."""
+    """100k points in one call (the vectorised Newton); timing lives in bench/perf/bench_pushbroom.py."""
     rng = np.random.default_rng(0)
     n = 100_000
     col, row, h = rng.uniform(0, N - 1, n), rng.uniform(0, N - 1, n), rng.uniform(-400, 4800, n)
