@@ -36,9 +36,6 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
-import rasterio
-from pyproj import Transformer
-from scipy.ndimage import gaussian_filter, map_coordinates, uniform_filter
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[2]))
 
@@ -54,8 +51,6 @@ from bench.common import (
 )
 
 CASES = ("1:5.75:44.75", "3:5.25:44.2", "6:5.45:44.15")
-#: the footprint SRTM's 3" heights average over (m)
-FOOTPRINT_M = 90.0
 
 
 @dataclass(frozen=True)
@@ -76,33 +71,18 @@ class ReferenceErrors:
 
 def make_reference(scene: Path, dest: Path, seed: int, errors: ReferenceErrors
                    ) -> tuple[float, float]:
-    """Write ``dest`` on the lattice of ``scene/reference.tif`` from ``scene/truth``; return
-    the shift (east, north, m): the reference shows the world moved by it."""
-    rng = np.random.default_rng(seed)
-    azimuth = rng.uniform(0.0, 2.0 * np.pi)
-    dx, dy = errors.shift_m * np.sin(azimuth), errors.shift_m * np.cos(azimuth)
-    with rasterio.open(scene / "reference.tif") as r:
-        profile, tr, shape, tags = r.profile, r.transform, r.shape, r.tags()
-    with rasterio.open(scene / "truth" / "dtm.tif") as d:
-        dtm, ttr, crs = d.read(1).astype(np.float64), d.transform, d.crs
-    with rasterio.open(scene / "truth" / "dsm.tif") as d:
-        dsm = d.read(1).astype(np.float64)
-    box = round(FOOTPRINT_M / ttr.a) | 1
-    surface = uniform_filter(dtm + errors.canopy * (dsm - dtm), size=box, mode="nearest")
-    rows, cols = np.mgrid[0:shape[0], 0:shape[1]]
-    lon, lat = tr.c + (cols + 0.5) * tr.a, tr.f + (rows + 0.5) * tr.e
-    x, y = Transformer.from_crs(4326, crs, always_xy=True).transform(lon, lat)
-    h = map_coordinates(surface, [(y - dy - ttr.f) / ttr.e - 0.5, (x - dx - ttr.c) / ttr.a - 0.5],
-                        order=1, cval=np.nan)
-    noise = gaussian_filter(rng.normal(size=shape), errors.corr_m / (abs(tr.e) * 111_320.0))
-    h = h + errors.noise_m * noise / noise.std()
-    profile.update(dtype="float32", nodata=np.nan)
-    tmp = dest.with_suffix(".part.tif")
-    with rasterio.open(tmp, "w", **profile) as out:
-        out.write(h.astype(np.float32), 1)
-        out.update_tags(**{**tags, "source": "bench/validation/independent_reference.py"})
-    tmp.replace(dest)
-    return float(dx), float(dy)
+    """Write ``dest`` on the lattice of ``scene/reference.tif`` from ``scene/truth``
+    (:func:`tests.scenes.independent_reference`, no bias), its shift at an azimuth drawn from
+    ``seed``; return the shift (east, north, m): the reference shows the world moved by it."""
+    from tests.scenes import independent_reference
+
+    azimuth = np.random.default_rng(seed).uniform(0.0, 2.0 * np.pi)
+    shift = (errors.shift_m * np.sin(azimuth), errors.shift_m * np.cos(azimuth))
+    part = dest.with_suffix(".part.tif")  # a reference there is reused under --keep: whole
+    dx, dy = independent_reference(scene, part, shift, errors.noise_m, errors.corr_m,
+                                   errors.canopy, bias_m=0.0, seed=seed + 1)
+    part.replace(dest)
+    return dx, dy
 
 
 def independent_scene(scene: Path, dest: Path, seed: int, errors: ReferenceErrors) -> Path:
