@@ -20,6 +20,8 @@ from typing import Any
 
 from prefect import flow
 
+from core.choices import CORRECTIONS, Corrections
+from core.errors import InputError
 from core.geodesy import ARCSEC
 from core.matching.surface import SurfaceMatchConfig
 from core.orientation.absolute import AbsoluteConfig
@@ -53,7 +55,7 @@ class OrientParams:
     checkpoints: Path | None = None
     self_calibrate: bool = False
     along_track: bool = True
-    corrections: str = "linear"
+    corrections: Corrections = "linear"
     spacing_m: float | None = None
     min_windows: int = 8
     workers: int | None = None
@@ -67,6 +69,18 @@ class OrientParams:
 
     # what only changes how the orientation runs, not what it is
     RUN_ONLY = ("out", "workers", "progress", "write_report")
+
+    def __post_init__(self) -> None:
+        """The options checked, in one line each: they come from the command line, an
+        archive's catalog or a deployment's parameters (:mod:`flows.options`)."""
+        if self.corrections not in CORRECTIONS:
+            raise InputError(f"--corrections {self.corrections!r} unknown; use one of "
+                             f"{', '.join(CORRECTIONS)}")
+        if self.min_windows < 1:
+            raise InputError(f"--min-windows must be at least 1 (got {self.min_windows})")
+        if self.sar_sigma_m is not None and not self.sar_sigma_m > 0:
+            raise InputError(f"--sar-sigma {self.sar_sigma_m:g} is the SAR product's "
+                             "geolocation sigma: give a sigma > 0 m")
 
     def sar_config(self, sar: Any) -> Any:
         """The SAR GCPs' settings: the product's geolocation sigma as ``sar_sigma_m`` states

@@ -13,52 +13,75 @@ step.
 
 from __future__ import annotations
 
-from dataclasses import asdict, dataclass
+from dataclasses import asdict, dataclass, fields, replace
 from pathlib import Path
 from typing import Any
 
 from prefect import flow
 
-from core.matching.surface import SurfaceMatchConfig
+from core.choices import VERTICAL_CHOICES, VerticalChoice
+from core.errors import InputError
+from flows.orient import OrientParams
 from tasks.io.pair import PairInputs
 
 
 @dataclass(frozen=True)
 class PairParams:
-    """One pair to process: its inputs (a reference or SRTM tiles required), the output folder
-    (see ``gcpfree orient`` for the orientation options).
+    """One pair to process: its orientation (:class:`flows.orient.OrientParams`: the pair's
+    inputs, a reference or SRTM tiles required, the output folder, the check points, the SAR
+    scene and every orientation option; see ``gcpfree orient``) and what the chain adds.
 
-    ``lidar`` (LAS/LAZ) and ``landcover`` (a class raster) drive the evaluation; without lidar
-    the pair ends with the ortho check. ``checkpoints``: independent points for the check-point
-    table. ``pair_id`` names the STAC items (default: OUT's folder name). ``sar`` (and
-    ``sar_model``): a SAR scene for SAR-optical GCPs (``gcpfree orient --sar``).
+    ``lidar`` (LAS/LAZ, its heights ``lidar_vertical``) and ``landcover`` (a class raster)
+    drive the evaluation; without lidar the pair ends with the ortho check. ``pair_id`` names
+    the STAC items (default: OUT's folder name). The orientation's own ``write_report`` is not
+    used: the chain writes the report once, after the evaluation.
     """
 
-    pair: PairInputs
-    out: Path
+    orient: OrientParams
     lidar: Path | None = None
     landcover: Path | None = None
-    lidar_vertical: str = "auto"
-    checkpoints: Path | None = None
-    self_calibrate: bool = False
-    along_track: bool = True
-    corrections: str = "linear"
-    surface: SurfaceMatchConfig | None = None
-    spacing_m: float | None = None
-    min_windows: int = 8
-    workers: int | None = None
-    progress: bool = False
+    lidar_vertical: VerticalChoice = "auto"
     pair_id: str | None = None
-    reference_sigma_m: tuple[float, float, float] = (5.0, 5.0, 5.0)
-    sar: Path | None = None
-    sar_model: Path | None = None
+
+    def __post_init__(self) -> None:
+        if self.lidar_vertical not in VERTICAL_CHOICES:
+            raise InputError(f"--lidar-vertical {self.lidar_vertical!r} unknown; use one of "
+                             f"{', '.join(VERTICAL_CHOICES)}")
+
+    @property
+    def pair(self) -> PairInputs:
+        """The pair's inputs (the orientation's)."""
+        return self.orient.pair
+
+    @property
+    def out(self) -> Path:
+        """The output folder (the orientation's)."""
+        return Path(self.orient.out)
 
     def to_dict(self) -> dict[str, Any]:
-        """The manifest's ``params``: the pair's inputs and every option, as JSON values."""
+        """The manifest's ``params``, flat as gcpfree has always written them: the pair's
+        inputs, then every option by name (those of :mod:`flows.options`): the orientation's
+        fields (``surface`` one object), the adjustment's ``reference_sigma_m`` and, under
+        ``absolute``, its other settings, the chain's own; JSON values. Keys added since a
+        manifest was written compare as their defaults (:func:`manifest_defaults`)."""
         from core.jsonio import json_ready
 
-        rest = {k: v for k, v in asdict(self).items() if k != "pair"}
-        return json_ready({**self.pair.to_dict(), **rest})
+        orient = asdict(self.orient)
+        for name in ("pair", "write_report"):
+            del orient[name]
+        absolute = orient.pop("absolute")
+        sigma = absolute.pop("reference_sigma_m")
+        mine = {f.name: getattr(self, f.name) for f in fields(self) if f.name != "orient"}
+        return json_ready({**self.pair.to_dict(), **orient, **mine, "reference_sigma_m": sigma,
+                           "absolute": absolute})
+
+
+def manifest_defaults() -> dict[str, Any]:
+    """The manifest's ``params`` of a pair whose options are all at their defaults, its files
+    and folder aside: what a manifest that lacks a parameter (an option added since it was
+    written) or records it null (``surface`` before the archive passed it) was made with."""
+    made = PairParams(OrientParams(PairInputs(Path("left"), Path("right")), Path("out")))
+    return {k: v for k, v in made.to_dict().items() if k not in ("left", "right", "out")}
 
 
 @dataclass(frozen=True, eq=False)
@@ -113,7 +136,7 @@ def make_orthos(params: PairParams, out: Path, skipped: list[str]) -> dict[str, 
             continue
         plan = plan_ortho(loaded, dem, *grid)
         grid = (plan.grid.res_m, plan.epsg)
-        orthorectify(plan, path, OrthoConfig(), params.workers)
+        orthorectify(plan, path, OrthoConfig(), params.orient.workers)
     cmp_json, cmp_map = out / "ortho_compare.json", out / "ortho_discrepancy.tif"
     products.update(ortho_compare=cmp_json.name, ortho_discrepancy=cmp_map.name)
     if product_ok(cmp_json) and product_ok(cmp_map):
@@ -124,7 +147,8 @@ def make_orthos(params: PairParams, out: Path, skipped: list[str]) -> dict[str, 
         # a small ortho (a crop, coarse pixels) gets more, smaller windows, as many as fit
         cfg = CompareConfig(window_px=32, step_px=32) if small else CompareConfig()
         plan = plan_compare(out / "ortho_left.tif", out / "ortho_right.tif", cfg)
-        compare_orthos(plan, cmp_json, cmp_map, out / "ortho_discrepancy.png", params.workers)
+        compare_orthos(plan, cmp_json, cmp_map, out / "ortho_discrepancy.png",
+                       params.orient.workers)
     return products
 
 
@@ -134,9 +158,7 @@ def pair_flow(params: PairParams) -> PairOutcome:
     when its products already read back."""
     from prefect.artifacts import create_progress_artifact, update_progress_artifact
 
-    from core.errors import InputError
-    from core.orientation.absolute import AbsoluteConfig
-    from flows.orient import OrientParams, orient_flow
+    from flows.orient import orient_flow
     from tasks.archive.pair import (
         ORIENT_PRODUCTS,
         json_ok,
@@ -163,14 +185,7 @@ def pair_flow(params: PairParams) -> PairOutcome:
     def done(step: str) -> None:
         update_progress_artifact(progress, 100.0 * (steps.index(step) + 1) / len(steps))
 
-    orient = OrientParams(
-        pair=pair, out=out, checkpoints=params.checkpoints,
-        self_calibrate=params.self_calibrate, along_track=params.along_track,
-        corrections=params.corrections,
-        workers=params.workers, progress=params.progress, spacing_m=params.spacing_m,
-        min_windows=params.min_windows, surface=params.surface or SurfaceMatchConfig(),
-        absolute=AbsoluteConfig(reference_sigma_m=params.reference_sigma_m),
-        sar=params.sar, sar_model=params.sar_model, write_report=False)  # made once, below
+    orient = replace(params.orient, out=out, write_report=False)  # the report: once, below
     changes = orientation_changes(out, orient.settings())
     if changes == ():
         skipped.append("orient")
@@ -206,9 +221,9 @@ def pair_flow(params: PairParams) -> PairOutcome:
         products["evaluation"] = "eval.json"
     done("evaluate")
 
-    write_report(out, reference=pair.reference, checkpoints=params.checkpoints,
+    write_report(out, reference=pair.reference, checkpoints=orient.checkpoints,
                  evaluation=out / "eval.json" if params.lidar is not None else None,
-                 reference_vertical=pair.reference_vertical, surface=params.surface)
+                 reference_vertical=pair.reference_vertical, surface=orient.surface)
     for name in ("report.html", "report.md"):
         if (out / name).exists():
             products[name.replace(".", "_")] = name

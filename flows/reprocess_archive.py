@@ -29,12 +29,14 @@ from __future__ import annotations
 
 import functools
 import sys
+from collections.abc import Mapping
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Self
+from typing import Any, Self
 
 from prefect import flow
 
+from core.choices import VerticalChoice
 from tasks.archive.catalog import (
     PairEntry,
     PairRow,
@@ -73,39 +75,46 @@ class ArchiveOutcome:
 
 
 def pair_params(entry: PairEntry, root: Path, srtm_dir: Path | None, reference: Path | None,
-                reference_vertical: str = "auto", self_calibrate: bool = False,
+                reference_vertical: VerticalChoice = "auto",
+                options: Mapping[str, Any] | None = None,
                 geoid: Path | None = None):  # -> PairParams
     """The ``pair`` flow's parameters for one pair of the archive into ``root/<id>`` (one
-    worker: the archive's parallelism is over pairs). Raises InputError on bad inputs."""
+    worker: the archive's parallelism is over pairs): the pair's files, the archive's ground,
+    the archive's ``options`` for every pair, then the pair's own from the catalog (by name,
+    :mod:`flows.options`). Raises InputError on bad inputs, naming the option."""
     from dataclasses import replace
 
+    from flows.options import with_options
+    from flows.orient import OrientParams
     from flows.pair import PairParams
 
-    return PairParams(
-        pair=replace(entry.pair_inputs(reference, srtm_dir, reference_vertical), geoid=geoid),
-        out=Path(root) / entry.id, lidar=entry.lidar, landcover=entry.landcover,
-        checkpoints=entry.checkpoints, sar=entry.sar, sar_model=entry.sar_model,
-        self_calibrate=self_calibrate, workers=1, progress=False, pair_id=entry.id)
+    pair = replace(entry.pair_inputs(reference, srtm_dir, reference_vertical), geoid=geoid)
+    params = PairParams(
+        OrientParams(pair=pair, out=Path(root) / entry.id, checkpoints=entry.checkpoints,
+                     sar=entry.sar, sar_model=entry.sar_model, workers=1, progress=False),
+        lidar=entry.lidar, landcover=entry.landcover, pair_id=entry.id)
+    params = with_options(params, options or {}, "the archive's options")
+    return with_options(params, dict(entry.options), f"pair {entry.id} of the catalog")
 
 
 def run_pair(entry: PairEntry, root: Path, srtm_dir: Path | None, reference: Path | None,
-             reference_vertical: str = "auto", self_calibrate: bool = False,
-             geoid: Path | None = None) -> None:
+             reference_vertical: VerticalChoice = "auto",
+             options: Mapping[str, Any] | None = None, geoid: Path | None = None) -> None:
     """One pair of the archive through the ``pair`` flow into ``root/<id>`` (one worker: the
     archive's parallelism is over pairs); what :func:`tasks.archive.runs.process_pair` runs
     in a Dask worker. A pair found complete is left as it is; otherwise the temporary files an
     interrupted attempt left (its worker killed, the run stopped by Ctrl-C) are removed and the
     ``pair`` flow resumes at its first missing product."""
     from flows._env import one_line_errors
-    from flows.pair import pair_flow
+    from flows.pair import manifest_defaults, pair_flow
     from tasks.archive.pair import pair_complete, remove_leftovers
 
     out = Path(root) / entry.id
     with one_line_errors():
-        params = pair_params(entry, root, srtm_dir, reference, reference_vertical,
-                             self_calibrate, geoid)
+        params = pair_params(entry, root, srtm_dir, reference, reference_vertical, options,
+                             geoid)
     # an earlier attempt finished it with the same inputs and options, then its worker died
-    if pair_complete(out, params.to_dict()):
+    if pair_complete(out, params.to_dict(), manifest_defaults()):
         print(f"pair {entry.id} already complete in {out}")
         return
     removed = remove_leftovers(out)
@@ -126,8 +135,8 @@ def _dashboard_link() -> str | None:
 
 @flow(name="archive-pairs")
 def run_pairs(entries: list[PairEntry], root: Path, srtm_dir: Path | None = None,
-              reference: Path | None = None, self_calibrate: bool = False,
-              progress: bool = False, reference_vertical: str = "auto",
+              reference: Path | None = None, options: dict[str, Any] | None = None,
+              progress: bool = False, reference_vertical: VerticalChoice = "auto",
               geoid: Path | None = None) -> tuple[list[PairResult], str | None]:
     """The pairs submitted to the flow's Dask task runner; (results in entry order, the Dask
     dashboard link)."""
@@ -141,8 +150,8 @@ def run_pairs(entries: list[PairEntry], root: Path, srtm_dir: Path | None = None
         create_link_artifact(link, link_text="Dask dashboard", key="dask-dashboard",
                              description="the Dask cluster running the pairs")
     run = functools.partial(run_pair, root=Path(root), srtm_dir=srtm_dir, reference=reference,
-                            reference_vertical=reference_vertical,
-                            self_calibrate=self_calibrate, geoid=geoid)
+                            reference_vertical=reference_vertical, options=options,
+                            geoid=geoid)
     futures = {process_pair.submit(e, run): e for e in entries}
     results: dict[str, PairResult] = {}
     with _PairProgress(len(entries), progress) as bar:
@@ -198,37 +207,42 @@ class _PairProgress:
 def reprocess_archive(catalog: Path, out: Path, srtm_dir: Path | None = None,
                       reference: Path | None = None, dask_address: str | None = None,
                       workers: int | None = None, processes: bool = True,
-                      dashboard_address: str = DEFAULT_DASHBOARD, self_calibrate: bool = False,
-                      progress: bool = False, reference_vertical: str = "auto",
+                      dashboard_address: str = DEFAULT_DASHBOARD,
+                      options: dict[str, Any] | None = None, progress: bool = False,
+                      reference_vertical: VerticalChoice = "auto",
                       geoid: Path | None = None) -> ArchiveOutcome:
     """Catalog -> skip complete pairs -> the rest on Dask -> summary.csv/json + artifacts.
 
     ``catalog``: a folder of pair folders or a CSV/JSON list (``tasks.archive.catalog``);
     ``out``: ROOT, one folder per pair id. ``srtm_dir`` or ``reference`` (its heights
     ``reference_vertical``): the ground every pair is oriented to, ``geoid`` the grid its
-    orthometric heights refer to when not EGM96 (``--geoid``).
+    orthometric heights refer to when not EGM96 (``--geoid``). ``options``: the options of
+    every pair by name (:mod:`flows.options`: ``{"self_calibrate": true, "surface.radius_m":
+    3000}``), a catalog's own for a pair winning over them.
     ``dask_address``: an existing scheduler (``tcp://HOST:PORT``), else a LocalCluster of
     ``workers`` (default: one per core, at most one per pair) single-threaded workers, in
     processes unless ``processes`` is False.
     """
     from core.errors import InputError
+    from flows.options import OPTIONS
+    from flows.pair import manifest_defaults
     from tasks.scheduling import archive_task_runner, schedule
 
     if (srtm_dir is None) == (reference is None):
         raise InputError("gcpfree archive needs the ground to orient every pair to: give "
                          "--srtm-dir or --reference (one of them)")
     schedule(workers=workers)  # --workers checked before the catalog is read
-    cat = load_catalog(Path(catalog))
+    cat = load_catalog(Path(catalog), tuple(OPTIONS))
     root = Path(out)
     root.mkdir(parents=True, exist_ok=True)
     wanted = {}  # the parameters each pair would run with: a pair made with others is redone
     for e in cat.pairs:
         try:
             wanted[e.id] = pair_params(e, root, srtm_dir, reference, reference_vertical,
-                                       self_calibrate, geoid).to_dict()
+                                       options, geoid).to_dict()
         except InputError:
             pass  # not complete: its run reports the bad input
-    done_before = complete_pairs(wanted, root)
+    done_before = complete_pairs(wanted, root, manifest_defaults())
     todo = [e for e in cat.pairs if e.id not in done_before]
     results: dict[str, PairResult] = {}
     link = None
@@ -236,7 +250,7 @@ def reprocess_archive(catalog: Path, out: Path, srtm_dir: Path | None = None,
         runner = archive_task_runner(dask_address, len(todo), workers, processes,
                                      dashboard_address)
         found, link = run_pairs.with_options(task_runner=runner)(
-            todo, root, srtm_dir, reference, self_calibrate, progress,
+            todo, root, srtm_dir, reference, options, progress,
             reference_vertical=reference_vertical, geoid=geoid)
         results = {r.id: r for r in found}
     rows = tuple(

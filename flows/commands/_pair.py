@@ -5,9 +5,9 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
-VERTICALS = ("auto", "ellipsoidal", "egm96")  # core.heights.VERTICAL_CHOICES (not imported:
-# the parser is built without numpy, so --help answers at once)
-TIE_MEASURES = ("auto", "ncc", "orientation")  # tasks.io.pair.TIE_MEASURES, likewise
+from core.choices import CORRECTIONS, TIE_MEASURES, VERTICAL_CHOICES
+
+VERTICALS = VERTICAL_CHOICES
 VERTICAL_HELP = ("heights of REF: auto (default) reads its vertical_datum tag, then its CRS's "
                  "vertical part, then a product's name (SRTM .hgt, N44E005.tif, NASADEM: "
                  "EGM96; Copernicus_DSM_*: EGM2008); a DEM none of these describe is refused: "
@@ -48,6 +48,11 @@ def add_pair_arguments(p: argparse.ArgumentParser, *, right_help: str = "right i
                    help="model of the left image (.DIM, gcpfree .json, .geom, RPC .XML or a "
                         "GeoTIFF's RPC); default: found beside the image")
     p.add_argument("--right-model", type=Path, default=None, help="model of the right image")
+    add_image_arguments(p)
+
+
+def add_image_arguments(p: argparse.ArgumentParser) -> None:
+    """``--band --tie-measure``: how the pair's images are read and matched."""
     p.add_argument("--band", type=int, default=None,
                    help="SPOT multispectral band whose look angles to use (default the first)")
     p.add_argument("--tie-measure", choices=TIE_MEASURES, default="auto",
@@ -78,31 +83,12 @@ def add_reference_arguments(p: argparse.ArgumentParser, *, use: str) -> None:
 
 
 def add_orientation_arguments(p: argparse.ArgumentParser) -> None:
-    """The GCP-free orientation's options (``orient``, ``pair``): check points, lens
-    self-calibration, corrections, surface-matching windows, relief refusal."""
+    """The GCP-free orientation's options (``orient``, ``pair``): the pair's own files (check
+    points, SAR scene) and the settings (:func:`add_orientation_settings`)."""
     p.add_argument("--checkpoints", type=Path, default=None, metavar="FILE",
                    help="independent check points: the simulator's truth/checkpoints.json or a "
                         "CSV id,lon_deg,lat_deg,h_m,left_col,left_row,right_col,right_row "
                         "(ellipsoidal heights, 0-based pixels)")
-    p.add_argument("--self-calibrate", action="store_true",
-                   help="estimate the cameras' calibration errors of pushbroom images (look-angle "
-                        "scale k1, bow p1, cubic k3, across-track quadratic p2), kept only where "
-                        "significant (GCPs, or the tie points' parallax)")
-    p.add_argument("--no-along-track", dest="along_track", action="store_false",
-                   help="do not estimate the attitude's along-track profile of pushbroom images "
-                        "(harmonics in time, as many as the data choose: none included)")
-    p.add_argument("--corrections", choices=("offset", "linear"), default="linear",
-                   help="terms adjusted per image: linear (default, attitude biases and rates / "
-                        "RPC affine) or offset (biases / RPC shift)")
-    p.add_argument("--window-radius", type=float, default=4000.0, metavar="M",
-                   help="radius of the surface-matching windows, metres (default 4000)")
-    p.add_argument("--window-spacing", type=float, default=None, metavar="M",
-                   help="distance between window centres (default: the radius)")
-    p.add_argument("--max-shift", type=float, default=20.0, metavar="ARCSEC",
-                   help="largest horizontal shift searched, arcseconds (default 20)")
-    p.add_argument("--min-windows", type=int, default=8,
-                   help="windows with enough relief needed, else the terrain is refused as too "
-                        "flat (default 8)")
     p.add_argument("--sar", type=Path, default=None, metavar="IMAGE",
                    help="a SAR scene of the same ground (e.g. a Sentinel-1 measurement TIFF, "
                         "or gcpfree simulate's sar.tif; its annotation found beside it): "
@@ -112,10 +98,50 @@ def add_orientation_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--sar-model", type=Path, default=None, metavar="FILE",
                    help="the SAR scene's model when not beside it (Sentinel-1 annotation XML or "
                         "gcpfree SAR .json)")
-    p.add_argument("--sar-sigma", type=float, default=None, metavar="M",
+    add_orientation_settings(p)
+
+
+def add_orientation_settings(p: argparse.ArgumentParser) -> None:
+    """The orientation's settings (``orient``, ``pair``, and ``archive``/``serve`` for every
+    pair): lens self-calibration, along-track attitude, corrections, surface-matching windows,
+    relief refusal, the SAR product's and the reference's sigmas. Each ``dest`` is the option's
+    name (:mod:`flows.options`, pair.json's ``params``), which is how the commands read them."""
+    p.add_argument("--self-calibrate", action="store_true",
+                   help="estimate the cameras' calibration errors of pushbroom images (look-angle "
+                        "scale k1, bow p1, cubic k3, across-track quadratic p2), kept only where "
+                        "significant (GCPs, or the tie points' parallax)")
+    p.add_argument("--no-along-track", dest="along_track", action="store_false",
+                   help="do not estimate the attitude's along-track profile of pushbroom images "
+                        "(harmonics in time, as many as the data choose: none included)")
+    p.add_argument("--corrections", choices=CORRECTIONS, default="linear",
+                   help="terms adjusted per image: linear (default, attitude biases and rates / "
+                        "RPC affine) or offset (biases / RPC shift)")
+    p.add_argument("--window-radius", dest="surface.radius_m", type=float, default=4000.0,
+                   metavar="M", help="radius of the surface-matching windows, metres (default "
+                                     "4000)")
+    p.add_argument("--window-spacing", dest="spacing_m", type=float, default=None, metavar="M",
+                   help="distance between window centres (default: the radius)")
+    p.add_argument("--max-shift", dest="surface.shift_max_arcsec", type=float, default=20.0,
+                   metavar="ARCSEC", help="largest horizontal shift searched, arcseconds "
+                                          "(default 20)")
+    p.add_argument("--min-windows", type=int, default=8,
+                   help="windows with enough relief needed, else the terrain is refused as too "
+                        "flat (default 8)")
+    p.add_argument("--sar-sigma", dest="sar_sigma_m", type=float, default=None, metavar="M",
                    help="the SAR product's stated geolocation accuracy, 1 sigma, m (default "
                         "the mission's: Sentinel-1 3, ERS and others 10): the prior of the SAR "
                         "GCPs' frame, against which the reference's own shift is estimated")
+    p.add_argument("--reference-sigma", dest="reference_sigma_m", nargs=3, type=float,
+                   default=(5.0, 5.0, 5.0), metavar=("E", "N", "U"),
+                   help="registration error of the reference DEM, east, north and up in "
+                        "metres, 1 sigma (default 5 5 5): the GCP-free orientation cannot see "
+                        "it, so the predicted check-point RMS in report.json adds it")
+
+
+def add_lidar_vertical_argument(p: argparse.ArgumentParser) -> None:
+    """``--lidar-vertical`` (``pair``, and ``archive``/``serve`` for every pair)."""
+    p.add_argument("--lidar-vertical", choices=VERTICALS, default="auto",
+                   help="heights of the lidar (auto: from its CRS)")
 
 
 def add_run_arguments(p: argparse.ArgumentParser) -> None:
@@ -126,33 +152,45 @@ def add_run_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--out", type=Path, required=True, help="output folder")
 
 
+def check_reference_sigma(args: argparse.Namespace) -> None:
+    """``--reference-sigma`` checked at once, before the Prefect server is started: three
+    finite metres, each >= 0 (InputError else)."""
+    import math
+
+    from core.errors import InputError
+
+    values = tuple(float(v) for v in args.reference_sigma_m)
+    if len(values) != 3 or not all(math.isfinite(v) and v >= 0 for v in values):
+        raise InputError(f"--reference-sigma takes three finite sigmas in metres (east north "
+                         f"up), each >= 0; got {' '.join(f'{v:g}' for v in values)}")
+
+
 def check_sar_arguments(args: argparse.Namespace) -> None:
-    """``--sar``/``--sar-model`` name files that exist (InputError else)."""
+    """``--sar``/``--sar-model`` name files that exist, ``--sar-sigma`` comes with ``--sar``
+    (InputError else)."""
     from core.errors import InputError
 
     if args.sar_model is not None and args.sar is None:
         raise InputError("--sar-model names the model of the --sar image: give --sar too")
-    sigma = getattr(args, "sar_sigma", None)
-    if sigma is not None and (args.sar is None or not sigma > 0):
-        raise InputError(f"--sar-sigma {sigma:g} is the --sar product's geolocation sigma: give "
-                         "--sar, and a sigma > 0 m")
+    if args.sar_sigma_m is not None and args.sar is None:
+        raise InputError(f"--sar-sigma {args.sar_sigma_m:g} is the --sar product's geolocation "
+                         "sigma: give --sar too")
     for flag, path in (("--sar", args.sar), ("--sar-model", args.sar_model)):
         if path is not None and not Path(path).is_file():
             raise InputError(f"{flag} {path} does not exist; give the SAR image (and its "
                              "annotation)")
 
 
-def check_orientation_arguments(args: argparse.Namespace, command: str,
-                                checked=None):  # -> SurfaceMatchConfig
-    """The reference, check points and window settings checked before the flow starts;
-    returns the surface-matching settings they make. With ``checked`` (what
-    :func:`check_pair` returned: the pair's inputs and its two models), a scene too small for
-    one surface-matching window is refused here, in seconds, rather than after its
-    matching."""
-    from dataclasses import replace
-
+def orientation_params(args: argparse.Namespace, command: str, checked):  # -> OrientParams
+    """The orientation's parameters (:class:`flows.orient.OrientParams`) from the options,
+    checked before the flow starts: the reference, the check points, the SAR files and every
+    setting (by :func:`flows.options.with_options`, through the dataclasses that hold them).
+    ``checked`` (what :func:`check_pair` returned: the pair's inputs and its two models) also
+    refuses here, in seconds rather than after its matching, a scene too small for one
+    surface-matching window."""
     from core.errors import InputError
-    from core.matching.surface import SurfaceMatchConfig
+    from flows.options import OPTIONS, given_options, with_options
+    from flows.orient import OrientParams
     from tasks.absolute.orientation import read_checkpoints
 
     if args.reference is None and args.srtm_dir is None:
@@ -160,13 +198,14 @@ def check_orientation_arguments(args: argparse.Namespace, command: str,
                          "--srtm-dir) or --reference")
     if args.checkpoints is not None:
         read_checkpoints(args.checkpoints)
-    if args.min_windows < 1:
-        raise InputError("--min-windows must be at least 1")
-    surface = replace(SurfaceMatchConfig(), radius_m=args.window_radius,
-                      shift_max_arcsec=args.max_shift)
-    if checked is not None:
-        _check_scene_size(surface, *checked)
-    return surface
+    check_sar_arguments(args)
+    params = with_options(
+        OrientParams(pair=checked[0], out=args.out, checkpoints=args.checkpoints, sar=args.sar,
+                     sar_model=args.sar_model, workers=args.workers,
+                     progress=not args.no_progress),
+        {k: v for k, v in given_options(args).items() if OPTIONS[k].is_orientation})
+    _check_scene_size(params.surface, *checked)
+    return params
 
 
 def _check_scene_size(surface, pair, left, right) -> None:  # PairInputs, LoadedModel x 2

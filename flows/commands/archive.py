@@ -7,15 +7,29 @@ import sys
 from pathlib import Path
 from typing import TYPE_CHECKING
 
-from flows.commands._pair import DEM_DIR_HELP, GEOID_HELP, VERTICAL_HELP, VERTICALS
+from flows.commands._pair import (
+    DEM_DIR_HELP,
+    GEOID_HELP,
+    VERTICAL_HELP,
+    VERTICALS,
+    add_image_arguments,
+    add_lidar_vertical_argument,
+    add_orientation_settings,
+)
 
 if TYPE_CHECKING:
     from tasks.archive.catalog import Catalog
 
 CATALOG_HELP = ("a folder of pair folders (each with left.tif + right.tif and their models, or "
                 "left/ and right/ folders with IMAGERY.TIF + METADATA.DIM; optional lidar.laz, "
-                "landcover.tif, checkpoints.json), or a CSV/JSON list with the columns "
-                "id,left,right[,left_model,right_model,lidar,landcover,checkpoints]")
+                "landcover.tif, checkpoints.json, sar.tif), or a CSV/JSON list with the columns "
+                "id,left,right[,left_model,right_model,lidar,landcover,checkpoints,sar,"
+                "sar_model] and any of the pair's options, named as in its pair.json's params "
+                "(self_calibrate, along_track, corrections, spacing_m, min_windows, "
+                "reference_sigma_m, sar_sigma_m, band, tie_measure, lidar_vertical, "
+                "surface.radius_m and the other surface.* and absolute.* settings; text in a "
+                "CSV, e.g. true, linear, \"5 5 5\"): a pair's own option wins over the command "
+                "line's, which apply to every pair")
 
 
 def add_archive_arguments(p: argparse.ArgumentParser) -> None:
@@ -45,8 +59,12 @@ def add_archive_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--dashboard-address", default=":8787", metavar="[HOST]:PORT",
                    help="where the LocalCluster serves its Dask dashboard (default :8787; :0 "
                         "for any free port)")
-    p.add_argument("--self-calibrate", action="store_true",
-                   help="estimate lens distortion of pushbroom images (see gcpfree orient)")
+    settings = p.add_argument_group(
+        "the options of every pair (as gcpfree orient's and gcpfree pair's; a pair's own in "
+        "the catalog wins)")
+    add_orientation_settings(settings)
+    add_image_arguments(settings)
+    add_lidar_vertical_argument(settings)
 
 
 def add_parser(sub: argparse._SubParsersAction) -> None:
@@ -57,12 +75,16 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
             "Run the whole chain (orientation without GCP, DSM, orthos, evaluation when lidar is "
             "given, report) on every pair of CATALOG, pairs in parallel on a Dask cluster (a "
             "LocalCluster, or an existing one with --dask-address; the dashboard link is "
-            "printed). A pair that fails is recorded with its reason and never stops the "
-            "others. ROOT/summary.csv and ROOT/summary.json list every pair: status (done, "
-            "skipped, failed), reason, GCP count, check-point and GCP residual RMS per image, "
-            "LE68. A rerun processes only the pairs missing or failed, and a pair interrupted "
-            "(Ctrl-C, a worker process killed) resumes after its last finished step. Exit code "
-            "1 when a pair failed, 130 when interrupted."),
+            "printed). A pair that the method refuses (terrain too flat, too small, too few "
+            "points) or that fails is recorded with its reason and never stops the others. "
+            "ROOT/summary.csv and ROOT/summary.json list every pair: status (done, skipped, "
+            "refused, failed), reason, GCP count, check-point and GCP residual RMS per image, "
+            "LE68; ROOT/map.html beside them (and the run's archive-map artifact) shows the "
+            "pairs' footprints over an SRTM hillshade coloured by status and by stated "
+            "accuracy, the counts, the throughput and the slowest steps, refreshed as pairs "
+            "end. A rerun processes only the pairs missing, refused or failed, and a pair "
+            "interrupted (Ctrl-C, a worker process killed) resumes after its last finished "
+            "step. Exit code 1 when a pair was refused or failed, 130 when interrupted."),
     )
     add_archive_arguments(p)
     p.add_argument("--no-progress", action="store_true", help="no progress bar")
@@ -71,10 +93,12 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
 def check_archive_args(args: argparse.Namespace) -> Catalog:
     """Bad arguments refused in one line before Prefect starts; the catalog read."""
     from core.errors import InputError
+    from flows.options import OPTIONS, check_options, given_options
     from tasks.archive.catalog import read_catalog
     from tasks.io.dem import check_reference, dem_datum
 
-    catalog = read_catalog(args.catalog)
+    check_options(given_options(args))
+    catalog = read_catalog(args.catalog, tuple(OPTIONS))
     if args.reference is not None:
         check_reference(args.reference)
         decision = dem_datum(args.reference, args.reference_vertical, geoid=args.geoid,
@@ -98,7 +122,10 @@ def check_archive_args(args: argparse.Namespace) -> Catalog:
 
 
 def flow_parameters(args: argparse.Namespace) -> dict:
-    """The flow's parameters from the command line (absolute paths, JSON values)."""
+    """The flow's parameters from the command line (absolute paths, JSON values; the options
+    of every pair by name, those at their defaults left out)."""
+    from flows.options import given_options
+
     def path(p: Path | None) -> str | None:
         return None if p is None else str(Path(p).expanduser().resolve())
 
@@ -107,7 +134,7 @@ def flow_parameters(args: argparse.Namespace) -> dict:
             "reference_vertical": args.reference_vertical, "geoid": path(args.geoid),
             "dask_address": args.dask_address, "workers": args.workers,
             "processes": not args.threads, "dashboard_address": args.dashboard_address,
-            "self_calibrate": args.self_calibrate}
+            "options": given_options(args)}
 
 
 def interrupted_line(catalog: Catalog, root: Path) -> str:
@@ -131,4 +158,4 @@ def run(args: argparse.Namespace) -> int:
         print(interrupted_line(catalog, args.out), file=sys.stderr, flush=True)
         raise
     print("\n".join(outcome.lines()))
-    return 1 if outcome.count("failed") else 0
+    return 1 if outcome.count("failed") or outcome.count("refused") else 0

@@ -7,15 +7,15 @@ import argparse
 from pathlib import Path
 
 from flows.commands._pair import (
+    add_lidar_vertical_argument,
     add_orientation_arguments,
     add_pair_arguments,
     add_reference_arguments,
     add_run_arguments,
-    check_orientation_arguments,
     check_pair,
-    check_sar_arguments,
+    check_reference_sigma,
+    orientation_params,
 )
-from flows.commands.orient import add_reference_sigma_argument, reference_sigma_m
 
 
 def add_parser(sub: argparse._SubParsersAction) -> None:
@@ -34,13 +34,11 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     add_reference_arguments(p, use="the ground the pair is oriented to (required, or "
                                    "--dem-dir)")
     add_orientation_arguments(p)
-    add_reference_sigma_argument(p)
     p.add_argument("--lidar", type=Path, default=None, metavar="LAS",
                    help="lidar LAS/LAZ to evaluate the final DSM against (any CRS)")
     p.add_argument("--landcover", type=Path, default=None, metavar="TIF",
                    help="land-cover raster classifying the evaluation (needs --lidar)")
-    p.add_argument("--lidar-vertical", choices=("auto", "ellipsoidal", "egm96"),
-                   default="auto", help="heights of the lidar (auto: from its CRS)")
+    add_lidar_vertical_argument(p)
     p.add_argument("--id", dest="pair_id", default=None,
                    help="name of the pair in the STAC items (default: OUT's folder name)")
     add_run_arguments(p)
@@ -49,7 +47,7 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
 def run(args: argparse.Namespace) -> int:
     from flows._env import prefect_api
 
-    sigma = reference_sigma_m(args)  # refused in a line, before the server boots
+    check_reference_sigma(args)  # refused in a line, before the server boots
     with prefect_api() as api:  # a temporary Prefect server boots meanwhile
         from core.errors import InputError
 
@@ -69,19 +67,12 @@ def run(args: argparse.Namespace) -> int:
 
             with open_raster(args.landcover, "land cover"):
                 pass
-        surface = check_orientation_arguments(args, "pair", checked)
-        check_sar_arguments(args)
+        orient = orientation_params(args, "pair", checked)
         from flows.pair import PairParams, pair_flow
 
         api.ready()
-        outcome = pair_flow(PairParams(
-            pair=checked[0], out=args.out, lidar=args.lidar, landcover=args.landcover,
-            lidar_vertical=args.lidar_vertical, checkpoints=args.checkpoints,
-            self_calibrate=args.self_calibrate, along_track=args.along_track,
-            corrections=args.corrections,
-            workers=args.workers, progress=not args.no_progress,
-            pair_id=args.pair_id, surface=surface, spacing_m=args.window_spacing,
-            min_windows=args.min_windows, reference_sigma_m=sigma, sar=args.sar,
-            sar_model=args.sar_model))
+        outcome = pair_flow(PairParams(orient=orient, lidar=args.lidar, landcover=args.landcover,
+                                       lidar_vertical=args.lidar_vertical,
+                                       pair_id=args.pair_id))
         print("\n".join(outcome.lines()))
     return 0

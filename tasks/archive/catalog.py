@@ -11,16 +11,21 @@ A catalog is one of:
   in its ``truth/`` folder (the simulator's); ``sar.tif`` (a SAR scene of the same ground, its
   model ``sar.xml``/``sar.json`` beside it: SAR-optical GCPs, ``gcpfree orient --sar``);
 - a CSV file with a header ``id,left,right[,left_model,right_model,lidar,landcover,
-  checkpoints,sar,sar_model]``, or a JSON list of objects with the same keys (or ``{"pairs": [...]}``). Relative
-  paths are relative to the catalog file;
+  checkpoints,sar,sar_model]``, or a JSON list of objects with the same keys (or
+  ``{"pairs": [...]}``). Relative paths are relative to the catalog file. Beyond these columns
+  a pair may carry the options the reader is given (``options``: the archive's, by their names
+  in pair.json's ``params``, :mod:`flows.options`), each kept as the catalog writes it (text
+  in a CSV, a JSON value) for the flow to read with its type; an empty cell or null is not
+  given;
 - the JSON ``gcpfree scenes`` writes (``"format": "gcpfree.scenes"``): its ``pairs`` as above,
   each also naming its two scenes, its block and its figures (:data:`SCENE_PAIR_KEYS`), and
   the ``scenes`` (id, image, model), ``overlaps`` (every two overlapping scenes), ``blocks``
   (the scenes and pairs of each connected component) and ``rejected`` files (path, reason),
   read into :class:`Catalog` and checked against each other.
 
-Reading a catalog checks its form only: a pair whose images are missing is that pair's failure
-(:func:`check_pair_inputs`), not the catalog's. The summary (``ROOT/summary.csv`` and
+Reading a catalog checks its form only: a pair whose images are missing, or whose option has a
+value of another type, is that pair's failure (:func:`check_pair_inputs`), not the catalog's; a
+column no pair may have (neither a column nor an option) is the catalog's. The summary (``ROOT/summary.csv`` and
 ``ROOT/summary.json``) lists every pair with its status, the reason of a failure and the figures
 its products give (GCP count, check-point and GCP residual RMS, LE68).
 """
@@ -28,9 +33,11 @@ its products give (GCP count, check-point and GCP residual RMS, LE68).
 from __future__ import annotations
 
 import csv
+import difflib
 import io
 import math
 import re
+from collections.abc import Collection
 from dataclasses import asdict, dataclass, fields
 from pathlib import Path
 from typing import Any
@@ -38,6 +45,7 @@ from typing import Any
 from prefect import task
 from prefect.cache_policies import NO_CACHE
 
+from core.choices import VerticalChoice
 from core.errors import GcpFreeError, InputError
 from core.jsonio import parse_json
 from tasks.archive.scene_catalog import (
@@ -68,7 +76,8 @@ FOLDER_LAYOUT = ("a pair folder holds left.tif and right.tif, or left/ and right
 
 @dataclass(frozen=True)
 class PairEntry:
-    """One stereo pair of the catalog: its id (the name of its output folder) and its files."""
+    """One stereo pair of the catalog: its id (the name of its output folder), its files and
+    its own options (name, value as the catalog gives it), in catalog order."""
 
     id: str
     left: Path
@@ -80,9 +89,10 @@ class PairEntry:
     checkpoints: Path | None = None
     sar: Path | None = None
     sar_model: Path | None = None
+    options: tuple[tuple[str, Any], ...] = ()
 
     def pair_inputs(self, reference: Path | None = None, srtm_dir: Path | None = None,
-                    reference_vertical: str = "auto") -> PairInputs:
+                    reference_vertical: VerticalChoice = "auto") -> PairInputs:
         """The pair's images and models with the ground the archive orients every pair to."""
         return PairInputs(self.left, self.right, self.left_model, self.right_model,
                           reference=reference, reference_vertical=reference_vertical,
@@ -110,8 +120,9 @@ class Catalog:
 # ---------------------------------------------------------------------------- reading
 
 
-def read_catalog(path: str | Path) -> Catalog:
-    """The catalog at ``path``: a directory of pair folders, a ``.csv`` or a ``.json`` file.
+def read_catalog(path: str | Path, options: Collection[str] = ()) -> Catalog:
+    """The catalog at ``path``: a directory of pair folders, a ``.csv`` or a ``.json`` file;
+    ``options``: the names a pair may carry beyond the columns (the archive's options).
 
     Raises:
         InputError: the catalog does not exist, cannot be parsed, lists no pair, repeats an
@@ -125,9 +136,9 @@ def read_catalog(path: str | Path) -> Catalog:
     if path.is_dir():
         pairs = _pairs_of_directory(path)
     elif path.suffix.lower() == ".csv":
-        pairs = _pairs_of_rows(_csv_rows(path), path)
+        pairs = _pairs_of_rows(_csv_rows(path, options), path)
     elif path.suffix.lower() == ".json":
-        pairs, extra = _json_catalog(path)
+        pairs, extra = _json_catalog(path, options)
     else:
         raise InputError(f"catalog {path}: unknown kind; give a folder of pair folders, a .csv "
                          f"or a .json file with the columns {','.join(COLUMNS)}")
@@ -153,9 +164,9 @@ def _transient(task: Any, task_run: Any, state: Any) -> bool:
 
 @task(name="read-catalog", retries=2, retry_delay_seconds=1, retry_condition_fn=_transient,
       cache_policy=NO_CACHE)
-def load_catalog(path: Path) -> Catalog:
+def load_catalog(path: Path, options: Collection[str] = ()) -> Catalog:
     """:func:`read_catalog` as a task: retried on I/O errors (network file systems)."""
-    return read_catalog(path)
+    return read_catalog(path, options)
 
 
 def _read_text(path: Path) -> str:
@@ -168,7 +179,7 @@ def _read_text(path: Path) -> str:
         raise InputError(f"cannot read catalog {path}: {exc.strerror}") from exc
 
 
-def _csv_rows(path: Path) -> list[tuple[str, dict[str, Any]]]:
+def _csv_rows(path: Path, options: Collection[str]) -> list[tuple[str, dict[str, Any]]]:
     text = _read_text(path)
     try:
         reader = csv.DictReader(io.StringIO(text), skipinitialspace=True)
@@ -179,7 +190,7 @@ def _csv_rows(path: Path) -> list[tuple[str, dict[str, Any]]]:
     if not header:
         raise InputError(f"catalog {path} is empty; its first line is the header "
                          f"{','.join(COLUMNS)} (id,left,right required)")
-    _check_columns(header, path)
+    _check_columns(header, path, options)
     out = []
     for n, row in enumerate(rows, start=2):
         if None in row:  # more values than header columns
@@ -200,15 +211,16 @@ def _json_doc(path: Path) -> Any:
         raise InputError(f"{exc}; give a list of pairs") from None
 
 
-def _json_catalog(path: Path) -> tuple[list[PairEntry], dict[str, Any]]:
+def _json_catalog(path: Path, options: Collection[str]
+                  ) -> tuple[list[PairEntry], dict[str, Any]]:
     """A JSON catalog's pairs, and for a ``gcpfree scenes`` one its other parts."""
     doc = _json_doc(path)
     if isinstance(doc, dict) and doc.get("format") == SCENES_FORMAT:
-        return _scenes_catalog(doc, path)
-    return _pairs_of_rows(_json_rows(doc, path), path), {}
+        return _scenes_catalog(doc, path, options)
+    return _pairs_of_rows(_json_rows(doc, path, options), path), {}
 
 
-def _json_rows(doc: Any, path: Path, extra_keys: tuple[str, ...] = ()
+def _json_rows(doc: Any, path: Path, options: Collection[str], extra_keys: tuple[str, ...] = ()
                ) -> list[tuple[str, dict[str, Any]]]:
     """The pair objects of a JSON catalog (``extra_keys``: allowed beyond the columns, not
     read)."""
@@ -222,28 +234,33 @@ def _json_rows(doc: Any, path: Path, extra_keys: tuple[str, ...] = ()
         if not isinstance(item, dict):
             raise InputError(f"catalog {path}: pair {i} is a {type(item).__name__}, not an "
                              f"object with {', '.join(REQUIRED)}")
-        _check_columns([k for k in item if k not in extra_keys], path)
+        _check_columns([k for k in item if k not in extra_keys], path, options)
         out.append((f"pair {i}", {k: v for k, v in item.items() if k not in extra_keys}))
     return out
 
 
-def _scenes_catalog(doc: dict[str, Any], path: Path) -> tuple[list[PairEntry], dict[str, Any]]:
+def _scenes_catalog(doc: dict[str, Any], path: Path, options: Collection[str]
+                    ) -> tuple[list[PairEntry], dict[str, Any]]:
     """The pairs of a ``gcpfree scenes`` catalog and its other parts, checked against each
     other (:func:`tasks.archive.scene_catalog.scene_parts`)."""
     if doc.get("version") != 1:
         raise InputError(f"catalog {path}: {SCENES_FORMAT} version {doc.get('version')!r} is "
                          "not 1; write it again with this gcpfree's scenes command")
     rows = doc.get("pairs", [])
-    pairs = _pairs_of_rows(_json_rows(rows, path, SCENE_PAIR_KEYS), path)
+    pairs = _pairs_of_rows(_json_rows(rows, path, options, SCENE_PAIR_KEYS), path)
     return pairs, scene_parts(doc, path, {p.id for p in pairs},
                               lambda v: _resolve(v, path.parent), _checked_id)
 
 
-def _check_columns(names: list[str], path: Path) -> None:
-    unknown = [n for n in names if n not in COLUMNS]
+def _check_columns(names: list[str], path: Path, options: Collection[str]) -> None:
+    unknown = [str(n) for n in names if n not in COLUMNS and n not in options]
     if unknown:
-        raise InputError(f"catalog {path}: unknown column(s) {', '.join(map(str, unknown))}; "
-                         f"the columns are {','.join(COLUMNS)}")
+        close = [m for n in unknown for m in difflib.get_close_matches(n, (*COLUMNS, *options), 1)]
+        raise InputError(f"catalog {path}: unknown column(s) {', '.join(unknown)}; "
+                         + (f"did you mean {', '.join(close)}? " if close else "")
+                         + f"the columns are {','.join(COLUMNS)}"
+                         + (f", and {len(options)} options (gcpfree archive --help)"
+                            if options else ""))
     missing = [n for n in REQUIRED if n not in names]
     if missing:
         raise InputError(f"catalog {path}: missing column(s) {', '.join(missing)}; "
@@ -267,9 +284,17 @@ def _pairs_of_rows(rows: list[tuple[str, dict[str, Any]]], path: Path) -> list[P
                                      "needs an id, a left and a right image")
                 continue
             values[key] = v if key == "id" else _resolve(v, base)
+        options = tuple((k, _frozen(v)) for k, v in row.items() if k not in COLUMNS
+                        and v is not None and v != "")  # empty or null: not given
         pairs.append(PairEntry(id=_checked_id(values["id"], f"catalog {path} {where}"),
-                               **{k: v for k, v in values.items() if k != "id"}))
+                               **{k: v for k, v in values.items() if k != "id"},
+                               options=options))
     return pairs
+
+
+def _frozen(value: Any) -> Any:
+    """A JSON value with its lists as tuples (a :class:`PairEntry` is a value)."""
+    return tuple(map(_frozen, value)) if isinstance(value, list) else value
 
 
 def _resolve(value: str, base: Path) -> Path:

@@ -103,25 +103,47 @@ def orientation_changes(out: Path,
         return None
     if settings is None:
         return ()
-    had = report.settings or {}
+    return settings_changes(report.settings, settings)
+
+
+def settings_changes(had: Mapping[str, Any] | None,
+                     settings: Mapping[str, Any]) -> tuple[str, ...]:
+    """The names of the ``settings`` whose value differs from what a report.json recorded
+    (``had``, its ``settings``): every name when it records none (an older gcpfree's report);
+    a setting it lacks is unchanged when it is unset now (null: an option added since, at its
+    default)."""
+    had = had or {}
     return tuple(k for k in settings
                  if (had[k] != settings[k] if k in had else settings[k] is not None))
 
 
-def pair_complete(out: str | Path, params: Mapping[str, Any] | None = None) -> bool:
+def param_changes(had: Mapping[str, Any], params: Mapping[str, Any],
+                  defaults: Mapping[str, Any] | None = None) -> tuple[str, ...]:
+    """The names of the manifest parameters ``params`` (:meth:`flows.pair.PairParams.to_dict`)
+    whose value differs from what a manifest recorded (``had``), those that only change how a
+    run goes (:data:`RUN_ONLY_PARAMS`) aside. A parameter the manifest lacks (an option added
+    since) or records as null (``surface`` in an archive's manifest before the archive passed
+    it) compares as its value in ``defaults`` (:func:`flows.pair.manifest_defaults`; None
+    without)."""
+    defaults = defaults or {}
+    return tuple(k for k, v in params.items() if k not in RUN_ONLY_PARAMS and v != (
+        had[k] if had.get(k) is not None else defaults.get(k)))
+
+
+def pair_complete(out: str | Path, params: Mapping[str, Any] | None = None,
+                  defaults: Mapping[str, Any] | None = None) -> bool:
     """True when ``OUT/pair.json`` exists and every product it lists reads back with the
     size it had when the pair finished: a rerun skips this pair. With ``params`` (the
     manifest's, :meth:`flows.pair.PairParams.to_dict`), a manifest that records its parameters
-    (every one gcpfree writes) must record the same, the options that only change how a run
-    goes (:data:`RUN_ONLY_PARAMS`) aside."""
+    (every one gcpfree writes) must record the same (:func:`param_changes`, with the
+    parameters' ``defaults``)."""
     out = Path(out)
     try:
         manifest = PAIR.read(out / MANIFEST)
     except InputError:
         return False
     had = manifest.params
-    if params is not None and had is not None and any(
-            had.get(k) != v for k, v in params.items() if k not in RUN_ONLY_PARAMS):
+    if params is not None and had is not None and param_changes(had, params, defaults):
         return False
     for rel in manifest.products.values():
         path = out / rel
@@ -183,10 +205,13 @@ def remove_leftovers(out: str | Path) -> list[Path]:
 
 
 @task(name="find-complete-pairs", cache_policy=NO_CACHE)
-def complete_pairs(params: Mapping[str, Mapping[str, Any]], root: Path) -> frozenset[str]:
+def complete_pairs(params: Mapping[str, Mapping[str, Any]], root: Path,
+                   defaults: Mapping[str, Any] | None = None) -> frozenset[str]:
     """The pair ids (keys of ``params``, each pair's manifest parameters) whose ``ROOT/<id>``
-    already holds valid finished products made with those parameters."""
-    return frozenset(i for i, p in params.items() if pair_complete(Path(root) / i, p))
+    already holds valid finished products made with those parameters (:func:`pair_complete`,
+    with their ``defaults``)."""
+    return frozenset(i for i, p in params.items()
+                     if pair_complete(Path(root) / i, p, defaults))
 
 
 def write_manifest(out: Path, pair_id: str, params: Mapping[str, Any],

@@ -43,9 +43,11 @@ class Reached(Exception):
 
 
 @pytest.fixture
-def no_server(monkeypatch):
-    """The commands' checks and Prefect server stubbed: what reaches the flow is captured."""
+def no_server(monkeypatch, tmp_path):
+    """The commands' checks of the files and Prefect server stubbed (in a scratch folder):
+    what reaches the flow is captured."""
     import flows._env
+    import flows.commands._pair
     import flows.orient
     import flows.pair
 
@@ -55,10 +57,11 @@ def no_server(monkeypatch):
 
     seen = {"real_pair_flow": flows.pair.pair_flow}
     monkeypatch.setattr(flows._env, "prefect_api", lambda: contextlib.nullcontext(Api()))
+    monkeypatch.chdir(tmp_path)
     for mod in (orient_command, pair_command):
         monkeypatch.setattr(mod, "check_pair", lambda args: (
             PairInputs(Path("l.tif"), Path("r.tif"), reference=Path("ref.tif")), None, None))
-        monkeypatch.setattr(mod, "check_orientation_arguments", lambda *a, **k: None)
+    monkeypatch.setattr(flows.commands._pair, "_check_scene_size", lambda *a: None)
 
     def orient_flow(params):
         seen["orient"] = params
@@ -85,7 +88,7 @@ def test_reference_sigma_reaches_the_absolute_configuration(no_server, monkeypat
     assert no_server["orient"].absolute.reference_sigma_m == (5.0, 5.0, 5.0)
     assert pair_command.run(parse(pair_command, *PAIR, "--reference-sigma", "3", "4", "6")) == 0
     params = no_server["pair"]
-    assert params.reference_sigma_m == (3.0, 4.0, 6.0)
+    assert params.orient.absolute.reference_sigma_m == (3.0, 4.0, 6.0)
     assert params.to_dict()["reference_sigma_m"] == [3.0, 4.0, 6.0]  # in the manifest
     # and the pair flow hands it to the orientation
     import prefect.artifacts

@@ -16,7 +16,8 @@ import rasterio.crs
 from pystac.extensions.projection import ProjectionExtension
 from rasterio.warp import transform_bounds
 
-from flows.pair import PairParams, pair_flow
+from flows.orient import OrientParams
+from flows.pair import PairParams, manifest_defaults, pair_flow
 from tasks.archive.pair import pair_complete
 from tasks.io.pair import PairInputs
 
@@ -26,12 +27,12 @@ def pair_run(tiny_oriented, tmp_path_factory):
     scene, oriented_out, _ = tiny_oriented
     out = tmp_path_factory.mktemp("pair") / "tiny-pair"
     shutil.copytree(oriented_out, out)
-    params = PairParams(pair=PairInputs(scene / "left.tif", scene / "right.tif",
-                                        reference=scene / "reference.tif"),
-                        out=out, lidar=scene / "truth" / "lidar.laz",
-                        landcover=scene / "truth" / "landcover.tif",
-                        checkpoints=scene / "truth" / "checkpoints.json",
-                        self_calibrate=True)
+    params = PairParams(OrientParams(pair=PairInputs(scene / "left.tif", scene / "right.tif",
+                                                     reference=scene / "reference.tif"),
+                                     out=out, checkpoints=scene / "truth" / "checkpoints.json",
+                                     self_calibrate=True, progress=False),
+                        lidar=scene / "truth" / "lidar.laz",
+                        landcover=scene / "truth" / "landcover.tif")
     mtime = (out / "dsm.tif").stat().st_mtime_ns
     outcome = pair_flow(params)
     return scene, out, params, outcome, mtime
@@ -141,11 +142,16 @@ def test_a_changed_option_redoes_the_orientation_and_what_follows(pair_run, tmp_
     _scene, done, params, _, _ = pair_run
     out = tmp_path / "pair"
     shutil.copytree(done, out)
-    same = dataclasses.replace(params, out=out)
-    changed = dataclasses.replace(same, self_calibrate=False)
-    assert pair_complete(out, same.to_dict()) and not pair_complete(out, changed.to_dict())
+    same = dataclasses.replace(params, orient=dataclasses.replace(params.orient, out=out))
+    changed = dataclasses.replace(same, orient=dataclasses.replace(same.orient,
+                                                                   self_calibrate=False))
+    defaults = manifest_defaults()
+    assert pair_complete(out, same.to_dict(), defaults)
+    assert not pair_complete(out, changed.to_dict(), defaults)
     # the options that only change how a run goes leave it complete
-    assert pair_complete(out, dataclasses.replace(same, workers=1, pair_id="x").to_dict())
+    quicker = dataclasses.replace(same, orient=dataclasses.replace(same.orient, workers=1),
+                                  pair_id="x")
+    assert pair_complete(out, quicker.to_dict(), defaults)
 
     def started(p):
         raise Reached(p)

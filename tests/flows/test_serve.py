@@ -70,7 +70,8 @@ def test_serve_registers_the_deployment_with_its_cron(prefect_harness, tmp_path:
         proc = subprocess.Popen(
             [sys.executable, "-c", SERVE, "--catalog", str(tmp_path / "cat.csv"),
              "--out", str(tmp_path / "root"), "--srtm-dir", str(tmp_path), "--cron", CRON,
-             "--timezone", "Europe/Paris", "--name", "test-nightly", "--workers", "2"],
+             "--timezone", "Europe/Paris", "--name", "test-nightly", "--workers", "2",
+             "--self-calibrate", "--window-radius", "3000", "--reference-sigma", "2", "2", "4"],
             cwd=REPO, env=api_env(), stdout=out, stderr=subprocess.STDOUT)
         try:
             dep = read_deployment("reprocess-archive/test-nightly", proc, log)
@@ -91,7 +92,10 @@ def test_serve_registers_the_deployment_with_its_cron(prefect_harness, tmp_path:
         "catalog": str(tmp_path / "cat.csv"), "out": str(tmp_path / "root"),
         "srtm_dir": str(tmp_path), "reference": None, "reference_vertical": "auto",
         "geoid": None, "dask_address": None, "workers": 2,
-        "processes": True, "dashboard_address": ":8787", "self_calibrate": False}
+        "processes": True, "dashboard_address": ":8787",
+        # the orientation options given, by their names in pair.json (the others at defaults)
+        "options": {"self_calibrate": True, "surface.radius_m": 3000.0,
+                    "reference_sigma_m": [2.0, 2.0, 4.0]}}
     assert {"gcpfree", "archive"} <= set(dep.tags)
     assert "serving" in log.read_text() and CRON in log.read_text()
 

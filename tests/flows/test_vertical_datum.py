@@ -137,6 +137,11 @@ DEM_COMMANDS = {
     "fill-voids": (["fill-voids", "--srtm", "{dem}", "--dem", "{dem}", "--out",
                     "{dir}/filled.tif"], "--srtm-vertical"),
     "simulate": (["simulate", "--dem", "{dem}", "--out", "{dir}/scene"], "--dem-vertical"),
+    "block": (["block", "--catalog", "{catalog}", "--reference", "{dem}", "--out", "{dir}/b"],
+              "--reference-vertical"),
+    # the mean terrain height under each scene's footprint, from --reference or --dem-dir
+    "scenes": (["scenes", str(VENTOUX), "--reference", "{dem}", "--out", "{dir}/s.json"],
+               "--reference-vertical"),
 }
 #: commands that read no DEM, and why
 NO_DEM = {"ortho-compare": "compares two orthoimages",
