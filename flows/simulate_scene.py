@@ -1,4 +1,5 @@
-"""Flow: render a SPOT-like stereo pair with known truth over a real DEM."""
+"""Flows: render a SPOT-like stereo pair with known truth over a real DEM (``simulate-scene``),
+or a block of R x C scenes over K dates of one world (``simulate-block``)."""
 
 from __future__ import annotations
 
@@ -7,8 +8,19 @@ from pathlib import Path
 
 from prefect import flow
 
+from core.simulation.block import BlockLayout
 from core.simulation.scene import error_config
 from tasks.io.geoid import BUNDLED_SRTM_DIR
+from tasks.simulate.block import (
+    BlockOptions,
+    BlockSummary,
+    build_block_radiance,
+    define_block,
+    make_block_checkpoints,
+    render_block_image,
+    summarize_block,
+    write_block_metadata,
+)
 from tasks.simulate.sar import simulate_sar
 from tasks.simulate.scene import (
     SimulationSummary,
@@ -16,12 +28,11 @@ from tasks.simulate.scene import (
     build_truth_surface,
     define_scene,
     make_checkpoints,
-    make_lidar,
-    make_reference,
     render_image,
     summarize,
     write_spot_metadata,
 )
+from tasks.simulate.survey import make_lidar, make_reference
 
 BUNDLED_DEM = BUNDLED_SRTM_DIR / "N44E005.hgt"
 
@@ -67,3 +78,45 @@ def simulate_scene(params: SimulationParams) -> SimulationSummary:
     if params.sar:
         simulate_sar(scene, out, params.sar)
     return summarize(scene, out)
+
+
+@dataclass(frozen=True)
+class BlockParams:
+    """Parameters of :func:`simulate_block` (``gcpfree simulate --block RxC --dates K``)."""
+
+    out: Path
+    layout: BlockLayout
+    dem: Path = BUNDLED_DEM
+    preset: str = "tiny"
+    seed: int = 0
+    lens: bool = False
+    jitter: bool = False
+    date_change: float = 0.0
+    relief_factor: float = 1.0
+    bits: int = 8
+    center: tuple[float, float] | None = None
+    dem_vertical: str = "auto"
+    errors: str | None = None
+    flat_scene: str | None = None  # "r{row}c{col}": that scene's ground too flat
+
+
+@flow(name="simulate-block", log_prints=True)
+def simulate_block(params: BlockParams) -> BlockSummary:
+    """Passes and images -> SPOT metadata -> truth surface -> radiance per date -> every image
+    -> check points seen by two images or more -> the SRTM-like reference."""
+    out = Path(params.out)
+    opts = BlockOptions(
+        params.layout, params.preset, params.seed,
+        error_config(params.preset, params.errors, lens=params.lens, jitter=params.jitter),
+        params.relief_factor, params.bits, params.date_change, params.center,
+        params.dem_vertical, params.flat_scene)
+    scene = define_block(Path(params.dem), out, opts)
+    write_block_metadata(scene, out)
+    scene = build_truth_surface(scene, out)
+    for d in range(params.layout.dates):
+        build_block_radiance(scene, out, d)
+    for name in scene.image_names:
+        render_block_image(scene, out, name)
+    make_block_checkpoints(scene, out)
+    make_reference(scene, out)
+    return summarize_block(scene, out)

@@ -264,17 +264,18 @@ def metadata_scene(model: PushbroomModel, mission_index: int, instrument: str,
     return quantise_speeds(scene) if mission_index < 5 else scene
 
 
-def realistic_models(
+def realistic_truth(
     truth: PushbroomModel, delivered: PushbroomModel, rng: np.random.Generator,
-    mission_index: int, instrument: str,
+    mission_index: int,
 ) -> tuple[PushbroomModel, PushbroomModel, RealisticErrors]:
-    """(truth, delivered, record) with the realistic errors drawn from ``rng``.
+    """(truth, ideal metadata, record) with the realistic errors drawn from ``rng``: the truth
+    with the attitude profile and the detector calibration errors, and the model the satellite's
+    own measurements describe (the profile, the ephemeris and time-tag errors), before the
+    product samples and quantises them (:func:`measured_model`).
 
     ``truth`` and ``delivered`` are the simple-mode models (polynomial attitudes that differ by
-    biases and rates). The profile goes into both (the satellite measured it); the delivered
-    model is then what the chain reads from the metadata (:func:`metadata_scene` read back by
-    :func:`~core.sensors.spot.spot_pushbroom`), with the ephemeris errors; the truth camera gets
-    the detector calibration errors.
+    biases and rates). A pass of several scenes is drawn whole, then cut into its scenes
+    (``with_image_window``): its profile, ephemeris and clock are the pass's.
     """
     if not isinstance(truth.attitude, Attitude) or not isinstance(delivered.attitude, Attitude):
         raise InputError("realistic errors start from polynomial truth and delivered attitudes")
@@ -285,7 +286,6 @@ def realistic_models(
     bias = tuple(float(rng.uniform(-m, m)) for m in ORBIT_BIAS_MAX_M)
     time_tag = float(rng.uniform(-TIME_TAG_MAX_S, TIME_TAG_MAX_S))
     ideal = with_ephemeris_error(ideal, bias, time_tag)  # type: ignore[arg-type]
-    measured = spot_pushbroom(metadata_scene(ideal, mission_index, instrument))
     look_scale = float(rng.uniform(-LOOK_SCALE_MAX, LOOK_SCALE_MAX))
     bow = float(rng.uniform(-BOW_MAX_PX, BOW_MAX_PX))
     n_seg = HRV_SEGMENTS if mission_index < 5 else 0
@@ -300,4 +300,22 @@ def realistic_models(
         orbit_bias_m=bias, time_tag_s=time_tag,  # type: ignore[arg-type]
         look_scale=look_scale, bow_px=bow, segment_offsets_px=offsets,
     )
-    return truth, measured, record
+    return truth, ideal, record
+
+
+def measured_model(ideal: PushbroomModel, mission_index: int,
+                   instrument: str) -> PushbroomModel:
+    """What the chain reads from the metadata of a product whose satellite measured ``ideal``
+    (:func:`metadata_scene` read back by :func:`~core.sensors.spot.spot_pushbroom`)."""
+    return spot_pushbroom(metadata_scene(ideal, mission_index, instrument))
+
+
+def realistic_models(
+    truth: PushbroomModel, delivered: PushbroomModel, rng: np.random.Generator,
+    mission_index: int, instrument: str,
+) -> tuple[PushbroomModel, PushbroomModel, RealisticErrors]:
+    """(truth, delivered, record) with the realistic errors drawn from ``rng``
+    (:func:`realistic_truth`): the delivered model is what the chain reads from the metadata
+    (:func:`measured_model`)."""
+    truth, ideal, record = realistic_truth(truth, delivered, rng, mission_index)
+    return truth, measured_model(ideal, mission_index, instrument), record

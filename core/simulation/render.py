@@ -27,8 +27,8 @@ __all__ = [
     "date_change_kind",
     "date_change_mask",
     "date_change_weight",
-    "hillshade",
     "ground_radiance",
+    "hillshade",
     "illuminate",
     "radiance_to_dn",
     "render_dn",
@@ -246,23 +246,26 @@ def illuminate(reflectance: ArrayLike, shade: ArrayLike,
 
 def ground_radiance(x_m: ArrayLike, y_m: ArrayLike, classes: ArrayLike, surface_h_m: ArrayLike,
                     cell_m: float, sun_azimuth_deg: float, sun_elevation_deg: float, seed: int,
-                    date_change: float = 0.0, ambient: float = AMBIENT) -> NDArray[np.float64]:
+                    date_change: float = 0.0, ambient: float = AMBIENT,
+                    change_seed: int | None = None) -> NDArray[np.float64]:
     """Radiance of a north-up block of ground cells on one date.
 
     ``x_m``, ``y_m`` are the cell centres, ``surface_h_m`` the surface heights (NaN cells take
     the block mean, so shading stays defined), ``cell_m`` the grid spacing. The ground-fixed
     :func:`texture` is shaded by the date's sun (:func:`hillshade`); with ``date_change`` > 0
     (the second date) that fraction of the ground changes (:func:`apply_date_change`) and clouds
-    hide the terrain's shading. Each cell depends on its 3x3 neighbourhood only: run it over
-    tiles with a one-cell halo.
+    hide the terrain's shading; ``change_seed`` (default ``seed``: a pair's second date) draws
+    where and how, so each later date of a block changes in its own pattern. Each cell depends
+    on its 3x3 neighbourhood only: run it over tiles with a one-cell halo.
     """
     z = np.asarray(surface_h_m, dtype=np.float64)
     dem = np.where(np.isfinite(z), z, np.nanmean(z) if np.isfinite(z).any() else 0.0)
     shade = hillshade(dem, cell_m, -cell_m, sun_azimuth_deg, sun_elevation_deg)
     refl = texture(x_m, y_m, np.asarray(classes).astype(np.uint8), seed)
     if date_change > 0:
-        w = date_change_weight(x_m, y_m, derive_seed(seed, "date-change"), date_change)
-        kind = date_change_kind(x_m, y_m, derive_seed(seed, "date-change-kind"))
+        cs = seed if change_seed is None else change_seed
+        w = date_change_weight(x_m, y_m, derive_seed(cs, "date-change"), date_change)
+        kind = date_change_kind(x_m, y_m, derive_seed(cs, "date-change-kind"))
         refl = apply_date_change(refl, w, kind)
         cloud = w * (kind == ChangeKind.CLOUD)
         shade = shade * (1 - cloud) + cloud  # clouds are not shaded by the terrain below

@@ -51,6 +51,21 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
                    help="scale the relief by K (0.05: nearly flat); default 1")
     p.add_argument("--bits", type=int, choices=(8, 12), default=8, help="image depth (default 8)")
     p.add_argument("--no-lidar", action="store_true", help="skip the truth lidar")
+    p.add_argument("--block", metavar="RxC", default=None,
+                   help="a block instead of a pair: R scenes along track (consecutive segments "
+                        "of one pass: one orbit, a continuous attitude) by C across (adjacent "
+                        "passes), about 10 %% overlap, over --dates dates of one world, into "
+                        "DIR/images/r<row>c<col>d<date>.tif with their models beside; the "
+                        "truth in DIR/truth/ (block.json, checkpoints.json keyed by image, "
+                        "dsm.tif, dtm.tif), the reference in DIR/reference.tif. No lidar, no "
+                        "SAR")
+    p.add_argument("--dates", type=int, default=2, metavar="K",
+                   help="with --block: dates, each its own across-track view and sun (the "
+                        "same scene on two dates is a stereo pair; the preset's two views, "
+                        "then +10 and -6 deg); default 2")
+    p.add_argument("--flat-scene", metavar="rRcC", default=None,
+                   help="with --block: make that scene's ground too flat to orient alone "
+                        "(relief x 0.02, tapered over 2 km), e.g. r0c1")
     p.add_argument("--sar", choices=("ers", "s1"), default=None,
                    help="also a SAR product of the same world: DIR/sar.tif (amplitude, uint16, "
                         "sigma0 = (DN/1000)^2) with its Sentinel-1-form annotation DIR/sar.xml "
@@ -62,7 +77,13 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
+    from core.errors import InputError
     from tasks.simulate.io import check_dem
+
+    if args.block is None and args.flat_scene is not None:
+        raise InputError("--flat-scene needs --block; add --block RxC")
+    if args.block is not None and args.sar:
+        raise InputError("--sar makes a pair's SAR product, not a block's; drop --sar or --block")
 
     dem = args.dem
     if dem is None:
@@ -73,6 +94,8 @@ def run(args: argparse.Namespace) -> int:
 
     print(f"DEM              {dem}: "
           f"{dem_datum(dem, args.dem_vertical, what='DEM', option='--dem-vertical').describe()}")
+    if args.block is not None:
+        return _run_block(args, dem)
     from flows.simulate_scene import SimulationParams, simulate_scene
 
     summary = simulate_scene(SimulationParams(
@@ -87,4 +110,19 @@ def run(args: argparse.Namespace) -> int:
         from tasks.simulate.sar import sar_summary
 
         print("\n".join(sar_summary(args.out).lines()))
+    return 0
+
+
+def _run_block(args: argparse.Namespace, dem: Path) -> int:
+    from core.simulation.block import BlockLayout
+    from flows.simulate_scene import BlockParams, simulate_block
+
+    layout = BlockLayout.parse(args.block, args.dates)
+    summary = simulate_block(BlockParams(
+        out=args.out, layout=layout, dem=dem, preset=args.preset, seed=args.seed,
+        lens=args.lens, jitter=args.jitter, date_change=args.date_change,
+        relief_factor=args.relief_factor, bits=args.bits,
+        center=tuple(args.center) if args.center else None, dem_vertical=args.dem_vertical,
+        errors=args.errors, flat_scene=args.flat_scene))
+    print("\n".join(summary.lines()))
     return 0

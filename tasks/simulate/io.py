@@ -142,6 +142,16 @@ def read_dem_window(path: Path, window: BBox | None, datum: str = "egm96"
     return H, tuple(tr)[:6], box
 
 
+def products_exist(*paths: Path) -> bool:
+    """Products of an earlier run of the same scene (written atomically, so complete)."""
+    return all(p.exists() for p in paths)
+
+
+def surface_spec(scene: SceneDef) -> SurfaceSpec:
+    """The truth-surface definition of ``scene`` (:func:`load_surface_spec`)."""
+    return load_surface_spec(scene.to_json())
+
+
 _SPEC_LOCK = threading.Lock()
 
 

@@ -1,4 +1,5 @@
-"""Tasks of the scene simulator: scene, truth surface, radiance, rendering, check points, lidar.
+"""Tasks of the scene simulator: scene, truth surface, radiance, rendering, check points (the
+reference and the lidar, its surveys, are :mod:`tasks.simulate.survey`'s, named here too).
 
 Every raster is computed block by block with Dask from the deterministic functions of
 :mod:`core.simulation` (no full-scene array), written as COG through a temporary file.
@@ -9,22 +10,19 @@ reading of the DEM the world stands on are in :mod:`tasks.simulate.io`.
 
 from __future__ import annotations
 
-from concurrent.futures import ThreadPoolExecutor
-from dataclasses import asdict, dataclass, replace
-from datetime import date
+from dataclasses import dataclass, replace
 from functools import lru_cache, partial
 from pathlib import Path
 
 import dask.array as darr
 import laspy
 import numpy as np
-import pyproj
 import rasterio
 from prefect import task
 from rasterio.rpc import RPC
 
 from core.errors import InputError, InsufficientDataError
-from core.geodesy import ARCSEC, metres_per_degree, utm_epsg
+from core.geodesy import utm_epsg
 from core.jsonio import parse_json
 from core.points import CheckPointSet, GeoPoint
 from core.sensors.pushbroom import PushbroomModel
@@ -33,10 +31,8 @@ from core.sensors.spot import spot_scene_from_model
 from core.simulation.checkpoints import select_checkpoints
 from core.simulation.hashing import derive_seed
 from core.simulation.landcover import LandCover
-from core.simulation.lidar import lidar_extent, lidar_tile
 from core.simulation.raycast import ray_levels
 from core.simulation.realistic import metadata_scene
-from core.simulation.reference import ReferenceErrors, radar_voids, seen_surface, srtm_like
 from core.simulation.render import ground_radiance, render_dn
 from core.simulation.scene import (
     PRESETS,
@@ -49,7 +45,7 @@ from core.simulation.scene import (
     scene_models,
     terrain_levels,
 )
-from core.simulation.surface import SurfaceSpec, sample_surface, slope_deg
+from core.simulation.surface import sample_surface
 from tasks.io.crs import Projection
 from tasks.io.dem import dem_datum
 from tasks.io.dimap import write_dimap
@@ -65,19 +61,16 @@ from tasks.io.rasters import (
     read_window,
     write_arrays_cog,
 )
-from tasks.scheduling import schedule
-from tasks.simulate.io import ScenePaths, check_dem, load_surface_spec, read_dem_window
+from tasks.simulate.io import (
+    ScenePaths,
+    check_dem,
+    products_exist,
+    read_dem_window,
+    surface_spec,
+)
+from tasks.simulate.survey import lidar_bounds, make_lidar, make_reference  # noqa: F401
 
 NOISE_DN = {8: 1.0, 12: 6.0}
-
-
-def _exist(*paths: Path) -> bool:
-    """Products of an earlier run of the same scene (written atomically, so complete)."""
-    return all(p.exists() for p in paths)
-
-
-def _spec(scene: SceneDef) -> SurfaceSpec:
-    return load_surface_spec(scene.to_json())
 
 
 @lru_cache(maxsize=8)
@@ -86,6 +79,45 @@ def _model(text: str) -> PushbroomModel:
 
 
 # ---------------------------------------------------------------------------- A. scene
+
+
+def check_world_options(preset_name: str, relief_factor: float, date_change: float,
+                        bits: int) -> None:
+    """InputError, in one line, on a preset or a world setting the simulator cannot make."""
+    if preset_name not in PRESETS:
+        raise InputError(f"unknown preset {preset_name!r}; choose one of {sorted(PRESETS)}")
+    if not 0 < relief_factor <= 10:
+        raise InputError(f"--relief-factor must be in (0, 10], got {relief_factor}")
+    if not 0 <= date_change <= 1:
+        raise InputError(f"--date-change must be a fraction in [0, 1], got {date_change}")
+    if bits not in (8, 12):
+        raise InputError(f"--bits must be 8 or 12, got {bits}")
+
+
+def world_centre(dem: Path, centre_lonlat: tuple[float, float] | None) -> tuple[float, float]:
+    """The centre asked for, else the DEM's (which is checked first)."""
+    check_dem(dem)
+    if centre_lonlat is None:
+        with rasterio.open(dem) as src:
+            b = src.bounds
+        centre_lonlat = (0.5 * (b.left + b.right), 0.5 * (b.bottom + b.top))
+    return float(centre_lonlat[0]), float(centre_lonlat[1])
+
+
+def earlier_scene(paths: ScenePaths, scene: SceneDef) -> SceneDef | None:
+    """The scene an earlier run wrote in ``paths`` when it is ``scene`` (resume), None when
+    there is none; InputError when it is another one."""
+    if not paths.scene_json.exists():
+        return None
+    try:
+        old = SceneDef.from_json(paths.scene_json.read_text())
+    except InputError as exc:
+        raise InputError(f"{paths.scene_json} is unreadable ({exc}); remove {paths.root} "
+                         "or choose another --out") from exc
+    if replace(old, dsm_range_m=None).to_json() == scene.to_json():
+        return old
+    raise InputError(f"{paths.root} already holds a different simulated scene; choose another "
+                     "--out or remove that folder")
 
 
 @task(name="define-scene")
@@ -97,24 +129,12 @@ def define_scene(
     """Choose the scene, build truth and delivered models, save them with scene.json; the
     DEM's heights are read in the datum the one rule gives (:func:`tasks.io.dem.dem_datum`,
     ``dem_vertical`` as ``--dem-vertical``)."""
-    if preset_name not in PRESETS:
-        raise InputError(f"unknown preset {preset_name!r}; choose one of {sorted(PRESETS)}")
-    if not 0 < relief_factor <= 10:
-        raise InputError(f"--relief-factor must be in (0, 10], got {relief_factor}")
-    if not 0 <= date_change <= 1:
-        raise InputError(f"--date-change must be a fraction in [0, 1], got {date_change}")
-    if bits not in (8, 12):
-        raise InputError(f"--bits must be 8 or 12, got {bits}")
+    check_world_options(preset_name, relief_factor, date_change, bits)
     preset = PRESETS[preset_name]
     paths = ScenePaths(Path(out))
     dem = Path(dem)
-    check_dem(dem)
+    clon, clat = world_centre(dem, centre_lonlat)
     datum = dem_datum(dem, dem_vertical, what="DEM", option="--dem-vertical")
-    if centre_lonlat is None:
-        with rasterio.open(dem) as src:
-            b = src.bounds
-        centre_lonlat = (0.5 * (b.left + b.right), 0.5 * (b.bottom + b.top))
-    clon, clat = map(float, centre_lonlat)
     H, tr, window = read_dem_window(dem, dem_window(preset, clon, clat), datum.datum)
     levels = terrain_levels(H, tr, load_geoid(), clon, clat, relief_factor)
     centre = GeoPoint(clon, clat, levels.h_centre_m)
@@ -132,18 +152,9 @@ def define_scene(
         image_names=tuple(models), injected={n: m.injected for n, m in models.items()},
         dem_vertical=datum.datum, dem_vertical_source=datum.source,
     )
-    if paths.scene_json.exists():
-        try:
-            old = SceneDef.from_json(paths.scene_json.read_text())
-        except InputError as exc:
-            raise InputError(f"{paths.scene_json} is unreadable ({exc}); remove {paths.root} "
-                             "or choose another --out") from exc
-        if replace(old, dsm_range_m=None).to_json() == scene.to_json():
-            return old  # same scene: resume, keep the products already made
-        raise InputError(
-            f"{paths.root} already holds a different simulated scene; choose another --out "
-            "or remove that folder"
-        )
+    old = earlier_scene(paths, scene)
+    if old is not None:
+        return old  # same scene: resume, keep the products already made
     paths.truth.mkdir(parents=True, exist_ok=True)
     for n, m in models.items():
         atomic_write_text(paths.truth_model(n), m.truth.to_json(indent=1))
@@ -159,7 +170,7 @@ def write_spot_metadata(scene: SceneDef, out: Path) -> tuple[Path, ...]:
     paths = ScenePaths(Path(out))
     preset = scene.preset_spec
     for i, (name, spec) in enumerate(zip(scene.image_names, preset.images, strict=True)):
-        if _exist(paths.dimap(name)):
+        if products_exist(paths.dimap(name)):
             continue
         delivered = PushbroomModel.from_json(paths.delivered(name).read_text())
         # realistic: the speeds stated as the satellite quantised them (the delivered model was
@@ -181,7 +192,7 @@ def truth_block(block: np.ndarray, scene: SceneDef, block_info: dict | None = No
     """(3, h, w) float32: DTM, DSM, land cover of one block of the truth grid."""
     (r0, r1), (c0, c1) = block_info[0]["array-location"][-2:]
     xx, yy = scene.grid.cell_centres(r0, r1, c0, c1)
-    s = sample_surface(_spec(scene), xx, yy, Projection(scene.epsg).to_lonlat)
+    s = sample_surface(surface_spec(scene), xx, yy, Projection(scene.epsg).to_lonlat)
     return np.stack([s.dtm_m, s.dsm_m, s.classes.astype(np.float64)]).astype(np.float32)
 
 
@@ -193,9 +204,9 @@ def _georef(scene: SceneDef, **kw: object) -> CogOptions:
 def build_truth_surface(scene: SceneDef, out: Path) -> SceneDef:
     """Write the truth DTM, DSM (ellipsoidal, COG) and land cover; record the DSM range."""
     paths = ScenePaths(Path(out))
-    if scene.dsm_range_m is not None and _exist(paths.dtm, paths.dsm, paths.landcover):
+    if scene.dsm_range_m is not None and products_exist(paths.dtm, paths.dsm, paths.landcover):
         return scene
-    _spec(scene)  # read the DEM once here, before the Dask threads need it
+    surface_spec(scene)  # read the DEM once here, before the Dask threads need it
     base = darr.zeros(scene.grid.shape, chunks=CHUNK, dtype=np.float32)
     stack = darr.map_blocks(truth_block, base, scene=scene, new_axis=0,
                             chunks=((3,),) + base.chunks, dtype=np.float32)
@@ -245,7 +256,25 @@ def _read_halo(path: str, r0: int, r1: int, c0: int, c1: int, nan_masked: bool,
     return part[np.ix_(rows - rows[0], cols - cols[0])]
 
 
-def radiance_block(block: np.ndarray, scene: SceneDef, image_index: int, dsm_path: str,
+@dataclass(frozen=True)
+class DateLight:
+    """The sun of one date and how much of the ground has changed since the first date
+    (``change``), in the pattern ``change_seed`` draws."""
+
+    sun_azimuth_deg: float
+    sun_elevation_deg: float
+    change: float
+    change_seed: int
+
+
+def date_light(scene: SceneDef, image_index: int) -> DateLight:
+    """A pair's date: its image's sun; the second date changed by ``scene.date_change``."""
+    sun = scene.preset_spec.images[image_index]
+    return DateLight(sun.sun_azimuth_deg, sun.sun_elevation_deg,
+                     scene.date_change if image_index == 1 else 0.0, scene.seed)
+
+
+def radiance_block(block: np.ndarray, scene: SceneDef, light: DateLight, dsm_path: str,
                    landcover_path: str, block_info: dict | None = None) -> np.ndarray:
     """Ground radiance of one block of the truth grid: its DSM and land cover read from the
     truth rasters with a one-cell halo (the slopes at its edge), at the grid's own cells."""
@@ -254,43 +283,51 @@ def radiance_block(block: np.ndarray, scene: SceneDef, image_index: int, dsm_pat
     dsm = _read_halo(dsm_path, r0, r1, c0, c1, nan_masked=True)
     classes = _read_halo(landcover_path, r0, r1, c0, c1, nan_masked=False)
     xx, yy = scene.grid.cell_centres(r0 - h, r1 + h, c0 - h, c1 + h)
-    sun = scene.preset_spec.images[image_index]
-    change = scene.date_change if image_index == 1 else 0.0  # the second date changed
-    rad = ground_radiance(xx, yy, classes, dsm, scene.grid.res_m, sun.sun_azimuth_deg,
-                          sun.sun_elevation_deg, scene.seed, change)
+    rad = ground_radiance(xx, yy, classes, dsm, scene.grid.res_m, light.sun_azimuth_deg,
+                          light.sun_elevation_deg, scene.seed, light.change,
+                          change_seed=light.change_seed)
     return rad[h:-h, h:-h].astype(np.float32)
 
 
-def radiance(scene: SceneDef, image_index: int, dsm_path: Path, landcover_path: Path,
+def radiance(scene: SceneDef, date: int | DateLight, dsm_path: Path, landcover_path: Path,
              chunks: int | tuple[int, int] | None = None) -> darr.Array:
-    """The ground radiance of one date over the truth grid (the DSM raster's shape), a Dask
-    array of ``chunks`` (default :data:`CHUNK`) whose blocks each read their own cells (no
-    block waits for another: memory holds the blocks in flight, whatever the scene's size)."""
+    """The ground radiance of one date (a pair's image index, or its light) over the truth
+    grid (the DSM raster's shape), a Dask array of ``chunks`` (default :data:`CHUNK`) whose
+    blocks each read their own cells (no block waits for another: memory holds the blocks in
+    flight, whatever the scene's size)."""
+    light = date if isinstance(date, DateLight) else date_light(scene, date)
     with open_raster(dsm_path, "truth DSM") as src:
         shape = (src.height, src.width)
     base = darr.zeros(shape, chunks=chunks or CHUNK, dtype=np.float32)
-    return darr.map_blocks(radiance_block, base, scene=scene, image_index=image_index,
+    return darr.map_blocks(radiance_block, base, scene=scene, light=light,
                            dsm_path=str(dsm_path), landcover_path=str(landcover_path),
                            dtype=np.float32)
 
 
+def write_radiance(scene: SceneDef, paths: ScenePaths, date: int | DateLight,
+                   target: Path) -> Path:
+    """The ground radiance of one date on the truth grid, written to ``target`` (COG, kept
+    for reruns)."""
+    if products_exist(target):
+        return target
+    rad = radiance(scene, date, paths.dsm, paths.landcover)
+    with rasterio.Env(GDAL_CACHEMAX=SIM_CACHE_MB):
+        write_arrays_cog([CogItem(rad, target, _georef(scene, nodata=np.nan))])
+    return target
+
+
 @task(name="radiance")
 def build_radiance(scene: SceneDef, out: Path, image_index: int) -> Path:
-    """The ground radiance of one date on the truth grid (COG, kept for reruns)."""
+    """The ground radiance of one date of a pair on the truth grid (COG, kept for reruns)."""
     paths = ScenePaths(Path(out))
-    name = scene.image_names[image_index]
-    if _exist(paths.radiance(name)):
-        return paths.radiance(name)
-    rad = radiance(scene, image_index, paths.dsm, paths.landcover)
-    with rasterio.Env(GDAL_CACHEMAX=SIM_CACHE_MB):
-        write_arrays_cog([CogItem(rad, paths.radiance(name), _georef(scene, nodata=np.nan))])
-    return paths.radiance(name)
+    return write_radiance(scene, paths, image_index,
+                          paths.radiance(scene.image_names[image_index]))
 
 
 # ---------------------------------------------------------------------------- D. rendering
 
 
-def render_block(block: np.ndarray, scene: SceneDef, model_json: str, image_index: int,
+def render_block(block: np.ndarray, scene: SceneDef, model_json: str, noise_seed: int,
                  dsm_path: str, radiance_path: str, block_info: dict | None = None) -> np.ndarray:
     """DN of one image block (:func:`core.simulation.render.render_dn`)."""
     (r0, r1), (c0, c1) = block_info[0]["array-location"]
@@ -298,16 +335,15 @@ def render_block(block: np.ndarray, scene: SceneDef, model_json: str, image_inde
         _model(model_json), np.arange(r0, r1), np.arange(c0, c1), ray_levels(scene.dsm_range_m),
         Projection(scene.epsg).to_xy, partial(read_surface_window, dsm_path),
         partial(read_surface_window, radiance_path), NOISE_DN[scene.bits], scene.bits,
-        derive_seed(scene.seed, "sensor-noise", image_index),
+        noise_seed,
     )
 
 
-@task(name="render-image")
-def render_image(scene: SceneDef, out: Path, image_index: int) -> Path:
-    """Render one image tile by tile and write it with the RPC of its delivered metadata."""
-    paths = ScenePaths(Path(out))
-    name = scene.image_names[image_index]
-    if _exist(paths.image(name)):
+def render_to(scene: SceneDef, paths: ScenePaths, name: str, radiance_path: Path,
+              noise_seed: int) -> Path:
+    """Render image ``name`` (its truth model, its date's radiance) tile by tile and write it
+    with the RPC of its delivered metadata, where ``paths`` put them."""
+    if products_exist(paths.image(name)):
         return paths.image(name)
     truth_json = paths.truth_model(name).read_text()
     delivered = PushbroomModel.from_json(paths.delivered(name).read_text())
@@ -315,8 +351,8 @@ def render_image(scene: SceneDef, out: Path, image_index: int) -> Path:
     dtype = np.uint8 if scene.bits == 8 else np.uint16
     base = darr.zeros((truth.n_rows, truth.n_cols), chunks=CHUNK, dtype=dtype)
     img = darr.map_blocks(
-        render_block, base, scene=scene, model_json=truth_json, image_index=image_index,
-        dsm_path=str(paths.dsm), radiance_path=str(paths.radiance(name)), dtype=dtype,
+        render_block, base, scene=scene, model_json=truth_json, noise_seed=noise_seed,
+        dsm_path=str(paths.dsm), radiance_path=str(radiance_path), dtype=dtype,
     )
     lo, hi = scene.dsm_range_m
     rpc, report = fit_rpc(delivered, truth.n_cols, truth.n_rows, (lo - 100.0, hi + 100.0))
@@ -328,6 +364,16 @@ def render_image(scene: SceneDef, out: Path, image_index: int) -> Path:
     return paths.image(name)
 
 
+@task(name="render-image")
+def render_image(scene: SceneDef, out: Path, image_index: int) -> Path:
+    """Render one image of a pair tile by tile and write it with the RPC of its delivered
+    metadata."""
+    paths = ScenePaths(Path(out))
+    name = scene.image_names[image_index]
+    return render_to(scene, paths, name, paths.radiance(name),
+                     derive_seed(scene.seed, "sensor-noise", image_index))
+
+
 # ---------------------------------------------------------------------------- E. check points
 
 
@@ -335,13 +381,13 @@ def render_image(scene: SceneDef, out: Path, image_index: int) -> Path:
 def make_checkpoints(scene: SceneDef, out: Path, n_wanted: int = 100) -> Path:
     """Independent check points on bare soil, visible in both images, with true image coords."""
     paths = ScenePaths(Path(out))
-    if _exist(paths.checkpoints):
+    if products_exist(paths.checkpoints):
         return paths.checkpoints
     models = {
         n: PushbroomModel.from_json(paths.truth_model(n).read_text()) for n in scene.image_names}
     proj = Projection(scene.epsg)
     points = select_checkpoints(
-        _spec(scene), models, scene.grid, np.random.default_rng(derive_seed(scene.seed,
+        surface_spec(scene), models, scene.grid, np.random.default_rng(derive_seed(scene.seed,
                                                                             "checkpoints")),
         proj.to_lonlat, proj.to_xy, partial(read_surface_window, paths.dsm),
         ray_levels(scene.dsm_range_m), n_wanted=n_wanted,
@@ -354,109 +400,6 @@ def make_checkpoints(scene: SceneDef, out: Path, n_wanted: int = 100) -> Path:
     doc = CheckPointSet(f"EPSG:{scene.epsg}", scene.image_names, tuple(points))
     atomic_write_json(paths.checkpoints, doc.to_dict())
     return paths.checkpoints
-
-
-# ---------------------------------------------------------------------------- G. reference
-
-
-@task(name="srtm-like-reference")
-def make_reference(scene: SceneDef, out: Path, errors: ReferenceErrors | None = None) -> Path:
-    """``DIR/reference.tif``: the world as SRTM would show it (3" posting, correlated noise,
-    misregistration, voids; ellipsoidal heights, EPSG:4326), the reference the chain should be
-    tested against: the bare terrain with voids on steep slopes, or with ``--errors realistic``
-    partial canopy, noise growing with slope, radar shadow and layover voids and a tilt
-    (:mod:`core.simulation.reference`); the errors drawn go to
-    ``truth/reference_errors.json``."""
-    paths = ScenePaths(Path(out))
-    target = paths.root / "reference.tif"
-    if _exist(target):
-        return target
-    proj = Projection(scene.epsg)
-    if errors is None and scene.errors.realistic:
-        cx, cy = proj.to_xy(np.array([scene.centre.lon_deg]), np.array([scene.centre.lat_deg]))
-        x0, _, x1, _ = scene.grid.bounds_m()
-        errors = ReferenceErrors.drawn_realistic(derive_seed(scene.seed, "reference"),
-                                                 (float(cx[0]), float(cy[0])), x1 - x0)
-    errors = errors or ReferenceErrors.drawn(derive_seed(scene.seed, "reference"))
-    d = 3.0 * ARCSEC
-    w = scene.dem_window
-    lons = np.arange(np.ceil(w.lon_min / d), np.floor(w.lon_max / d) + 1) * d
-    lats = np.arange(np.floor(w.lat_max / d), np.ceil(w.lat_min / d) - 1, -1) * d
-    lon, lat = np.meshgrid(lons, lats)
-    m_lon, m_lat = metres_per_degree(lat)
-    seen_lon = lon - errors.shift_east_m / m_lon  # the node shows the terrain moved
-    seen_lat = lat - errors.shift_north_m / m_lat
-    x, y = proj.to_xy(seen_lon.ravel(), seen_lat.ravel())
-    spec = _spec(scene)
-    s = sample_surface(spec, x, y, proj.to_lonlat)
-    seed = derive_seed(scene.seed, "reference")
-    seen = seen_surface(s.dtm_m, s.dsm_m, x, y, seed, errors)
-    h = srtm_like(seen, x, y, slope_deg(spec, seen_lon.ravel(), seen_lat.ravel()),
-                  seed, errors).reshape(lon.shape)
-    mid = lon.shape[0] // 2
-    voids = radar_voids(s.dtm_m.reshape(lon.shape), d * float(m_lon[mid, 0]),
-                        d * float(m_lat[mid, 0]), errors)
-    h[voids] = np.nan
-    tags = {"vertical_datum": "WGS84 ellipsoid", "units": "m",
-            "source": "SRTM-like reference of the simulated world (gcpfree simulate)"}
-    write_arrays_cog([CogItem(h.astype(np.float32), target, CogOptions(
-        transform=(d, 0.0, lons[0] - d / 2, 0.0, -d, lats[0] + d / 2), crs="EPSG:4326",
-        nodata=np.nan, tags=tags))])
-    atomic_write_json(paths.truth / "reference_errors.json", asdict(errors))
-    return target
-
-
-# ---------------------------------------------------------------------------- F. lidar
-
-
-def lidar_bounds(scene: SceneDef) -> tuple[float, float, float, float]:
-    """The lidar strip (x_min, y_min, x_max, y_max) in the truth grid's CRS."""
-    cx, cy = Projection(scene.epsg).to_xy(np.array([scene.centre.lon_deg]),
-                                          np.array([scene.centre.lat_deg]))
-    return lidar_extent(scene.grid.bounds_m(), float(cx[0]), float(cy[0]),
-                        scene.preset_spec.lidar_strip_m)
-
-
-@task(name="lidar")
-def make_lidar(scene: SceneDef, out: Path, tile_m: float = 1000.0) -> Path:
-    """Truth lidar as LAZ (LAS 1.4), tile by tile: heights EGM96 orthometric, LAS classes."""
-    paths = ScenePaths(Path(out))
-    if _exist(paths.lidar):
-        return paths.lidar
-    spec = _spec(scene)
-    xmin, ymin, xmax, ymax = lidar_bounds(scene)
-    crs = pyproj.CRS.from_user_input(f"EPSG:{scene.epsg}+5773")  # UTM + EGM96 height
-    header = laspy.LasHeader(point_format=6, version="1.4")
-    header.scales = np.array([0.001, 0.001, 0.001])
-    header.offsets = np.array([np.floor(xmin), np.floor(ymin), 0.0])
-    header.add_crs(crs)
-    header.creation_date = date.fromisoformat(scene.preset_spec.images[0].date)  # same bytes
-    header.system_identifier = "gcpfree simulate"
-    header.generating_software = "gcpfree"
-    tmp = paths.lidar.with_name(f".{paths.lidar.name}.tmp")
-    seed = derive_seed(scene.seed, "lidar")
-    boxes = [(tx, ty, min(tx + tile_m, xmax), min(ty + tile_m, ymax))
-             for ty in np.arange(ymin, ymax, tile_m) for tx in np.arange(xmin, xmax, tile_m)]
-    survey = partial(lidar_tile, spec, seed=seed, spacing_m=scene.preset_spec.lidar_spacing_m,
-                     to_lonlat=Projection(scene.epsg).to_lonlat)
-    workers = schedule(len(boxes)).workers
-    try:
-        # the temporary name ends in .tmp: say LAZ, or laspy writes an uncompressed LAS
-        with (laspy.open(tmp, mode="w", header=header, do_compress=True) as writer,
-              ThreadPoolExecutor(workers) as pool):
-            for g in range(0, len(boxes), 4 * workers):  # a few tiles in flight per thread
-                # tiles surveyed in threads, written in their order: the bytes of one thread
-                for t in pool.map(survey, boxes[g:g + 4 * workers]):
-                    if t is None:
-                        continue
-                    rec = laspy.ScaleAwarePointRecord.zeros(len(t.returns), header=header)
-                    rec.x, rec.y, rec.z = t.returns.x_m, t.returns.y_m, t.z_orthometric_m
-                    rec.classification = t.returns.las_class
-                    writer.write_points(rec)
-        tmp.replace(paths.lidar)
-    finally:
-        tmp.unlink(missing_ok=True)
-    return paths.lidar
 
 
 @dataclass(frozen=True)
