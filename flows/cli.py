@@ -13,6 +13,7 @@ from collections.abc import Sequence
 
 from flows._env import configure_environment, one_line_errors
 from flows.commands import archive as archive_command
+from flows.commands import block as block_command
 from flows.commands import coregister as coregister_command
 from flows.commands import dsm as dsm_command
 from flows.commands import evaluate as evaluate_command
@@ -52,7 +53,7 @@ COMMAND_MODULES = {"prepare-reference": prepare_reference_command,
                    "project": project_command, "localize": localize_command,
                    "relative": relative_command, "evaluate": evaluate_command,
                    "coregister": coregister_command, "dsm": dsm_command,
-                   "orient": orient_command, "pair": pair_command,
+                   "orient": orient_command, "pair": pair_command, "block": block_command,
                    "report": report_command, "ortho": ortho_command,
                    "ortho-compare": ortho_compare_command, "fill-voids": fill_voids_command,
                    "scenes": scenes_command, "archive": archive_command,

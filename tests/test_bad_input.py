@@ -688,6 +688,12 @@ CLI_CASES = [
                              "{out}/a"], "tcp://HOST:PORT"),
     ("serve-missing-catalog", ["serve", "--catalog", "{missing}", "--srtm-dir",
                                str(HGT.parent), "--out", "{out}/a"], "does not exist"),
+    ("block-missing-catalog", ["block", "--catalog", "{missing}", "--srtm-dir",
+                               str(HGT.parent), "--out", "{out}/b"], "does not exist"),
+    ("block-no-reference", ["block", "--catalog", "{catalog}", "--out", "{out}/b"],
+     "needs a reference DEM"),
+    ("block-no-blocks", ["block", "--catalog", "{catalog}", "--srtm-dir", str(HGT.parent),
+                         "--out", "{out}/b"], "lists no blocks"),
     ("report-not-a-folder", ["report", "{missing}"], "is not a folder"),
     ("report-no-products", ["report", "{dir}/empty"], "holds no gcpfree orient products"),
 ]

@@ -76,7 +76,7 @@ def _checkpoints_csv(path: Path) -> CheckPointSet:
     return CheckPointSet("EPSG:4326", NAMES, tuple(points))
 
 
-def read_checkpoints(path: str | Path) -> CheckPointSet:
+def read_checkpoints(path: str | Path, images: tuple[str, ...] = NAMES) -> CheckPointSet:
     """Check points from the simulator's ``truth/checkpoints.json`` or a CSV
     ``id,lon_deg,lat_deg,h_m,left_col,left_row,right_col,right_row`` (heights WGS84
     ellipsoidal, image coordinates 0-based with pixel centres at integers)."""
@@ -98,10 +98,10 @@ def read_checkpoints(path: str | Path) -> CheckPointSet:
     if bad:
         raise InputError(f"check point file {path}: point {bad[0]} has a coordinate that is not a "
                          "finite number")
-    missing = [n for n in NAMES if n not in points.images]
-    if missing or not points.points:
+    missing = [n for n in images if n not in points.images]
+    if (missing if images == NAMES else len(missing) == len(images)) or not points.points:
         raise InputError(f"check point file {path} has no points measured in images "
-                         f"{', '.join(missing) or 'left, right'}")
+                         f"{', '.join(missing) or ', '.join(images)}")
     return points
 
 
@@ -167,15 +167,18 @@ def tie_observations(ties: TieGround | None, config: AbsoluteConfig
 @task(name="absolute-orientation", cache_policy=NO_CACHE)
 def orient_absolute(images: Sequence[tuple[str, LoadedModel]], control: Sequence[ControlSet],
                     out_dir: Path, config: AdjustConfig | None = None,
-                    ties: TieGround | None = None) -> AbsoluteProducts:
-    """Every image (name, model) adjusted to the control sets and the tie points in one
-    solution (:func:`core.orientation.adjust.adjust`), written as ``out_dir/NAME.json``
-    (gcpfree model files, with the sun the metadata stated: what later chooses the tie
-    points' measure)."""
+                    ties: TieGround | TieObservations | None = None) -> AbsoluteProducts:
+    """Every image (name, model) adjusted to the control sets and the tie points (a pair's, or
+    a block's tracks) in one solution (:func:`core.orientation.adjust.adjust`), written as
+    ``out_dir/NAME.json`` (gcpfree model files, with the sun the metadata stated: what later
+    chooses the tie points' measure)."""
     config = config or AdjustConfig()
+    tie_obs = ties if isinstance(ties, TieObservations) else \
+        tie_observations(ties, config.absolute)
     solution = adjust([ImageToAdjust(n, m.model, m.size) for n, m in images], control,
-                      tie_observations(ties, config.absolute), config)
+                      tie_obs, config)
     paths = []
+    Path(out_dir).mkdir(parents=True, exist_ok=True)
     for (name, given), model in zip(images, solution.models, strict=True):
         paths.append(atomic_write_json(Path(out_dir) / f"{name}.json",
                                        model_document(model, given.sun)))

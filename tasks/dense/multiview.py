@@ -157,13 +157,17 @@ def _histograms(z_pairs: darr.Array) -> list[Any]:
 
 @task(name="grid-views-dem", cache_policy=NO_CACHE)
 def grid_views_cog(pairs: list[MatchedViewPair], images: tuple[str, ...], out: Path,
-                   cfg: DenseConfig, fusion: FusionConfig, keep_work: bool = False) -> ViewsDemSummary:
+                   cfg: DenseConfig, fusion: FusionConfig, keep_work: bool = False,
+                   extent: str = "first") -> ViewsDemSummary:
     """Fuse the pairs' points into ``out``, ``<out>_mask.tif`` and ``<out>_views.tif``, write
-    ``<out>.json`` (module docstring); remove the work folders unless ``keep_work``."""
+    ``<out>.json`` (module docstring); remove the work folders unless ``keep_work``.
+    ``extent``: the grid spans the first image's pairs (``first``) or every pair's (``all``,
+    a block)."""
     out = Path(out)
     first = pairs[0].plan
-    with_first = [s for p in pairs if 0 in p.images for s in p.stats] or \
-        [s for p in pairs for s in p.stats]
+    with_first = [s for p in pairs if 0 in p.images for s in p.stats] if extent == "first" \
+        else []
+    with_first = with_first or [s for p in pairs for s in p.stats]
     spec = grid_spec(first, tuple(with_first))
     n = len(pairs)
     base = darr.zeros(spec.shape, chunks=CHUNK, dtype=np.float32)
