@@ -513,6 +513,7 @@ def bad(tmp_path_factory: pytest.TempPathFactory) -> dict[str, Path]:
         "far": _raster(d / "far_dem.tif", "EPSG:4326", 10.0, 10.2, 0.01),  # not over Ventoux
         "laz": d / "garbage.laz", "json": d / "bad.json", "csv": d / "bad.csv",
         "csv_nan": d / "nan.csv", "cp_list": d / "list.json", "catalog": d / "catalog.csv",
+        "typo_catalog": d / "typo.csv",
     }
     files["out"].mkdir()
     (d / "empty").mkdir()
@@ -521,6 +522,9 @@ def bad(tmp_path_factory: pytest.TempPathFactory) -> dict[str, Path]:
         dst.update_tags(vertical_datum="")  # says nothing of its datum
     files["catalog"].write_text(f"id,left,right\nv,{VENTOUX / 'left_image.tif'},"
                                 f"{VENTOUX / 'right_image.tif'}\n")
+    files["typo_catalog"].write_text(  # an option's name misspelt
+        f"id,left,right,self_calibration\nv,{VENTOUX / 'left_image.tif'},"
+        f"{VENTOUX / 'right_image.tif'},true\n")
     files["laz"].write_bytes(b"LASF" + bytes(range(256)) * 4)  # counts in the billions
     files["json"].write_text('{"crs": "EPSG:32631", "points": [1, 2')
     files["csv"].write_text("id,lon_deg,lat_deg\n1,5.2,44.2\n")
@@ -688,6 +692,15 @@ CLI_CASES = [
                              "{out}/a"], "tcp://HOST:PORT"),
     ("serve-missing-catalog", ["serve", "--catalog", "{missing}", "--srtm-dir",
                                str(HGT.parent), "--out", "{out}/a"], "does not exist"),
+    ("archive-negative-radius", ["archive", "--catalog", "{catalog}", "--srtm-dir",
+                                 str(HGT.parent), "--window-radius", "-5", "--out", "{out}/a"],
+     "window radius > 0 m"),
+    ("archive-option-typo", ["archive", "--catalog", "{typo_catalog}", "--srtm-dir",
+                             str(HGT.parent), "--out", "{out}/a"],
+     "unknown column(s) self_calibration; did you mean self_calibrate?"),
+    ("serve-bad-option", ["serve", "--catalog", "{catalog}", "--srtm-dir", str(HGT.parent),
+                          "--min-windows", "0", "--out", "{out}/a"],
+     "--min-windows must be at least 1"),
     ("block-missing-catalog", ["block", "--catalog", "{missing}", "--srtm-dir",
                                str(HGT.parent), "--out", "{out}/b"], "does not exist"),
     ("block-no-reference", ["block", "--catalog", "{catalog}", "--out", "{out}/b"],

@@ -25,9 +25,10 @@ A catalog is one of:
 
 Reading a catalog checks its form only: a pair whose images are missing, or whose option has a
 value of another type, is that pair's failure (:func:`check_pair_inputs`), not the catalog's; a
-column no pair may have (neither a column nor an option) is the catalog's. The summary (``ROOT/summary.csv`` and
-``ROOT/summary.json``) lists every pair with its status, the reason of a failure and the figures
-its products give (GCP count, check-point and GCP residual RMS, LE68).
+column no pair may have (neither a column nor an option) is the catalog's. The summary
+(``ROOT/summary.csv`` and ``ROOT/summary.json``) lists every pair with its status, the reason
+of a failure and the figures its products give (GCP count, check-point and GCP residual RMS,
+LE68).
 """
 
 from __future__ import annotations
