@@ -5,6 +5,7 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
+from core.choices import DATUMS
 from flows.commands._pair import add_pair_arguments, add_reference_arguments, check_pair
 
 
@@ -45,7 +46,7 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--height-range", type=float, nargs=2, default=None, metavar=("MIN", "MAX"),
                    help="ellipsoidal height range of the scene when there is no reference "
                         "(default for RPCs: their height offset +- scale)")
-    p.add_argument("--vertical", choices=("ellipsoidal", "egm96"), default="ellipsoidal",
+    p.add_argument("--vertical", choices=DATUMS, default="ellipsoidal",
                    help="heights of the DSM: WGS84 ellipsoidal (default) or EGM96 orthometric")
     p.add_argument("--margin", type=float, default=50.0, metavar="M",
                    help="height uncertainty searched around the reference, metres (default 50)")

@@ -11,12 +11,11 @@ import argparse
 from pathlib import Path
 from typing import TYPE_CHECKING
 
+from core.choices import RESAMPLINGS
 from flows.commands._pair import VERTICAL_HELP, VERTICALS
 
 if TYPE_CHECKING:
     from tasks.ortho.orthorectify import OrthoOptions
-
-RESAMPLINGS = ("nearest", "bilinear", "cubic")  # core.ortho.RESAMPLINGS, without importing it
 
 
 def add_parser(sub: argparse._SubParsersAction) -> None:

@@ -6,7 +6,7 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
-from flows.commands._pair import GEOID_HELP
+from flows.commands._pair import GEOID_HELP, VERTICALS
 
 
 def add_parser(sub: argparse._SubParsersAction) -> None:
@@ -42,7 +42,7 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--allow-missing-tiles", action="store_true",
                    help="treat absent tiles (e.g. open sea) as voids instead of failing")
     p.add_argument("--geoid", type=Path, default=None, metavar="GRID", help=GEOID_HELP)
-    p.add_argument("--dem-vertical", choices=("auto", "ellipsoidal", "egm96"), default="auto",
+    p.add_argument("--dem-vertical", choices=VERTICALS, default="auto",
                    help="heights of tagged DEMs that do not say their datum (named tiles say "
                         "their own)")
     p.add_argument("--max-height-error", type=float, default=10.0, metavar="M",

@@ -5,6 +5,7 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
+from core.choices import CORRECTIONS
 from flows.commands._pair import add_pair_arguments, add_reference_arguments, check_pair
 
 
@@ -28,7 +29,7 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--height-range", type=float, nargs=2, metavar=("MIN", "MAX"), default=None,
                    help="ellipsoidal height range of the scene when there is no reference "
                         "(default for RPCs: their own height offset +- scale)")
-    p.add_argument("--corrections", choices=("offset", "linear"), default="linear",
+    p.add_argument("--corrections", choices=CORRECTIONS, default="linear",
                    help="linear (default): attitude biases and rates / an RPC affine; offset: "
                         "biases / an RPC shift only")
     p.add_argument("--cell-m", type=float, default=2000.0,
