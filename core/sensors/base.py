@@ -11,18 +11,20 @@ sensor family they hold.
 
 from __future__ import annotations
 
-from typing import Literal, Protocol, runtime_checkable
+from typing import Protocol, runtime_checkable
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
+from core.choices import CORRECTIONS, Corrections
 from core.dem import GeoDEM, first_crossing, march_levels
 from core.errors import GeometryError, InputError
 from core.geodesy import metres_per_degree
 
 FloatArray = NDArray[np.float64]
-CorrectionKind = Literal["offset", "linear"]
-CORRECTION_KINDS = ("offset", "linear")
+#: the correction families a model adds to itself (``with_corrections``), as core.choices names
+CorrectionKind = Corrections
+CORRECTION_KINDS = CORRECTIONS
 
 
 @runtime_checkable
