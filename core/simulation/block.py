@@ -94,6 +94,15 @@ class BlockLayout:
             raise InputError(f"--block must read RxC (rows x columns, e.g. 2x2), got {block!r}")
         return cls(int(m.group(1)), int(m.group(2)), int(dates), float(overlap))
 
+    def check_scene(self, scene: str, option: str = "--flat-scene") -> str:
+        """``scene`` (``r{row}c{col}``) when the block holds it, else InputError."""
+        m = re.fullmatch(r"r(\d+)c(\d+)", scene)
+        if m is None or int(m.group(1)) >= self.rows or int(m.group(2)) >= self.cols:
+            raise InputError(f"{option} must name a scene r<row>c<col> of the {self.rows}x"
+                             f"{self.cols} block (r0c0 .. r{self.rows - 1}c{self.cols - 1}), "
+                             f"got {scene!r}")
+        return scene
+
     def names(self) -> tuple[str, ...]:
         """Every image's name, date by date, column by column, row by row."""
         return tuple(image_name(r, c, d) for d in range(self.dates) for c in range(self.cols)
@@ -327,4 +336,5 @@ def flatten_region(H_m: np.ndarray, transform: tuple[float, ...],
     if not inside.any():
         raise InputError("the scene to flatten lies outside the DEM read; choose another scene")
     h_loc = float(np.nanmedian(H_m[inside]))
-    return h_loc + (1.0 - w * (1.0 - relief)) * (H_m - h_loc), h_loc
+    flat = h_loc + (1.0 - w * (1.0 - relief)) * (H_m - h_loc)
+    return np.where(w > 0, flat, H_m), h_loc  # the world's own heights beyond the taper

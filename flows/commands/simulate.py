@@ -1,13 +1,18 @@
 """``gcpfree simulate``: a SPOT-like stereo pair rendered with known truth over a real DEM,
-and with ``--sar ers|s1`` a SAR product of the same world (flow ``simulate-scene``,
-:mod:`flows.simulate_scene`)."""
+and with ``--sar ers|s1`` a SAR product of the same world (flow ``simulate-scene``), or with
+``--block RxC --dates K`` a block of R x C scenes over K dates of one world (flow
+``simulate-block``; both in :mod:`flows.simulate_scene`)."""
 
 from __future__ import annotations
 
 import argparse
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 from flows.commands._pair import VERTICAL_HELP, VERTICALS
+
+if TYPE_CHECKING:
+    from core.simulation.block import BlockLayout
 
 
 def add_parser(sub: argparse._SubParsersAction) -> None:
@@ -18,7 +23,8 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
             "Simulate a SPOT-like stereo pair over a DEM: truth DSM/DTM/land cover (COG), two "
             "8- or 12-bit images with the fitted RPC of their delivered metadata inside and the "
             "delivered pushbroom model (JSON) beside them, truth models, check points and lidar "
-            "(LAZ) under DIR/truth/. Same seed, same bytes; a rerun resumes."
+            "(LAZ) under DIR/truth/. With --block RxC --dates K: a block of scenes instead "
+            "(see --block). Same seed, same bytes; a rerun resumes."
         ),
     )
     p.add_argument("--dem", type=Path, default=None,
@@ -77,14 +83,9 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from core.errors import InputError
     from tasks.simulate.io import check_dem
 
-    if args.block is None and args.flat_scene is not None:
-        raise InputError("--flat-scene needs --block; add --block RxC")
-    if args.block is not None and args.sar:
-        raise InputError("--sar makes a pair's SAR product, not a block's; drop --sar or --block")
-
+    layout = _block_layout(args)
     dem = args.dem
     if dem is None:
         from flows.simulate_scene import BUNDLED_DEM
@@ -94,8 +95,8 @@ def run(args: argparse.Namespace) -> int:
 
     print(f"DEM              {dem}: "
           f"{dem_datum(dem, args.dem_vertical, what='DEM', option='--dem-vertical').describe()}")
-    if args.block is not None:
-        return _run_block(args, dem)
+    if layout is not None:
+        return _run_block(args, dem, layout)
     from flows.simulate_scene import SimulationParams, simulate_scene
 
     summary = simulate_scene(SimulationParams(
@@ -113,11 +114,27 @@ def run(args: argparse.Namespace) -> int:
     return 0
 
 
-def _run_block(args: argparse.Namespace, dem: Path) -> int:
+def _block_layout(args: argparse.Namespace) -> BlockLayout | None:
+    """The block asked for (None for a pair), its options checked."""
+    from core.errors import InputError
+
+    if args.block is None:
+        if args.flat_scene is not None:
+            raise InputError("--flat-scene needs --block; add --block RxC")
+        return None
+    if args.sar:
+        raise InputError("--sar makes a pair's SAR product, not a block's; drop --sar or --block")
     from core.simulation.block import BlockLayout
-    from flows.simulate_scene import BlockParams, simulate_block
 
     layout = BlockLayout.parse(args.block, args.dates)
+    if args.flat_scene is not None:
+        layout.check_scene(args.flat_scene)
+    return layout
+
+
+def _run_block(args: argparse.Namespace, dem: Path, layout: BlockLayout) -> int:
+    from flows.simulate_scene import BlockParams, simulate_block
+
     summary = simulate_block(BlockParams(
         out=args.out, layout=layout, dem=dem, preset=args.preset, seed=args.seed,
         lens=args.lens, jitter=args.jitter, date_change=args.date_change,

@@ -20,7 +20,7 @@ from pathlib import Path
 import numpy as np
 from prefect import task
 
-from core.errors import InputError, InsufficientDataError
+from core.errors import InsufficientDataError
 from core.geodesy import BBox, utm_epsg
 from core.jsonio import parse_json
 from core.points import CheckPointSet, GeoPoint
@@ -126,10 +126,7 @@ class BlockOptions:
     def __post_init__(self) -> None:
         check_world_options(self.preset, self.relief_factor, self.date_change, self.bits)
         if self.flat_scene is not None:
-            r, c, _ = parse_image_name(f"{self.flat_scene}d0")
-            if r >= self.layout.rows or c >= self.layout.cols:
-                raise InputError(f"--flat-scene {self.flat_scene} is not in a "
-                                 f"{self.layout.rows}x{self.layout.cols} block")
+            self.layout.check_scene(self.flat_scene)
 
 
 # ---------------------------------------------------------------------------- the world
