@@ -26,7 +26,7 @@ from core.geodesy import ARCSEC
 from core.matching.surface import SurfaceMatchConfig
 from core.orientation.absolute import AbsoluteConfig
 from core.orientation.adjust import AdjustConfig
-from tasks.absolute.report import OrientReport, read_report
+from tasks.absolute.report import REPORT, OrientReport
 from tasks.io.pair import PairInputs
 
 
@@ -176,14 +176,14 @@ def orient_flow(params: OrientParams) -> OrientOutcome:
     final = _final_dsm(matched, absolute.models, dense_cfg, out)
     report = _report(params, rel, dem, windows, verdict, control, absolute, datum, final, sar,
                      checkpoints)
-    path = report.write(out / "report.json")
+    path = REPORT.write(out / "report.json", report)
     if params.write_report:
         from tasks.report.build import write_report
 
         # report.html/.md and their figures; it adds its own "report" key to report.json
         write_report(out, reference=given.reference, checkpoints=params.checkpoints,
                      reference_vertical=given.reference_vertical, surface=params.surface)
-    outcome = OrientOutcome(path, read_report(path))
+    outcome = OrientOutcome(path, REPORT.read(path))
     _say(outcome.lines())
     return outcome
 

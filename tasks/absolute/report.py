@@ -1,6 +1,8 @@
-"""``report.json``, the record of ``gcpfree orient`` (steps 1-4), as a typed value: the one
-place its keys are written (:meth:`OrientReport.to_dict`) and read
-(:meth:`OrientReport.from_dict`, :func:`read_report`).
+"""``report.json``, the record of ``gcpfree orient`` (steps 1-4), as a typed value: its
+document :data:`REPORT` (:mod:`tasks.io.documents`: ``REPORT.write(path, report)``,
+``REPORT.read(path)``, :func:`read_report` for a file or the folder holding it) writes and
+reads the keys of :class:`OrientReport` and its sections
+(:mod:`tasks.absolute.report_sections`), NaN as null.
 
 Its keys (format ``gcpfree.orient``, version 1), as the README lists them:
 
@@ -12,7 +14,10 @@ Its keys (format ``gcpfree.orient``, version 1), as the README lists them:
 - ``gcps``: ``given``, ``used``, ``rejected``, ``rejected_ids`` (id, reason), ``file``;
 - ``absolute``: per image (``images``) the parameters before and after with their sigmas and
   the GCP residuals; ``sigma0``, ``n_gcps``, ``rejected``, ``n_iterations``, ``converged``,
-  ``corrections``, ``self_calibration`` (or null); since the true uncertainties (absent from
+  ``corrections``, ``self_calibration`` (or null); ``frames`` (absent from older reports):
+  each control frame's prior, estimated shift and sigma
+  (:class:`core.orientation.frames.FrameEstimate`: ``name``, ``prior_sigma_m``, ``shift_m``,
+  ``sigma_m``, ``observed``, ``source``, ``up_of``); since the true uncertainties (absent from
   older reports, read as None):
   ``variance_components`` (:meth:`core.orientation.uncertainty.VarianceComponents.to_dict`:
   per observation group, ``gcp_col`` and ``gcp_row`` or one ``gcp``, the ``factor`` that
@@ -28,11 +33,14 @@ Its keys (format ``gcpfree.orient``, version 1), as the README lists them:
   image at those heights, with their terms ``adjustment_rms_*`` (the parameters' covariance),
   ``reference_rms_*`` (the reference's registration), ``unmodelled_rms_*`` (the model's own
   error: the GCP residuals' covariance between nearest neighbours in the image, when
-  significant), ``noise_px`` (0), ``n`` points;
-- ``models``: the oriented model files; ``reference``: the DEM used and its vertical datum;
-  ``dsm``: the final DSM's files and summary;
+  significant), ``noise_px`` (0), ``n`` points, and (since the frames) its two parts
+  ``predicted_relative_rms_*`` and ``predicted_reference_rms_*``;
+- ``models``: the oriented model files; ``reference``: the DEM used and its vertical datum,
+  and ``registration_estimate`` where other control made the reference's own shift
+  observable (absent otherwise); ``dsm``: the final DSM's files and summary;
 - optional: ``sar`` (with ``--sar``; :meth:`tasks.absolute.sar_control.SarControl.summary`):
-  the SAR scene, its mission and assumed geolocation error, the SAR GCPs' ``role`` (with
+  the SAR scene, its mission and assumed geolocation error, the standard atmosphere's delay
+  taken out of its range (``troposphere_m``), its ``frame``, the SAR GCPs' ``role`` (with
   SRTM, or alone where the relief verdict refused SRTM), per image the templates, counts by
   status, GCPs, matching noise and the SAR GCPs' residuals after the adjustment (RMS and mean,
   px); the points themselves are in ``sar_points.json``;
@@ -43,33 +51,30 @@ Its keys (format ``gcpfree.orient``, version 1), as the README lists them:
 - optional: ``check_points`` and ``check_points_before`` (per image, the paper's Table 2;
   ``check_points.<image>`` also gives ``predicted_rms_col_px`` and ``predicted_rms_row_px``,
   the RMS the adjustment predicts at those check points, beside the measured ``rms_col_px``
-  and ``rms_row_px``: the covariance propagated through the model's partial derivatives at
+  and ``rms_row_px``, and its two parts ``predicted_relative_rms_*`` and
+  ``predicted_reference_rms_*`` (each absent when there is no prediction): the covariance propagated through the model's partial derivatives at
   each point, the reference's registration error through the ground's, and the model's own
   error the GCP residuals show; the check points' own measurement noise is taken as 0, the
   simulator's being exact), and
   ``report``, the run report's own record (format ``gcpfree.report``, written by
   :mod:`tasks.report.build`; kept whole).
 
-Pure dataclasses: no file is read or written here but by :func:`read_report` and
-:meth:`OrientReport.write`. A version newer than :data:`VERSION` is refused, never guessed.
+Pure dataclasses: no file is read or written here but through :data:`REPORT`. Another
+format, or a version other than :data:`VERSION` (a newer one), is refused, never guessed.
 The sections are typed in :mod:`tasks.absolute.report_sections` (importable from here).
 """
 
 from __future__ import annotations
 
 from collections.abc import Mapping
-from dataclasses import asdict, dataclass, field, fields, replace
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any
 
-from core.errors import InputError
-from core.jsonio import parse_json
 from core.matching.peaks import MEASURE_NAMES
 from core.orientation.checkpoints import CheckPointStats
 from tasks.absolute.report_sections import (  # noqa: F401 (the sections, importable from here)
-    NUMBER,
     Absolute,
-    Doc,
     FinalDsm,
     GcpSummary,
     ImageFit,
@@ -77,13 +82,11 @@ from tasks.absolute.report_sections import (  # noqa: F401 (the sections, import
     Models,
     ReferenceUsed,
     RejectedGcp,
-    Relief,
     SurfaceMatching,
-    _dem_summary,
-    _get,
-    _json,
+    of_core,
 )
 from tasks.dense.dem import DemSummary
+from tasks.io.documents import Document, layout
 
 FORMAT = "gcpfree.orient"
 VERSION = 1
@@ -92,20 +95,7 @@ FILE = "report.json"
 
 def check_points_of(report: Mapping[str, Any]) -> dict[str, CheckPointStats] | None:
     """:func:`tasks.absolute.orientation.check_point_report`'s table as typed values."""
-    return _check_points(_json(report), "check_points")
-
-
-def _check_points(d: Any, where: str) -> dict[str, CheckPointStats] | None:
-    if d is None:
-        return None
-    if not isinstance(d, Mapping):
-        raise InputError(f"'{where}' is not an object")
-
-    names = [f.name for f in fields(CheckPointStats)]
-    return {n: CheckPointStats(**{k: _get(s, k, f"{where}.{n}", str if k == "name" else
-                                          int if k == "n" else NUMBER) for k in names
-                                  if not k.startswith("predicted_") or k in s})
-            for n, s in d.items()}
+    return of_core(dict[str, CheckPointStats], report)
 
 
 # ---------------------------------------------------------------------------- the report
@@ -128,64 +118,11 @@ class OrientReport:
     report: Mapping[str, Any] | None = None
     sar: Mapping[str, Any] | None = None
     settings: Mapping[str, Any] | None = None
-    version: int = VERSION
 
     # keys given their own section in the run report (the others are listed as they are)
     SECTIONS = ("format", "version", "relative", "relative_dem", "surface_matching", "gcps",
                 "absolute", "check_points", "check_points_before")
     RUN_REPORT_KEY = "report"
-
-    def to_dict(self) -> dict[str, Any]:
-        d: dict[str, Any] = {
-            "format": FORMAT, "version": self.version, "relative": dict(self.relative),
-            "relative_dem": self.relative_dem.to_dict(),
-            "surface_matching": self.surface_matching.to_dict(),
-            "gcps": self.gcps.to_dict(), "absolute": self.absolute.to_dict(),
-            "models": asdict(self.models), "reference": self.reference.to_dict(),
-            "dsm": self.dsm.to_dict()}
-        for key in ("check_points", "check_points_before"):
-            stats = getattr(self, key)
-            if stats is not None:
-                d[key] = {n: s.to_dict() for n, s in stats.items()}
-        if self.report is not None:
-            d[self.RUN_REPORT_KEY] = dict(self.report)
-        if self.sar is not None:
-            d["sar"] = dict(self.sar)
-        if self.settings is not None:
-            d["settings"] = dict(self.settings)
-        return _json(d)  # JSON values: what the file holds, NaN as null
-
-    @classmethod
-    def from_dict(cls, d: Any) -> OrientReport:
-        """The report from its JSON document; InputError naming what is missing or wrong (not
-        an orientation report, a newer version, a key missing or mistyped)."""
-        if not isinstance(d, Mapping) or d.get("format") != FORMAT:
-            raise InputError(f"not the {FILE} of gcpfree orient (format "
-                             f"{d.get('format') if isinstance(d, Mapping) else None!r}, "
-                             f"expected {FORMAT!r})")
-        version = _get(d, "version", "", int)
-        if not 1 <= version <= VERSION:
-            raise InputError(f"version {version}, and this gcpfree reads {FILE} up to version "
-                             f"{VERSION}; update gcpfree")
-
-        report = _get(d, cls.RUN_REPORT_KEY, "", Mapping) if cls.RUN_REPORT_KEY in d else None
-        return cls(
-            relative=dict(_get(d, "relative", "", Mapping)),
-            relative_dem=_dem_summary(_get(d, "relative_dem", "", Mapping), "relative_dem"),
-            surface_matching=SurfaceMatching.from_dict(_get(d, "surface_matching", "",
-                                                            Mapping)),
-            gcps=GcpSummary.from_dict(_get(d, "gcps", "", Mapping)),
-            absolute=Absolute.from_dict(_get(d, "absolute", "", Mapping)),
-            reference=ReferenceUsed.from_dict(_get(d, "reference", "", Mapping)),
-            dsm=FinalDsm.from_dict(_get(d, "dsm", "", Mapping)),
-            models=Models.from_dict(_get(d, "models", "", Mapping)),
-            check_points=_check_points(d.get("check_points"), "check_points"),
-            check_points_before=_check_points(d.get("check_points_before"),
-                                              "check_points_before"),
-            report=dict(report) if report is not None else None,
-            sar=dict(_get(d, "sar", "", Mapping)) if "sar" in d else None,
-            settings=dict(_get(d, "settings", "", Mapping)) if "settings" in d else None,
-            version=version)
 
     def lines(self) -> list[str]:
         """The orientation's figures as ``gcpfree orient`` and ``gcpfree pair`` print them."""
@@ -251,30 +188,22 @@ class OrientReport:
         """The same orientation with the run report's record (None: without one)."""
         return replace(self, report=None if record is None else dict(record))
 
-    def write(self, path: str | Path) -> Path:
-        """report.json written atomically as strict JSON (NaN as null)."""
-        from tasks.io.rasters import atomic_write_json
 
-        return atomic_write_json(path, self.to_dict())
+# the format and version first, then the sections in the order gcpfree has written them
+layout(OrientReport, computed={"format": lambda r: FORMAT, "version": lambda r: VERSION},
+       order=("format", "version", "relative", "relative_dem", "surface_matching", "gcps",
+              "absolute", "models"),
+       omit_default=("check_points", "check_points_before", "report", "sar", "settings"))
+REPORT: Document[OrientReport] = Document(FILE, OrientReport, format=FORMAT, version=VERSION,
+                                          hint="give the report.json gcpfree orient wrote")
 
 
 def read_report(path: str | Path) -> OrientReport:
-    """``report.json`` at ``path`` (a file, or the orient output folder holding it).
+    """:data:`REPORT` read from ``path``: a report.json, or the orient output folder holding
+    it.
 
     Raises:
         InputError: missing, not JSON, or not an orientation report this gcpfree reads.
     """
     path = Path(path)
-    if path.is_dir():
-        path = path / FILE
-    try:
-        text = path.read_text(encoding="utf-8", errors="replace")
-    except OSError as exc:
-        raise InputError(f"cannot read {path}: {exc.strerror or exc}; run gcpfree orient "
-                         "first") from None
-    doc = parse_json(text, str(path))
-    try:
-        return OrientReport.from_dict(doc)
-    except InputError as exc:
-        raise InputError(f"{path}: {exc}; give the report.json gcpfree orient wrote") from None
-
+    return REPORT.read(path / FILE if path.is_dir() else path)

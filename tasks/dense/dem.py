@@ -28,8 +28,7 @@ from __future__ import annotations
 
 import math
 import shutil
-from collections.abc import Mapping
-from dataclasses import MISSING, asdict, dataclass, field, fields, replace
+from dataclasses import asdict, dataclass, field, replace
 from pathlib import Path
 from typing import Any
 
@@ -60,6 +59,7 @@ from tasks.dense.blocks import (
 )
 from tasks.io.crs import Projection
 from tasks.io.dem import dem_datum, read_reference
+from tasks.io.documents import layout
 from tasks.io.geoid import load_geoid
 from tasks.io.rasters import CHUNK, CogItem, CogOptions, atomic_write_json, write_arrays_cog
 from tasks.io.sensors import LoadedModel
@@ -170,19 +170,6 @@ class DemSummary:
     def to_dict(self) -> dict[str, Any]:
         return {"format": "gcpfree.dem", "version": 1, **asdict(self)}
 
-    @classmethod
-    def from_dict(cls, d: Mapping[str, Any]) -> DemSummary:
-        """The summary :meth:`to_dict` wrote (InputError naming what is missing)."""
-        if not isinstance(d, Mapping) or d.get("format") != "gcpfree.dem":
-            raise InputError("not a DEM summary of gcpfree (format 'gcpfree.dem')")
-        names = [f.name for f in fields(cls)]
-        missing = [n for n in names if n not in d and cls.__dataclass_fields__[n].default
-                   is MISSING]
-        if missing:
-            raise InputError(f"the DEM summary lacks {', '.join(missing)}")
-        tuples = ("roi", "pointing_dy_px", "n_disp_range", "tiles")
-        return cls(**{n: (tuple(d[n]) if n in tuples else d[n]) for n in names if n in d})
-
     def lines(self) -> list[str]:
         lo, hi = self.pointing_dy_px
         return [
@@ -200,6 +187,11 @@ class DemSummary:
             (f"rectification  residual y-parallax <= {self.y_residual_max_px:.3f} px; pointing "
             f"correction {lo:+.2f} .. {hi:+.2f} px"),
         ]
+
+
+# as report.json holds it (relative_dem, dsm.summary): the format checked, the version 1
+layout(DemSummary, tag=("format", "gcpfree.dem"), computed={"version": lambda s: 1},
+       order=("format", "version"))
 
 
 # ---------------------------------------------------------------------------- 1. plan

@@ -32,7 +32,9 @@ The pattern, to move a document onto it:
    its reader checked before (checked the same way; None: not checked).
 3. Callers: ``DOC.dump(value)`` a JSON-ready dict (:func:`core.jsonio.to_json` writes it, the
    one writer), ``DOC.load(data)`` the value (one-line InputError naming the document and the
-   key path), ``DOC.write(path, value)``, ``DOC.read(path)`` and ``DOC.json_schema()``.
+   key path), ``DOC.write(path, value)``, ``DOC.read(path)`` and ``DOC.json_schema()``; a
+   part of a document: :func:`plain` (a recorded value as the JSON-ready values its document
+   writes) and :func:`adapter` (``adapter(T).validate_python(values)``: a value of ``T``).
 
 Example (gcps.json, :data:`tasks.io.products.GCPS`; ``GcpSet`` is the document's dataclass,
 its envelope fields with their defaults, then ``points: tuple[ControlPoint, ...]``)::
@@ -314,6 +316,7 @@ def record(cls: type) -> Any:
     if lay.tag:
         tag_type = Literal[lay.tag[1]]  # type: ignore[valid-type]
         items = {lay.tag[0]: NotRequired[tag_type] if lay.tag_default else tag_type, **items}
+    items = {k: items[k] for k in lay.order if k in items} | items  # the schema in file order
     body = TypedDict(cls.__name__, items)  # type: ignore[operator]
     body.__doc__ = cls.__doc__  # the schema's description
     extra: tuple[Any, ...] = ()
@@ -417,9 +420,14 @@ class Document(Generic[T]):
         if self.format is not None and data.get("format") != self.format:
             raise InputError(f"{what}: key 'format' is {data.get('format')!r:.40}, not "
                              f"{self.format!r}; {self.hint}")
-        if self.version is not None and data.get("version") != self.version:
-            raise InputError(f"{what}: version {data.get('version')!r:.40} is not "
-                             f"{self.version}; {self.hint}")
+        version = data.get("version")
+        if self.version is not None and (version != self.version or isinstance(version, bool)):
+            if isinstance(version, int) and not isinstance(version, bool) \
+                    and version > self.version:
+                raise InputError(f"{what}: version {version}, and this gcpfree reads "
+                                 f"{self.name} up to version {self.version}; update gcpfree")
+            raise InputError(f"{what}: version {version!r:.40} is not {self.version}; "
+                             f"{self.hint}")
         try:
             return self.adapter.validate_python(data)
         except ValidationError as exc:
@@ -456,5 +464,17 @@ def _adapter(value_type: Any) -> TypeAdapter:
     return TypeAdapter(shape(value_type))
 
 
-__all__ = ["Array", "Document", "Finite", "Integer", "Layout", "Number", "layout", "record",
-           "shape"]
+def adapter(value_type: Any) -> TypeAdapter:
+    """The TypeAdapter of a type hint (a dataclass: its :func:`record`), for a part of a
+    document: ``adapter(T).validate_python(json_values)`` reads a value of ``T``."""
+    return _adapter(value_type)
+
+
+def plain(value: Any) -> Any:
+    """A recorded dataclass's ``value`` as the JSON-ready values its document writes of it
+    (a part of a document, as :meth:`Document.dump` gives the whole)."""
+    return _plain(_adapter(type(value)).dump_python(value, mode="python"))
+
+
+__all__ = ["Array", "Document", "Finite", "Integer", "Layout", "Number", "adapter", "layout",
+           "plain", "record", "shape"]

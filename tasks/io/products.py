@@ -4,7 +4,7 @@ pair.json). Keys, their order and the readers' checks are those the hand-written
 readers had (``tests/tasks/test_documents.py`` reads the files today's code wrote, in
 ``tests/data/products_v0_1/``, and writes them back byte for byte), and the simulator's
 checkpoints.json and truth/scene.json, which ``tasks.simulate`` writes itself. The orientation's
-report.json has its own (:mod:`tasks.absolute.report`), to move onto this pattern."""
+report.json is on the same pattern, beside its sections (:data:`tasks.absolute.report.REPORT`)."""
 
 from __future__ import annotations
 

@@ -1,17 +1,17 @@
 """The JSON Schema of each product, by its name: what the site's product pages show.
 
 Generated from the typed classes that write and read the products (:mod:`tasks.io.products`,
-:mod:`tasks.io.model_files`, on :mod:`tasks.io.documents`), so a page cannot drift from the
-files. ``summary.csv`` is a table: its entry is the schema of one row, whose properties are
-the columns in their order (``x-columns``).
+:mod:`tasks.io.model_files`, :mod:`tasks.absolute.report`, on :mod:`tasks.io.documents`), so
+a page cannot drift from the files. ``summary.csv`` is a table: its entry is the schema of one
+row, whose properties are the columns in their order (``x-columns``).
 
 Not moved onto the documents yet, so generated from what exists and marked ``x-not-moved``:
 
-- ``report.json``: the fields of :class:`tasks.absolute.report.OrientReport` and its sections
-  (their own ``to_dict`` writes the file; a few keys differ from the fields);
 - ``rel.json``: no class holds it (``tasks/relative/orientation.py`` writes a dict): the
   schema says its format and, typed, the right model it embeds;
-- ``dsm.json`` (a DSM's JSON, :class:`tasks.dense.dem.DemSummary`): as report.json.
+- ``dsm.json`` (a DSM's JSON, :class:`tasks.dense.dem.DemSummary`): the fields of the class
+  (its own ``to_dict`` writes the file; report.json's ``relative_dem`` and ``dsm.summary``
+  are the same record, written through its layout).
 """
 
 from __future__ import annotations
@@ -20,6 +20,7 @@ from typing import Any
 
 from pydantic import TypeAdapter
 
+from tasks.absolute.report import REPORT
 from tasks.io.documents import Document, record
 from tasks.io.model_files import PUSHBROOM, RPC, SAR
 from tasks.io.products import CHECKPOINTS, EVALUATION, GCPS, PAIR, SCENE, WINDOWS
@@ -28,9 +29,9 @@ from tasks.io.products import CHECKPOINTS, EVALUATION, GCPS, PAIR, SCENE, WINDOW
 DOCUMENTS: dict[str, Document[Any]] = {
     "gcps.json": GCPS, "windows.json": WINDOWS, "eval.json": EVALUATION, "pair.json": PAIR,
     "checkpoints.json": CHECKPOINTS, "scene.json": SCENE, "model (gcpfree.pushbroom)": PUSHBROOM,
-    "model (gcpfree.sar)": SAR, "model (rpc)": RPC,
+    "model (gcpfree.sar)": SAR, "model (rpc)": RPC, "report.json": REPORT,
 }
-NOT_MOVED = ("report.json", "rel.json", "dsm.json")
+NOT_MOVED = ("rel.json", "dsm.json")
 
 
 def _not_moved(name: str, schema: dict[str, Any], how: str) -> dict[str, Any]:
@@ -67,12 +68,10 @@ def rel_json_schema() -> dict[str, Any]:
 
 def product_schemas() -> dict[str, dict[str, Any]]:
     """Every product's JSON Schema, by name (``summary.csv``: one row's)."""
-    from tasks.absolute.report import OrientReport
     from tasks.dense.dem import DemSummary
 
     out = {name: doc.json_schema() for name, doc in DOCUMENTS.items()}
     out["summary.csv"] = summary_csv_schema()
-    out["report.json"] = _fields_schema(OrientReport, "report.json")
     out["rel.json"] = rel_json_schema()
     out["dsm.json"] = _fields_schema(DemSummary, "dsm.json")
     return out

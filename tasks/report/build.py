@@ -49,7 +49,7 @@ from core.matching.surface import SurfaceMatchConfig, correlation_surface
 from core.points import ControlPoint
 from tasks.absolute.orientation import NAMES, read_checkpoints
 from tasks.absolute.report import FILE as JSON_NAME
-from tasks.absolute.report import OrientReport, read_report
+from tasks.absolute.report import REPORT, OrientReport, read_report
 from tasks.absolute.surface_match import read_window_cells
 from tasks.io.crs import Projection
 from tasks.io.rasters import atomic_write_bytes, atomic_write_text
@@ -467,7 +467,7 @@ def make_report(out_dir: str | Path, reference: str | Path | None = None,
         rep, Path(checkpoints) if checkpoints else None, gcp_panels))
     rep.section("Accuracy against lidar", lambda: _evaluation(
         rep, Path(evaluation) if evaluation else None))
-    rest = {k: v for k, v in (orientation.to_dict() if orientation else {}).items()
+    rest = {k: v for k, v in (REPORT.dump(orientation) if orientation else {}).items()
             if k not in SECTIONS and k != JSON_KEY}
     if rest:
         rep.section("Other products", lambda: rep.add(Table.flat(rest, "Other entries")))
@@ -485,10 +485,10 @@ def make_report(out_dir: str | Path, reference: str | Path | None = None,
             old.unlink(missing_ok=True)
     js = None
     if orientation is not None:  # the orientation's keys as they are, the report's beside
-        js = orientation.with_run_report({
+        js = REPORT.write(out / JSON_NAME, orientation.with_run_report({
             "format": FORMAT, "version": 1, "html": HTML_NAME, "markdown": MD_NAME,
             "figures": {p.stem: f"{FIGURES_DIR}/{p.name}" for p in rep.figures},
-            "inputs": inputs, "not_available": rep.missing, **rep.data}).write(out / JSON_NAME)
+            "inputs": inputs, "not_available": rep.missing, **rep.data}))
     return ReportOutcome(html, md, js, tuple(rep.figures), tuple(rep.missing))
 
 

@@ -11,11 +11,13 @@ from collections.abc import Mapping, Sequence
 from typing import TYPE_CHECKING, Any
 
 from tasks.absolute.report import OrientReport
+from tasks.io.documents import plain
 from tasks.report.doc import Block, Para, Table, flatten, fmt
 
 if TYPE_CHECKING:
+    from core.matching.relief import ReliefVerdict
     from core.orientation.checkpoints import CheckPointStats
-    from tasks.absolute.report import Absolute, GcpSummary, Relief, SurfaceMatching
+    from tasks.absolute.report import Absolute, GcpSummary, SurfaceMatching
     from tasks.dense.dem import DemSummary
 
 STATS = ("n", "min_col_px", "max_col_px", "mean_col_px", "std_col_px", "rms_col_px",
@@ -148,7 +150,7 @@ def dem_tables(dem: DemSummary) -> list[Block]:
     return out
 
 
-def relief_verdict(v: Relief) -> Para:
+def relief_verdict(v: ReliefVerdict) -> Para:
     """The relief-sufficiency verdict in a sentence (green when enough)."""
     text = (f"{fmt(v.n_qualified)} of {fmt(v.n_windows)} windows have the relief to fix the "
             f"position to {fmt(v.max_precision_m)} m ({fmt(v.n_needed)} needed); relief found "
@@ -160,7 +162,7 @@ def relief_verdict(v: Relief) -> Para:
 
 def surface_tables(sm: SurfaceMatching, windows: Sequence[Doc] | None) -> list[Block]:
     out: list[Block] = [relief_verdict(sm.relief),
-                        Table.flat(sm.to_dict(), "Surface matching and relief verdict")]
+                        Table.flat(plain(sm), "Surface matching and relief verdict")]
     if windows is not None:
         out.append(Table.of(WINDOW_KEYS, ([w.get(k) for k in WINDOW_KEYS] for w in windows),
                             "Windows (windows.json; shifts move the relative DEM onto the "
@@ -169,7 +171,7 @@ def surface_tables(sm: SurfaceMatching, windows: Sequence[Doc] | None) -> list[B
 
 
 def gcp_tables(g: GcpSummary) -> list[Block]:
-    out: list[Block] = [Table.flat(g.to_dict(), "Simulated GCPs", skip=("rejected_ids",))]
+    out: list[Block] = [Table.flat(plain(g), "Simulated GCPs", skip=("rejected_ids",))]
     if g.rejected_ids:
         out.append(Table.of(("GCP id", "reason"), ((r.id, r.reason) for r in g.rejected_ids),
                             "GCPs rejected by the absolute orientation"))
@@ -185,12 +187,12 @@ def absolute_tables(a: Absolute) -> list[Block]:
                             zip(img.param_names, img.params_before, img.params_after,
                                 img.sigmas, strict=True),
                             f"Image {name}: parameters adjusted"))
-        out.append(Table.flat(img.to_dict(), f"Image {name}: residuals at the GCPs used (px)",
+        out.append(Table.flat(plain(img), f"Image {name}: residuals at the GCPs used (px)",
                               skip=PARAMS))
-    out.append(Table.flat(a.to_dict(), "Absolute adjustment",
+    out.append(Table.flat(plain(a), "Absolute adjustment",
                           skip=("images", "self_calibration")))
     if a.self_calibration is not None:
-        out.append(Table.flat(a.self_calibration.to_dict(), "Lens self-calibration"))
+        out.append(Table.flat(plain(a.self_calibration), "Lens self-calibration"))
     else:
         out.append(Para("Lens self-calibration was not asked for."))
     return out
@@ -228,9 +230,9 @@ def prediction_table(after: Mapping[str, CheckPointStats],
                          getattr(s, f"predicted_relative_rms_{ax}_px"),
                          getattr(s, f"predicted_reference_rms_{ax}_px")])
     frames = "; ".join(
-        f"{f.get('name')}: prior {'/'.join(fmt(v) for v in f.get('prior_sigma_m', []))} m"
-        + (f", shift {'/'.join(fmt(v) for v in f.get('shift_m', []))} +- "
-           f"{'/'.join(fmt(v) for v in f.get('sigma_m', []))} m" if f.get("observed") else
+        f"{f.name}: prior {'/'.join(fmt(v) for v in f.prior_sigma_m)} m"
+        + (f", shift {'/'.join(fmt(v) for v in f.shift_m)} +- "
+           f"{'/'.join(fmt(v) for v in f.sigma_m)} m" if f.observed else
            " (not observable: its prior stands)")
         for f in ((absolute.frames or ()) if absolute is not None else ()))
     shift = ""

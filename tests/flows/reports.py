@@ -8,15 +8,17 @@ import math
 from typing import Any
 
 from core.evaluation.evaluation import DzStats
+from core.jsonio import json_ready
+from core.matching.relief import ReliefVerdict
 from core.orientation.checkpoints import CheckPointStats
 from tasks.absolute.report import (
+    REPORT,
     Absolute,
     FinalDsm,
     GcpSummary,
     ImageFit,
     OrientReport,
     ReferenceUsed,
-    Relief,
     SurfaceMatching,
 )
 from tasks.dense.dem import DemSummary
@@ -47,7 +49,7 @@ def finished_report(used: int, gcp_rms: dict[str, tuple[float, float]],
     image (col, row px) and check-point RMS (None: no check points)."""
     images = {s: ImageFit(s, used, c, r, 0.0, 0.0, ("roll",), (0.0,), (1.0,), (0.1,))
               for s, (c, r) in gcp_rms.items()}
-    relief = Relief(40, 36, 8, 149.0, 20.0, 10.0, 0, 0, 900, 100, 90.0, 4000.0, True, None)
+    relief = ReliefVerdict(40, 36, 8, 149.0, 20.0, 10.0, 0, 0, 900, 100, 90.0, 4000.0)
     report = OrientReport(
         relative={"format": "gcpfree.relative"}, relative_dem=_dem("relative_dem.tif"),
         surface_matching=SurfaceMatching({"radius_m": 4000.0}, 40, {"OK": used}, 36, relief),
@@ -57,7 +59,7 @@ def finished_report(used: int, gcp_rms: dict[str, tuple[float, float]],
         dsm=FinalDsm("dsm.tif", "dsm_egm96.tif", _dem("dsm.tif")),
         check_points=_check_points(cp_rms) if cp_rms else None,
         check_points_before=_check_points(cp_rms) if cp_rms else None)
-    return report.to_dict()
+    return json_ready(REPORT.dump(report))  # as the file holds it (NaN as null)
 
 
 def finished_evaluation(le68_m: float, count: int = 100) -> dict[str, Any]:

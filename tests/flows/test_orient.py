@@ -18,11 +18,12 @@ import pytest
 from core.errors import InputError, InsufficientDataError, InsufficientReliefError
 from core.geodesy import geodetic_to_enu
 from core.intersection import triangulate
+from core.jsonio import json_ready
 from core.matching.relief import relief_sufficiency
 from core.matching.surface import SurfaceMatchConfig, WindowMatch, WindowStatus
 from flows.commands import orient as orient_command
 from tasks.absolute.orientation import read_checkpoints
-from tasks.absolute.report import OrientReport
+from tasks.absolute.report import REPORT
 from tasks.io.pair import PairInputs
 from tasks.io.products import GCPS
 from tasks.io.sensors import load_model
@@ -45,8 +46,8 @@ def test_pushbroom_pair_reaches_the_check_points_with_no_gcp(oriented):
     _, out, outcome = oriented
     report = json.loads((out / "report.json").read_text())
     # the typed report is the file, every key and value (read through its schema and back)
-    assert report == outcome.report.to_dict()
-    assert OrientReport.from_dict(report) == outcome.report
+    assert report == json_ready(REPORT.dump(outcome.report)) == json_ready(
+        REPORT.dump(REPORT.load(report)))
     before, after = report["check_points_before"], report["check_points"]
     for name in ("left", "right"):
         # the metadata are 100-300 m (2.5-7.5 px) off; SRTM alone brings them under a pixel
@@ -152,7 +153,7 @@ def test_the_chain_never_needs_the_simulators_answers(tiny_oriented, tmp_path,
     for name in ("gcps.json", "left.json", "right.json", "windows.json"):
         assert_same_json(json.loads((out / name).read_text()),
                          json.loads((ref_out / name).read_text()), name)
-    doc, ref_doc = outcome.report.to_dict(), ref_outcome.report.to_dict()
+    doc, ref_doc = REPORT.dump(outcome.report), REPORT.dump(ref_outcome.report)
     for key in ("gcps", "check_points", "check_points_before"):
         assert_same_json(doc[key], ref_doc[key], key)
 

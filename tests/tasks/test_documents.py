@@ -1,7 +1,8 @@
 """The products' JSON through tasks/io/documents.py: the files gcpfree wrote before the move
 (``tests/data/products_v0_1/``, commit 161fa7a) read with today's code into the values they
 hold, and written back byte for byte; the hand-written writers still in core agree; bad files
-are refused in one line naming the document and the key; NaN goes as null and comes back."""
+are refused in one line naming the document and the key; NaN goes as null and comes back.
+(report.json written by today's orient: ``tests/tasks/test_report.py``.)"""
 
 from __future__ import annotations
 
@@ -15,12 +16,14 @@ import pytest
 
 from core.errors import InputError
 from core.evaluation.evaluation import DzStats
-from core.jsonio import parse_json, to_json
+from core.jsonio import json_ready, parse_json, to_json
 from core.matching.surface import WindowStatus
 from core.points import CheckPointSet, control_points_to_dict
 from core.sensors.orbit import SampledAttitude
 from core.sensors.pushbroom import PushbroomModel
-from tasks.io.documents import Document
+from tasks.absolute.report import REPORT
+from tasks.dense.dem import DemSummary
+from tasks.io.documents import Document, adapter, plain
 from tasks.io.model_files import model_document, read_model_document
 from tasks.io.products import (
     CHECKPOINTS,
@@ -40,7 +43,7 @@ V01 = Path(__file__).resolve().parents[1] / "data" / "products_v0_1"
 WRITTEN = {"gcps.json": (GCPS, ""), "windows.json": (WINDOWS, ""),
            "checkpoints.json": (CHECKPOINTS, ""), "eval.json": (EVALUATION, "\n"),
            "pair.json": (PAIR, ""), "archive_pair.json": (PAIR, ""), "scene.json": (SCENE, ""),
-           "scene_realistic.json": (SCENE, "")}
+           "scene_realistic.json": (SCENE, ""), "report.json": (REPORT, "")}
 MODELS = ("delivered_left.json", "left.json", "truth_left_realistic.json")
 
 
@@ -165,6 +168,37 @@ def test_an_oriented_model_reads_with_its_sampled_attitude_and_sun():
     assert PushbroomModel.from_dict(raw).to_dict() == model.to_dict()
 
 
+def test_an_old_report_json_reads_into_its_values():
+    """The v0.1 report.json (before the frames, the predicted parts and the SAR keys) into
+    its sections' values: core's own classes where the section is core's result; its DEM
+    summaries as the DEM step writes them (dsm.json: the same record, byte for byte)."""
+    from core.matching.relief import ReliefVerdict
+    from core.orientation.checkpoints import CheckPointStats
+
+    raw = _raw("report.json")
+    r = REPORT.read(V01 / "report.json")
+    assert r.relative == raw["relative"] and r.settings == raw["settings"]
+    assert r.report == raw["report"] and r.sar is None
+    relief = r.surface_matching.relief
+    assert isinstance(relief, ReliefVerdict) and relief.enough and relief.reason is None
+    assert relief.to_dict() == raw["surface_matching"]["relief"]
+    left = r.absolute.images["left"]
+    assert left.param_names == tuple(raw["absolute"]["images"]["left"]["param_names"])
+    assert (left.n, left.rms_col_px) == (36, raw["absolute"]["images"]["left"]["rms_col_px"])
+    assert r.absolute.frames is None and r.reference.registration_estimate is None
+    lens = r.absolute.self_calibration
+    assert lens is not None and not lens.applied and lens.wald_correlated_limit == 8.0
+    cp = r.check_points["right"]
+    assert isinstance(cp, CheckPointStats) and cp.to_dict() == raw["check_points"]["right"]
+    assert cp.predicted_relative_rms_col_px is None
+    assert r.check_points_before["left"].predicted_rms_col_px is None
+    assert r.relative_dem.roi == (0, 0, 600, 600) and r.dsm.summary.n_disp_range == (48, 48)
+    assert json_ready(r.relative_dem.to_dict()) == raw["relative_dem"]
+    text = (V01 / "dsm.json").read_text()
+    dsm = adapter(DemSummary).validate_python(_raw("dsm.json"))
+    assert to_json(plain(dsm), indent=1) == text == to_json(dsm.to_dict(), indent=1)
+
+
 def test_nan_is_written_as_null_and_read_back_as_nan():
     nan = math.nan
     s = DzStats(0, nan, nan, nan, nan, nan, nan, nan, nan, nan, nan, (nan, nan), 0.95, "exact",
@@ -233,7 +267,8 @@ def test_a_bad_model_file_is_refused_in_one_line_naming_the_key(path, value, mes
 def test_the_schemas_list_every_product_and_the_keys_of_its_file():
     schemas = product_schemas()
     assert set(schemas) == set(DOCUMENTS) | set(NOT_MOVED) | {"summary.csv"}
-    for name in ("gcps.json", "windows.json", "checkpoints.json", "eval.json", "pair.json"):
+    for name in ("gcps.json", "windows.json", "checkpoints.json", "eval.json", "pair.json",
+                 "report.json"):
         keys = set(schemas[name]["properties"])
         assert set(_raw(name)) <= keys | {"heights", "image_coordinates"}, name
     top = set(_raw("delivered_left.json"))

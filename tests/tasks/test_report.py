@@ -20,7 +20,15 @@ import pytest
 from PIL import Image
 
 from core.errors import InputError
-from tasks.absolute.report import OrientReport, read_report
+from core.jsonio import json_ready, to_json
+from core.matching.relief import ReliefVerdict
+from core.orientation.checkpoints import CheckPointStats
+from core.orientation.frames import FrameEstimate
+from core.orientation.result import AbsoluteOrientation, ImageResiduals
+from core.orientation.selfcal import SelfCalibration
+from core.orientation.uncertainty import PredictedAccuracy, VarianceComponents
+from tasks.absolute.report import REPORT, Absolute, LensCalibration, read_report
+from tasks.io.documents import adapter, plain
 from tasks.report.build import FIGURES_DIR, JSON_KEY, ReportOutcome, make_report, write_report
 from tasks.report.doc import MAX_INLINE, Table
 from tasks.report.tables import (
@@ -507,51 +515,138 @@ def test_the_relative_table_says_what_set_the_along_epipolar_part():
 # ---------------------------------------------------------------------------- report.json
 
 
-def test_report_json_schema_round_trips_and_refuses_what_it_cannot_read(tmp_path):
-    """report.json through :class:`OrientReport`: every key back as written; a newer version,
+def test_report_json_of_today_writes_back_byte_for_byte(tiny_oriented, run):
+    """report.json as ``gcpfree orient`` wrote it today (the frames, the predicted parts, the
+    lens's Wald statistics) and as the run report extended it: read through :data:`REPORT`
+    and written back, the same bytes."""
+    _, oriented, _ = tiny_oriented
+    _, out, _, _ = run
+    for path in (oriented / "report.json", out / "report.json"):
+        text = path.read_text()
+        report = REPORT.read(path)
+        assert to_json(REPORT.dump(report)) == text, path
+        assert report.absolute.frames and isinstance(report.absolute.frames[0], FrameEstimate)
+        assert all(c.predicted_relative_rms_col_px is not None
+                   for c in (report.check_points or {}).values())
+
+
+def test_report_json_round_trips_and_refuses_what_it_cannot_read(tmp_path):
+    """report.json through :data:`REPORT`: every key back as written; a newer version,
     another product, a missing or mistyped key refused in one line naming it."""
     doc = json.loads(json.dumps(finished_report(
         12, {"left": (0.25, 0.5), "right": (0.75, 0.125)},
         {"left": (0.375, 0.625), "right": (0.875, 0.0625)})))
-    report = OrientReport.from_dict(doc)
-    assert report.to_dict() == doc and OrientReport.from_dict(report.to_dict()) == report
+    report = REPORT.load(doc)
+    assert REPORT.dump(report) == doc and REPORT.load(REPORT.dump(report)) == report
+    assert list(doc)[:2] == ["format", "version"] and (doc["format"], doc["version"]) == (
+        "gcpfree.orient", 1)
     assert report.gcps.used == 12 and report.check_points["right"].rms_row_px == 0.0625
     assert report.absolute.images["left"].rms_col_px == 0.25
-    path = report.with_run_report({"format": "gcpfree.report"}).write(tmp_path / "report.json")
+    path = REPORT.write(tmp_path / "report.json",
+                        report.with_run_report({"format": "gcpfree.report"}))
     assert read_report(tmp_path).report == {"format": "gcpfree.report"}  # a folder or a file
-    for bad, says in [({**doc, "version": 2}, "version 2"),
-                      ({**doc, "format": "gcpfree.pair"}, "not the report.json"),
-                      ({k: v for k, v in doc.items() if k != "gcps"}, "'gcps' is missing"),
-                      ({**doc, "gcps": {**doc["gcps"], "used": "12"}}, "'gcps.used' is a str"),
-                      ({**doc, "check_points": {"left": {"n": 3}}},
-                       "'check_points.left.name' is missing")]:
+    for bad, says in [
+            ({**doc, "version": 2},
+             "version 2, and this gcpfree reads report.json up to version 1; update gcpfree"),
+            ({**doc, "version": "1"}, "version '1' is not 1"),
+            ({**doc, "format": "gcpfree.pair"},
+             "key 'format' is 'gcpfree.pair', not 'gcpfree.orient'"),
+            ({k: v for k, v in doc.items() if k != "gcps"}, "key 'gcps' is missing"),
+            ({**doc, "gcps": {**doc["gcps"], "used": "12"}},
+             "key 'gcps.used' must be an integer, got '12'"),
+            ({**doc, "check_points": {"left": {"n": 3}}},
+             "key 'check_points.left.name' is missing"),
+            ({**doc, "relative_dem": {**doc["relative_dem"], "format": "gcpfree.other"}},
+             "key 'relative_dem.format' must be 'gcpfree.dem'")]:
         path.write_text(json.dumps(bad))
         with pytest.raises(InputError, match=re.escape(says)) as err:
             read_report(path)
         assert "\n" not in str(err.value) and str(path) in str(err.value)
+    with pytest.raises(InputError, match="cannot read report.json .*; give the report.json "
+                                         "gcpfree orient wrote"):
+        read_report(tmp_path / "elsewhere")
 
 
-def test_the_schema_keeps_every_key_its_records_write():
-    """The records report.json embeds whole keep their writers' keys: a key added to the
-    relief verdict or the check-point table would otherwise be dropped on the way through."""
-    from core.matching.relief import ReliefVerdict
-    from core.orientation.checkpoints import CheckPointStats
-    from tasks.absolute.report import Relief
+def test_not_a_number_is_written_as_null_and_read_back():
+    """A relief the verdict could not measure (NaN) is null in the file, NaN in the value,
+    and null again when written back."""
+    doc = finished_report(12, {"left": (0.25, 0.5)})
+    doc["surface_matching"]["relief"].update(relief_needed_m=None, cell_m=None)
+    report = REPORT.load(json.loads(json.dumps(doc)))
+    relief = report.surface_matching.relief
+    assert math.isnan(relief.relief_needed_m) and math.isnan(relief.cell_m)
+    text = to_json(REPORT.dump(report))
+    assert "NaN" not in text and json.loads(text) == doc
 
-    verdict = ReliefVerdict(10, 9, 8, 50.0, 20.0, 10.0)
-    assert list(verdict.to_dict()) == list(Relief.from_dict(verdict.to_dict()).to_dict())
-    stats = CheckPointStats("left", 3, *range(10))
-    assert OrientReport.from_dict({**finished_report(1, {"left": (0.1, 0.2)}),
-                                   "check_points": {"left": stats.to_dict()}}
-                                  ).check_points["left"] == stats
-    from core.orientation.selfcal import SelfCalibration
-    from tasks.absolute.report_sections import LensCalibration
 
-    lens = SelfCalibration(None, None, {}, 3.0, {"left": 2.0}, 16.3, {},  # type: ignore[arg-type]
-                           "none significant (GCPs decide nothing: 11 kept, 16 needed)").to_dict()
-    assert LensCalibration.from_dict(lens).to_dict() == lens
-    old = {k: v for k, v in lens.items() if k != "decision"}  # a report before the key
-    assert LensCalibration.from_dict(old).decision is None
+def _adjustment() -> AbsoluteOrientation:
+    """A small adjustment of two images as core returns it (two GCPs kept, one rejected)."""
+    res = [ImageResiduals(n, 2, 0.25, 0.5, 0.125, -0.0625, np.array([0.1, -0.2]),
+                          np.array([0.3, 0.4]), 0.01, 0.02) for n in ("left", "right")]
+    return AbsoluteOrientation(
+        (), ("left", "right"), (("roll_bias", "pitch_bias"), ("roll_bias",)),
+        (np.zeros(2), np.zeros(1)), (np.array([1e-5, 2e-5]), np.array([3e-5])),
+        np.diag([4e-12, 9e-12, 1e-12]), 0.8, tuple(res), np.array([True, True, False]),
+        {2: "normalised residual 5.1 > 3.5"}, 5, True, n_ties=140, tie_rms_px=0.07)
+
+
+@pytest.mark.parametrize("kind", ["pushbroom", "rpc"])
+def test_the_sections_are_the_schema_of_what_core_writes(kind):
+    """``absolute`` read from core's records (:meth:`AbsoluteOrientation.to_dict`,
+    :meth:`SelfCalibration.to_dict`) and written: every key core writes and no other, with
+    its value, the images' residual figures those of :meth:`ImageResiduals.to_dict` (a key
+    core adds would otherwise be dropped on the way into report.json). With RPCs the lens
+    statistics are empty and their limits undefined (null)."""
+    from types import SimpleNamespace
+
+    adj = _adjustment()
+    lens = (SelfCalibration(adj, None, {}, 3.0, {"left": 12.5, "right": 7.0}, 16.3,
+                            {"n": 140.0, "rms_px_without": 0.07, "evidence": 0.0},
+                            "none significant (GCPs: Wald left 12.5, right 7.0 against 16.3)",
+                            {"left": 2.5, "right": 1.0}, 8.0) if kind == "pushbroom" else
+            SelfCalibration(adj, None, {}, 3.0, decision="no pushbroom image: RPC images "
+                                                         "take no lens terms"))
+    products = SimpleNamespace(adjustment=adj, self_calibration=lens, along_track=None,
+                               predicted={})
+    section = Absolute.of(products, "linear")  # type: ignore[arg-type]
+    core = json_ready({**adj.to_dict(), "corrections": "linear",
+                       "self_calibration": lens.to_dict()})
+    written = json_ready(plain(section))
+    assert written == {k: v for k, v in core.items() if v is not None}  # absent when None
+    for name, r in zip(adj.names, adj.residuals, strict=True):
+        assert {k: written["images"][name][k] for k in r.to_dict()} == r.to_dict()
+    assert all(isinstance(f, FrameEstimate) for f in section.frames or ())
+    assert adapter(Absolute).validate_python(written) == section
+    if kind == "rpc":
+        assert written["self_calibration"]["wald_correlated"] == {}
+        assert written["self_calibration"]["wald_correlated_limit"] is None
+    old = {k: v for k, v in core["self_calibration"].items()  # a report before the keys
+           if k not in ("decision", "wald_correlated", "wald_correlated_limit")}
+    read = adapter(LensCalibration).validate_python(old)
+    assert read.decision is None and read.wald_correlated is None
+    assert json_ready(plain(read)) == old
+
+
+def test_core_results_are_their_own_sections():
+    """The relief verdict, the check-point table and the frames are core's classes, written as
+    core writes them (with the verdict's ``enough`` and ``reason``, the predicted RMS only
+    when there is one) and read back into equal values."""
+    nan = math.nan
+    for verdict in (ReliefVerdict(10, 9, 8, 50.0, 20.0, 10.0),
+                    ReliefVerdict(10, 2, 8, 3.0, nan, 10.0, 1, 1, 900, 100, 90.0, math.inf)):
+        assert json_ready(plain(verdict)) == verdict.to_dict()
+        back = adapter(ReliefVerdict).validate_python(verdict.to_dict())
+        assert json_ready(plain(back)) == verdict.to_dict() and back.reason == verdict.reason
+    pred = PredictedAccuracy(3, 0.5, 0.25, 0.3, 0.2, 0.4, 0.15, 0.0, 0.0, (5.0, 5.0, 5.0), 0.0)
+    for stats in (CheckPointStats("left", 3, *map(float, range(10))),
+                  CheckPointStats("left", 3, *map(float, range(10))).with_prediction(pred)):
+        assert plain(stats) == stats.to_dict()
+        assert list(plain(stats)) == list(stats.to_dict())
+        assert adapter(CheckPointStats).validate_python(stats.to_dict()) == stats
+    frame = FrameEstimate("sar", (10.0, 10.0, 5.0), (1.5, -2.0, 0.0), (0.5, 0.5, 5.0), True,
+                          "mission", "reference")
+    assert plain(frame) == json_ready(frame.to_dict())
+    assert adapter(FrameEstimate).validate_python(frame.to_dict()) == frame
 
 
 def test_the_printed_lines_say_how_the_tie_points_were_matched():
@@ -563,22 +658,20 @@ def test_the_printed_lines_say_how_the_tie_points_were_matched():
     doc["relative"]["tie_point_search"] = {"measure": "orientation"}
     line = "tie points            850 in the adjustment (orientation correlation), parallax " \
            "0.125 px RMS"
-    assert line in OrientReport.from_dict(doc).lines()
+    assert line in REPORT.load(doc).lines()
     doc["relative"]["tie_point_search"] = {"measure": "ncc"}
-    assert "(normalised cross-correlation)" in "\n".join(OrientReport.from_dict(doc).lines())
+    assert "(normalised cross-correlation)" in "\n".join(REPORT.load(doc).lines())
     del doc["relative"]["tie_point_search"]
     assert "tie points            850 in the adjustment, parallax 0.125 px RMS" in \
-        OrientReport.from_dict(doc).lines()
+        REPORT.load(doc).lines()
 
 
 def test_report_json_carries_the_predicted_accuracy_beside_the_measured():
     """The keys of the true uncertainties: ``check_points.<image>.predicted_rms_col_px`` and
-    ``predicted_rms_row_px`` beside the measured RMS, ``absolute.variance_components`` and
-    ``absolute.predicted`` (per image over a grid, for users with no check point) come back
-    as written; a report without them (older runs) still reads, with None."""
-    from core.orientation.checkpoints import CheckPointStats
-    from core.orientation.uncertainty import PredictedAccuracy, VarianceComponents
-
+    ``predicted_rms_row_px`` beside the measured RMS with their relative and reference parts,
+    ``absolute.variance_components`` and ``absolute.predicted`` (per image over a grid, for
+    users with no check point), ``reference.registration_estimate`` come back as written; a
+    report without them (older runs) still reads, with None, and writes back without them."""
     comps = VarianceComponents(("gcp_col", "gcp_row"), np.array([0.56, 0.21]),
                                np.array([68, 68]), np.array([60.0, 58.0]), 4, True, "apart")
     pred = PredictedAccuracy(243, 0.16, 0.14, 0.08, 0.06, 0.14, 0.125, 0.0, 0.0, (5.0, 5.0, 5.0),
@@ -588,26 +681,39 @@ def test_report_json_carries_the_predicted_accuracy_beside_the_measured():
     doc["absolute"]["predicted"] = {"grid_points_per_side": 9, "heights_m": [1.0, 2.0, 3.0],
                                     "reference_sigma_m": [5.0, 5.0, 5.0],
                                     "images": {"left": pred.to_dict()}}
-    stats = CheckPointStats("left", 3, *range(10), predicted_rms_col_px=0.5,
-                            predicted_rms_row_px=0.25)
+    stats = CheckPointStats("left", 3, *map(float, range(10))).with_prediction(pred)
     doc["check_points"] = {"left": stats.to_dict()}
+    doc["reference"]["registration_estimate"] = {
+        "shift_m": [-7.5, 1.0, 0.5], "sigma_m": [2.0, 2.0, 4.0],
+        "prior_sigma_m": [10.0, 10.0, 5.0], "source": "srtm"}
     doc = json.loads(json.dumps(doc))
-    report = OrientReport.from_dict(doc)
-    assert report.to_dict() == doc
-    assert report.check_points["left"].predicted_rms_col_px == 0.5
-    assert report.check_points["left"].predicted_rms_row_px == 0.25
+    report = REPORT.load(doc)
+    assert REPORT.dump(report) == doc
+    c = report.check_points["left"]
+    assert (c.predicted_rms_col_px, c.predicted_rms_row_px) == (0.16, 0.14)
+    assert (c.predicted_relative_rms_col_px, c.predicted_reference_rms_row_px) == (
+        pred.predicted_relative_rms_col_px, 0.125)
     assert report.check_points_before["left"].predicted_rms_col_px is None
     assert "predicted_rms_col_px" not in doc["check_points_before"]["left"]
     img = report.absolute.predicted["images"]["left"]
-    assert (img["predicted_rms_col_px"], img["predicted_rms_row_px"]) == (0.16, 0.14)
+    assert (img["predicted_rms_col_px"], img["predicted_relative_rms_row_px"]) == (
+        0.16, pred.predicted_relative_rms_row_px)
     assert report.absolute.variance_components["groups"]["gcp_col"]["factor"] == 0.56
+    assert report.reference.registration_estimate["shift_m"] == [-7.5, 1.0, 0.5]
+    assert any(line.startswith("reference's shift     -7.5 +- 2.0") for line in report.lines())
     old = {**doc, "absolute": {k: v for k, v in doc["absolute"].items()
-                               if k not in ("predicted", "variance_components")}}
-    assert OrientReport.from_dict(old).absolute.predicted is None
+                               if k not in ("predicted", "variance_components")},
+           "reference": {k: v for k, v in doc["reference"].items()
+                         if k != "registration_estimate"}}
+    back = REPORT.load(old)
+    assert back.absolute.predicted is None and back.reference.registration_estimate is None
+    assert REPORT.dump(back) == old
     bad = json.loads(json.dumps(doc))
     bad["absolute"]["predicted"]["images"]["left"]["predicted_rms_row_px"] = "0.1"
-    with pytest.raises(InputError, match="predicted_rms_row_px"):
-        OrientReport.from_dict(bad)
+    with pytest.raises(InputError, match=re.escape(
+            "report.json: key 'absolute.predicted.images.left.predicted_rms_row_px' must be a "
+            "number, got '0.1'; give the report.json gcpfree orient wrote")):
+        REPORT.load(bad)
 
 
 # what a reader of the report sees in the browser
