@@ -103,7 +103,11 @@ def check_points_of(report: Mapping[str, Any]) -> dict[str, CheckPointStats] | N
 
 @dataclass(frozen=True)
 class OrientReport:
-    """report.json (see the module docstring for its keys)."""
+    """report.json, the record of ``gcpfree orient``: a section per step (the relative
+    orientation, the relative DEM, surface matching, the GCPs, the absolute orientation, the
+    oriented models, the reference, the final DSM), then, each absent when there is none, the
+    check points after and before, the run report's record, the SAR control and the settings
+    (every key: :mod:`tasks.absolute.report`)."""
 
     relative: Mapping[str, Any]
     relative_dem: DemSummary
