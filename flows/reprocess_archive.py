@@ -6,7 +6,10 @@ catalog (``tasks.archive.catalog``) -> pairs whose ``ROOT/<id>`` is already comp
 per pair inside a Dask task (:func:`tasks.archive.runs.process_pair`, on prefect-dask's
 ``DaskTaskRunner`` as :func:`tasks.scheduling.archive_task_runner` sizes it: a LocalCluster, or
 an existing cluster given its scheduler address) -> ``ROOT/summary.csv`` and
-``ROOT/summary.json`` -> Prefect artifacts (the summary table, a markdown account).
+``ROOT/summary.json`` -> Prefect artifacts (the summary table, a markdown account); all along,
+``ROOT/map.html`` (:mod:`tasks.archive.map`: the pairs' footprints over an SRTM hillshade by
+status and stated accuracy, the counts, throughput and slowest steps) refreshed as pairs end,
+with the run's ``archive-map`` artifact.
 
 A pair that the method refuses (terrain too flat, too small) or that fails (bad input, any
 exception) is recorded as ``refused`` or ``failed`` with its one-line reason and never stops the
@@ -38,6 +41,7 @@ from prefect import flow
 
 from core.choices import VerticalChoice
 from tasks.archive.catalog import (
+    Catalog,
     PairEntry,
     PairRow,
     load_catalog,
@@ -45,8 +49,9 @@ from tasks.archive.catalog import (
     publish_summary,
     write_summary,
 )
+from tasks.archive.map import ArchiveMapper
 from tasks.archive.pair import complete_pairs
-from tasks.archive.runs import PairResult, failure_reason, process_pair
+from tasks.archive.runs import PairResult, failure_reason, process_pair, running_ids
 
 DEFAULT_DASHBOARD = ":8787"
 
@@ -137,9 +142,11 @@ def _dashboard_link() -> str | None:
 def run_pairs(entries: list[PairEntry], root: Path, srtm_dir: Path | None = None,
               reference: Path | None = None, options: dict[str, Any] | None = None,
               progress: bool = False, reference_vertical: VerticalChoice = "auto",
-              geoid: Path | None = None) -> tuple[list[PairResult], str | None]:
+              geoid: Path | None = None, catalog: Catalog | None = None,
+              ) -> tuple[list[PairResult], str | None]:
     """The pairs submitted to the flow's Dask task runner; (results in entry order, the Dask
-    dashboard link)."""
+    dashboard link). With the ``catalog`` they belong to, its map is refreshed as each pair
+    ends (:class:`tasks.archive.map.ArchiveMapper`)."""
     from prefect.futures import as_completed
 
     link = _dashboard_link()
@@ -154,6 +161,8 @@ def run_pairs(entries: list[PairEntry], root: Path, srtm_dir: Path | None = None
                             geoid=geoid)
     futures = {process_pair.submit(e, run): e for e in entries}
     results: dict[str, PairResult] = {}
+    mapper = _mapper(catalog, root, entries, srtm_dir, reference)
+    _refresh(mapper, futures, results)
     with _PairProgress(len(entries), progress) as bar:
         for future in as_completed(list(futures)):
             entry = futures[future]
@@ -163,7 +172,28 @@ def run_pairs(entries: list[PairEntry], root: Path, srtm_dir: Path | None = None
                 result = PairResult(entry.id, "failed", failure_reason(exc))
             results[entry.id] = result
             bar.advance(result)
+            if mapper is not None:
+                mapper.ended(result)
+                _refresh(mapper, futures, results)
     return [results[e.id] for e in entries], link
+
+
+def _mapper(catalog: Catalog | None, root: Path, entries: list[PairEntry],
+            srtm_dir: Path | None, reference: Path | None) -> ArchiveMapper | None:
+    """The map of the run (the catalog's pairs not in ``entries`` kept from an earlier run)."""
+    if catalog is None:
+        return None
+    todo = {e.id for e in entries}
+    return ArchiveMapper(catalog, Path(root), [i for i in catalog.ids if i not in todo],
+                         srtm_dir, reference)
+
+
+def _refresh(mapper: ArchiveMapper | None, futures: dict[Any, PairEntry],
+             results: dict[str, PairResult]) -> None:
+    """The map refreshed, the pairs not ended that Dask is processing shown running."""
+    if mapper is not None:
+        mapper.try_refresh(running_ids({f: e for f, e in futures.items()
+                                        if e.id not in results}))
 
 
 class _PairProgress:
@@ -251,7 +281,7 @@ def reprocess_archive(catalog: Path, out: Path, srtm_dir: Path | None = None,
                                      dashboard_address)
         found, link = run_pairs.with_options(task_runner=runner)(
             todo, root, srtm_dir, reference, options, progress,
-            reference_vertical=reference_vertical, geoid=geoid)
+            reference_vertical=reference_vertical, geoid=geoid, catalog=cat)
         results = {r.id: r for r in found}
     rows = tuple(
         pair_row(e.id, "skipped", root / e.id) if e.id in done_before
@@ -259,5 +289,6 @@ def reprocess_archive(catalog: Path, out: Path, srtm_dir: Path | None = None,
         for e in cat.pairs)
     csv_path, json_path = write_summary(rows, root, cat.source)
     publish_summary(rows, root)
+    ArchiveMapper(cat, root, done_before, srtm_dir, reference, results.values()).try_refresh()
     outcome = ArchiveOutcome(rows, csv_path, json_path, link)
     return outcome
