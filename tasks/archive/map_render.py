@@ -150,7 +150,7 @@ def _panel(m: ArchiveMap, frame: _Frame, by: str, x0: float) -> str:
         labels.append(f'<text x="{x:.1f}" y="{y + 4:.1f}" text-anchor="middle" '
                       f'font-size="11" font-weight="bold" stroke="#fff" stroke-width="3" '
                       f'paint-order="stroke">{i}</text>')
-    out += [*labels, "</g>", _scale_bar(frame), "</g>"]
+    out += [*labels, "</g>", _scale_bar(frame) if m.footprints.box() else "", "</g>"]
     return "\n".join(out)
 
 
@@ -222,6 +222,8 @@ def throughput_text(m: ArchiveMap) -> str:
     from tasks.archive.map import throughput
 
     t = throughput(m)
+    if not t.ended and not t.left:
+        return "No pair ran: every pair was complete from an earlier run."
     if not t.ended or t.per_hour is None:
         return f"No pair has ended yet in this run ({seconds_text(m.elapsed_s)} since it began)."
     text = (f"{t.ended} pairs ended in {seconds_text(m.elapsed_s)}: {t.per_hour:.0f} pairs per "

@@ -34,6 +34,9 @@ RUN = ("import sys\n"
        "state = reprocess_archive(catalog=sys.argv[1], out=sys.argv[2], srtm_dir=sys.argv[3],\n"
        "                          return_state=True)\n"
        "print(state.state_details.flow_run_id, state.name)\n")
+# the archive-map artifact's image, decoded and laid out
+MAP_DRAWN = ("() => Array.from(document.images).some(i => i.src.startsWith("
+             "'data:image/svg+xml') && i.complete && i.naturalWidth > 600)")
 # what the page shows once the UI has drawn it: the run, or Prefect's "Page not found"
 SHOWN = "name => document.body.innerText.includes(name)" \
         " || document.body.innerText.includes('Page not found')"
@@ -151,10 +154,17 @@ def test_the_prefect_ui_shows_the_finished_run(prefect_server, tmp_path: Path):
         artifacts = wait_for_text(page, "key => document.body.innerText.includes(key)",
                                   "archive-summary", tmp_path / "prefect_artifacts.png")
         page.screenshot(path=str(tmp_path / "prefect_artifacts.png"))
+        # the archive's map (tasks.archive.map), its SVG drawn by the UI's markdown
+        page.get_by_text("archive-map", exact=True).first.click()
+        wait_for_text(page, "key => document.body.innerText.includes(key)",
+                      "Archive map: 2 pairs", tmp_path / "prefect_map.png")
+        page.wait_for_function(MAP_DRAWN)
+        page.screenshot(path=str(tmp_path / "prefect_map.png"), full_page=True)
         # the same look on a run the server does not have: not shown, so the check can fail
         page.goto(f"{url}/runs/flow-run/{uuid.uuid4()}")
         absent = wait_for_text(page, SHOWN, run["name"], tmp_path / "prefect_absent.png")
-    print(f"screenshots of the run page: {shot}, {tmp_path / 'prefect_artifacts.png'}")
-    assert {"archive-summary", "archive-report"} <= {
+    print(f"screenshots of the run page: {shot}, {tmp_path / 'prefect_artifacts.png'}, "
+          f"{tmp_path / 'prefect_map.png'}")
+    assert {"archive-summary", "archive-report", "archive-map"} <= {
         line.strip() for line in artifacts.splitlines()}
     assert "Page not found" in absent and run["name"] not in absent
