@@ -88,7 +88,8 @@ def write_arrays_cog(items: list[CogItem], extra: list[Any] | None = None) -> tu
     values (statistics) are computed in the same pass and returned.
 
     Blocks are computed by Dask threads and streamed into tiled GeoTIFFs under one write
-    lock each (memory stays bounded), then GDAL's COG driver copies them with overviews,
+    lock each (memory stays bounded; uncompressed: they are read back once, so compressing
+    them was a second compression), then GDAL's COG driver copies them with overviews,
     compressing in as many threads as the blocks were computed in.
     Everything happens in temporary folders beside the outputs; each finished file
     replaces its output by a rename, so a failure never leaves a half-written product and
@@ -114,7 +115,7 @@ def write_arrays_cog(items: list[CogItem], extra: list[Any] | None = None) -> tu
             profile: dict[str, Any] = {
                 "driver": "GTiff", "width": arr.shape[1], "height": arr.shape[0], "count": 1,
                 "dtype": dtype.name, "tiled": True, "blockxsize": opts.blocksize,
-                "blockysize": opts.blocksize, "compress": "DEFLATE", "BIGTIFF": "IF_SAFER",
+                "blockysize": opts.blocksize, "compress": "NONE", "BIGTIFF": "IF_SAFER",
                 "nodata": opts.nodata,
             }
             if opts.transform is not None:
