@@ -112,7 +112,8 @@ def settings_changes(had: Mapping[str, Any] | None,
     (``had``, its ``settings``): every name when it records none (an older gcpfree's report);
     a setting it lacks is unchanged when it is unset now (null: an option added since, at its
     default)."""
-    had = had or {}
+    if not had:
+        return tuple(settings)
     return tuple(k for k in settings
                  if (had[k] != settings[k] if k in had else settings[k] is not None))
 

@@ -160,6 +160,41 @@ def test_rerun_processes_only_the_failed_pair(archive, capsys):
     assert float(rows["real"]["cp_left_rms_col_px"]) > 0  # figures still read from products
 
 
+def test_the_options_reach_every_pair_through_the_flow(tmp_path: Path, prefect_harness):
+    """The flow's ``options`` (every pair) and the catalog's own (one pair) decide which pairs
+    are complete, and reach each pair's run in its Dask worker: two pairs finished with
+    them are skipped; the same archive with a bad option fails both pairs with its reason,
+    their products untouched."""
+    from flows.options import OPTIONS
+    from flows.reprocess_archive import pair_params, reprocess_archive
+    from tasks.archive.catalog import read_catalog
+
+    cat, root, ref = tmp_path / "cat.csv", tmp_path / "root", tmp_path / "ref.tif"
+    cat.write_text("id,left,right,corrections\nown,own/l.tif,own/r.tif,offset\n"
+                   "plain,plain/l.tif,plain/r.tif,\n")
+    for name in ("own/l.tif", "own/r.tif", "plain/l.tif", "plain/r.tif"):
+        (tmp_path / name).parent.mkdir(exist_ok=True)
+        (tmp_path / name).write_text("not read: the pairs are complete or refused first")
+    options = {"self_calibrate": True, "surface.radius_m": 3000}
+    for entry in read_catalog(cat, tuple(OPTIONS)).pairs:
+        complete_pair(root / entry.id, FINISHED_REPORT, params=json.loads(json.dumps(
+            pair_params(entry, root, None, ref, options=options).to_dict())))
+    before = {i: snapshot(root / i) for i in ("own", "plain")}
+
+    def run(**extra):
+        outcome = reprocess_archive(catalog=cat, out=root, reference=ref, workers=1,
+                                    processes=False, dashboard_address=":0", **extra)
+        return {r.id: (r.status, r.reason) for r in outcome.rows}
+
+    assert run(options=options) == {"own": ("skipped", ""), "plain": ("skipped", "")}
+    found = run(options={**options, "surface.radius_m": -5.0})
+    assert {k: s for k, (s, _) in found.items()} == {"own": "failed", "plain": "failed"}
+    for pair_id, (_, reason) in found.items():
+        assert reason.startswith("the archive's options: surface matching needs a window "
+                                 "radius > 0 m"), reason
+        assert snapshot(root / pair_id) == before[pair_id]
+
+
 def test_bad_arguments_are_one_line_before_prefect(tmp_path: Path):
     (tmp_path / "cat.csv").write_text("id,left,right\n")
     with pytest.raises(InputError, match="lists no pair"):
