@@ -22,7 +22,9 @@ copyright = "the gcpfree developers, Apache-2.0"
 release = tomllib.loads((ROOT / "pyproject.toml").read_text())["project"]["version"]
 version = release
 
-extensions = ["myst_parser", "gcpfree_docs"]
+extensions = ["myst_parser", "sphinx.ext.autodoc", "sphinx.ext.napoleon", "gcpfree_docs"]
+autodoc_member_order = "bysource"
+autodoc_typehints = "signature"
 source_suffix = {".md": "markdown"}
 root_doc = "index"
 exclude_patterns = ["_ext", "reference/notes", "validation/generated/*.md", "studies/_*"]

@@ -30,7 +30,7 @@ REPO = Path(__file__).resolve().parents[2]
 DOCS = REPO / "docs"
 sys.path.insert(0, str(DOCS / "_ext"))
 
-from gcpfree_docs import commands, schemas, validation
+from gcpfree_docs import commands, executed, schemas, validation
 
 # the pages whose commands a reader copies: the tutorials, getting started, the README
 COMMAND_PAGES = sorted((DOCS / "tutorials").glob("*.md")) + [DOCS / "getting-started.md",
@@ -140,6 +140,17 @@ def test_the_speed_figures_are_read_from_the_bench_results():
     assert all(r["two_s"] < r["one_s"] for r in rounds)
 
 
+def test_an_executed_block_shows_its_output_and_a_raising_one_fails(tmp_path):
+    page = ("# P\n\n```{python-run}\nx = 6 * 7\nprint(x)\n```\n\ntext\n\n"
+            "```{python-run}\nprint(x + 1)\nopen('figures/f.png', 'wb').write(b'png')\n```\n")
+    out = executed.execute(page, tmp_path / "p.md", tmp_path / "generated" / "p")
+    assert "```python\nx = 6 * 7\nprint(x)\n```\n\n```text\n42\n```" in out  # one namespace
+    assert "```text\n43\n```" in out and "python-run" not in out
+    assert (tmp_path / "generated" / "p" / "f.png").read_bytes() == b"png"
+    with pytest.raises(executed.BlockError, match="block 2 raised"):
+        executed.execute(page.replace("x + 1", "y"), tmp_path / "p.md", tmp_path / "g")
+
+
 # ---------------------------------------------------------------------------- the built site
 
 
@@ -174,6 +185,21 @@ def test_the_site_has_every_page(site):
     expected |= {"index.html", "getting-started.html", "validation/index.html",
                  "method/index.html", "changelog.html"}
     assert expected <= built, sorted(expected - built)
+
+
+def test_the_python_api_tutorial_ran_in_the_build(site):
+    """The page's code ran when the site was built: the flows' typed results printed, the
+    tiny pair's check points oriented under 0.5 px, its DSM's figure made (the API's parts are
+    tests/flows/test_api.py's)."""
+    import html
+
+    text = html.unescape((site / "tutorials" / "python-api.html").read_text())
+    assert "SimulationSummary" in text and "OrientOutcome OrientReport" in text
+    assert "EvaluationReport" in text and "dsm.png" in text
+    rms = [float(v) for pair in re.findall(r"check points (\d+\.\d+) / (\d+\.\d+) px \(col",
+                                           text) for v in pair]
+    assert len(rms) == 4 and max(rms) < 0.5, rms
+    assert (site / "_images" / "dsm.png").stat().st_size > 10_000
 
 
 LOOK = """() => ({
