@@ -17,7 +17,7 @@ from tasks.simulate.block import (
     build_block_radiance,
     define_block,
     make_block_checkpoints,
-    render_block_image,
+    render_block_images,
     summarize_block,
     write_block_metadata,
 )
@@ -115,8 +115,7 @@ def simulate_block(params: BlockParams) -> BlockSummary:
     scene = build_truth_surface(scene, out)
     for d in range(params.layout.dates):
         build_block_radiance(scene, out, d)
-    for name in scene.image_names:
-        render_block_image(scene, out, name)
+        render_block_images(scene, out, d)
     make_block_checkpoints(scene, out)
     make_reference(scene, out)
     return summarize_block(scene, out)

@@ -12,7 +12,8 @@ simulator writes are printed beside the hashes: check points, DSM range, metadat
 Cases: ``tiny`` (the tiny preset, seed 11, lens, jitter, 10 % date change, an ERS-like SAR
 product), ``spot-crop`` (the spot preset's sensor and realistic errors, lens, jitter and date
 change, on a 1500 x 1500 px crop: 15 km instead of 60 km, registered in the child as the preset
-``spot-crop``). ``--record`` writes the hashes as the new golden ones. Prints per stage the
+``spot-crop``), ``block`` (``gcpfree simulate --block 2x2 --dates 2``, tiny, seed 5, realistic
+errors, lens, jitter, 10 % date change; not run unless named). ``--record`` writes the hashes as the new golden ones. Prints per stage the
 wall and CPU seconds (process CPU: every thread) and the load; exit status 1 when a hash differs.
 Tasks run through ``.fn`` (no Prefect server: its start would dwarf the tiny case).
 """
@@ -39,6 +40,8 @@ CASES: dict[str, dict] = {
              "errors": "simple", "sar": "ers"},
     "spot-crop": {"preset": "spot-crop", "seed": 1, "lens": True, "jitter": True,
                   "date_change": 0.1, "errors": "realistic", "sar": None},
+    "block": {"preset": "tiny", "seed": 5, "lens": True, "jitter": True, "date_change": 0.1,
+              "errors": "realistic", "sar": None, "block": (2, 2, 2)},
 }
 CROP_PX = 1500
 
@@ -72,6 +75,10 @@ def child(case: str, out: Path) -> None:
     cfg = CASES[case]
     times: list = []
     errors = error_config(cfg["preset"], cfg["errors"], lens=cfg["lens"], jitter=cfg["jitter"])
+    if "block" in cfg:
+        _block(times, cfg, errors, out)
+        print(json.dumps(times))
+        return
     from flows.simulate_scene import BUNDLED_DEM
     from tasks.simulate import scene as S
     from tasks.simulate.sar import simulate_sar
@@ -89,6 +96,26 @@ def child(case: str, out: Path) -> None:
     if cfg["sar"]:
         _stage(times, "sar", simulate_sar.fn, scene, out, cfg["sar"])
     print(json.dumps(times))
+
+
+def _block(times: list, cfg: dict, errors: object, out: Path) -> None:
+    """A block as ``gcpfree simulate --block`` makes it (its flow's tasks, in its order)."""
+    from core.simulation.block import BlockLayout
+    from flows.simulate_scene import BUNDLED_DEM
+    from tasks.simulate import block as B
+    from tasks.simulate.scene import build_truth_surface
+    from tasks.simulate.survey import make_reference
+
+    opts = B.BlockOptions(BlockLayout(*cfg["block"]), cfg["preset"], cfg["seed"], errors,
+                          date_change=cfg["date_change"])
+    scene = _stage(times, "define", B.define_block.fn, BUNDLED_DEM, out, opts)
+    _stage(times, "dimap", B.write_block_metadata.fn, scene, out)
+    scene = _stage(times, "truth", build_truth_surface.fn, scene, out)
+    for d in range(opts.layout.dates):
+        _stage(times, f"radiance{d}", B.build_block_radiance.fn, scene, out, d)
+        _stage(times, f"render{d}", B.render_block_images.fn, scene, out, d)
+    _stage(times, "checkpoints", B.make_block_checkpoints.fn, scene, out)
+    _stage(times, "reference", make_reference.fn, scene, out)
 
 
 # ---------------------------------------------------------------------------- the parent
@@ -121,7 +148,7 @@ def file_hashes(root: Path) -> dict[str, dict[str, str]]:
 
 def figures(root: Path) -> dict:
     """The figures the simulator writes about its scene(s): check points, DSM range, centre
-    errors of the metadata."""
+    errors of the metadata; for a block, its overlaps (%) and B/H between dates."""
     figs = {}
     for sj in sorted(root.rglob("scene.json")):
         s = json.loads(sj.read_text())
@@ -132,6 +159,11 @@ def figures(root: Path) -> dict:
                                for k, v in s.get("injected", {}).items()},
             "checkpoints": (len(json.loads(cp.read_text())["points"]) if cp.exists() else None),
         }
+        if (sj.parent / "block.json").exists():
+            fig = json.loads((sj.parent / "block.json").read_text())["figures"]
+            figs[sj.relative_to(root).as_posix()]["block"] = {
+                k: [g["overlap_pct"] if k != "stereo" else g["b_over_h"] for g in fig[k]]
+                for k in ("along_track", "across_track", "stereo")}
     return figs
 
 
@@ -188,7 +220,7 @@ def main() -> None:
         print(f"{case}: wall {got['wall_s']:.1f} s, CPU {got['cpu_s']:.1f} s, peak RSS "
               f"{got['peak_rss_mb']:.0f} MB, load {got['load']}")
         for name, w, c in got["stages"]:
-            print(f"  {name:<12} wall {w:7.1f} s  CPU {c:7.1f} s")
+            print(f"  {name:<14} wall {w:7.1f} s  CPU {c:7.1f} s")
         for scene, f in got["figures"].items():
             print(f"  {scene}: {json.dumps(f)}")
         if args.record:

@@ -67,9 +67,10 @@ from tasks.io.rasters import (
 from tasks.simulate.io import ScenePaths, products_exist, read_dem_window, surface_spec
 from tasks.simulate.scene import (
     DateLight,
+    RenderJob,
     check_world_options,
     earlier_scene,
-    render_to,
+    render_images,
     world_centre,
     write_radiance,
 )
@@ -323,12 +324,14 @@ def build_block_radiance(scene: SceneDef, out: Path, date_index: int) -> Path:
                           paths.date_radiance(date_index))
 
 
-@task(name="render-block-image")
-def render_block_image(scene: SceneDef, out: Path, name: str) -> Path:
-    """Render one image of the block on its date's radiance."""
+@task(name="render-block-images")
+def render_block_images(scene: SceneDef, out: Path, date_index: int) -> list[Path]:
+    """Render the block's images of one date on its radiance, side by side."""
     paths = BlockPaths(Path(out))
-    return render_to(scene, paths, name, paths.date_radiance(parse_image_name(name)[2]),
-                     derive_seed(scene.seed, "sensor-noise", name))
+    names = [n for n in scene.image_names if parse_image_name(n)[2] == date_index]
+    return render_images(scene, paths, [
+        RenderJob(n, paths.date_radiance(date_index), derive_seed(scene.seed, "sensor-noise", n))
+        for n in names])
 
 
 @task(name="block-check-points")

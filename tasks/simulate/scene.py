@@ -339,29 +339,44 @@ def render_block(block: np.ndarray, scene: SceneDef, model_json: str, noise_seed
     )
 
 
-def render_to(scene: SceneDef, paths: ScenePaths, name: str, radiance_path: Path,
-              noise_seed: int) -> Path:
-    """Render image ``name`` (its truth model, its date's radiance) tile by tile and write it
-    with the RPC of its delivered metadata, where ``paths`` put them."""
-    if products_exist(paths.image(name)):
-        return paths.image(name)
-    truth_json = paths.truth_model(name).read_text()
-    delivered = PushbroomModel.from_json(paths.delivered(name).read_text())
+@dataclass(frozen=True)
+class RenderJob:
+    """One image to render: its name (its models' and file's, where the paths put them), its
+    date's radiance and the seed of its sensor noise."""
+
+    name: str
+    radiance_path: Path
+    noise_seed: int
+
+
+def _image_item(scene: SceneDef, paths: ScenePaths, job: RenderJob) -> CogItem:
+    """The image's DN, tile by tile, as a COG item with the RPC of its delivered metadata."""
+    truth_json = paths.truth_model(job.name).read_text()
+    delivered = PushbroomModel.from_json(paths.delivered(job.name).read_text())
     truth = _model(truth_json)
     dtype = np.uint8 if scene.bits == 8 else np.uint16
     base = darr.zeros((truth.n_rows, truth.n_cols), chunks=CHUNK, dtype=dtype)
     img = darr.map_blocks(
-        render_block, base, scene=scene, model_json=truth_json, noise_seed=noise_seed,
-        dsm_path=str(paths.dsm), radiance_path=str(radiance_path), dtype=dtype,
+        render_block, base, scene=scene, model_json=truth_json, noise_seed=job.noise_seed,
+        dsm_path=str(paths.dsm), radiance_path=str(job.radiance_path), dtype=dtype,
     )
     lo, hi = scene.dsm_range_m
     rpc, report = fit_rpc(delivered, truth.n_cols, truth.n_rows, (lo - 100.0, hi + 100.0))
     tags = {"rpc_fit_max_px": f"{report.max_px:.2e}", "rpc_fit_rms_px": f"{report.rms_px:.2e}",
-            "metadata": paths.delivered(name).name, "seed": str(scene.seed)}
-    with rasterio.Env(GDAL_CACHEMAX=SIM_CACHE_MB):
-        write_arrays_cog([CogItem(img, paths.image(name), CogOptions(
-            rpcs=RPC.from_gdal(rpc.to_gdal_tags()), nodata=0, tags=tags))])
-    return paths.image(name)
+            "metadata": paths.delivered(job.name).name, "seed": str(scene.seed)}
+    return CogItem(img, paths.image(job.name), CogOptions(
+        rpcs=RPC.from_gdal(rpc.to_gdal_tags()), nodata=0, tags=tags))
+
+
+def render_images(scene: SceneDef, paths: ScenePaths, jobs: list[RenderJob]) -> list[Path]:
+    """Render the images (each on its truth model and its date's radiance) in one pass of
+    tiles, so that small images render side by side, and write each with the RPC of its
+    delivered metadata, where ``paths`` put them; images made earlier are kept."""
+    todo = [j for j in jobs if not products_exist(paths.image(j.name))]
+    if todo:
+        with rasterio.Env(GDAL_CACHEMAX=SIM_CACHE_MB):
+            write_arrays_cog([_image_item(scene, paths, j) for j in todo])
+    return [paths.image(j.name) for j in jobs]
 
 
 @task(name="render-image")
@@ -370,8 +385,8 @@ def render_image(scene: SceneDef, out: Path, image_index: int) -> Path:
     metadata."""
     paths = ScenePaths(Path(out))
     name = scene.image_names[image_index]
-    return render_to(scene, paths, name, paths.radiance(name),
-                     derive_seed(scene.seed, "sensor-noise", image_index))
+    return render_images(scene, paths, [RenderJob(
+        name, paths.radiance(name), derive_seed(scene.seed, "sensor-noise", image_index))])[0]
 
 
 # ---------------------------------------------------------------------------- E. check points

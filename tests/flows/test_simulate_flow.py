@@ -73,8 +73,8 @@ def test_simulate_errors_option_reaches_the_flow(monkeypatch, tmp_path):
 @pytest.fixture(scope="module")
 def tiny_block(tmp_path_factory):
     """A 2 x 1 tiny block over two dates (4 images, realistic errors, lens, jitter) through
-    the block's tasks: its models, truth surface, check points and one image rendered (the
-    geometry needs no more). (out_dir, SceneDef)."""
+    the block's tasks: its models, truth surface, check points and the second date's images
+    (the geometry needs no more). (out_dir, SceneDef)."""
     from core.simulation.block import BlockLayout
     from core.simulation.scene import ErrorConfig
     from tasks.simulate import block as B
@@ -89,7 +89,7 @@ def tiny_block(tmp_path_factory):
     scene = build_truth_surface.fn(scene, out)
     B.make_block_checkpoints.fn(scene, out)
     B.build_block_radiance.fn(scene, out, 1)
-    B.render_block_image.fn(scene, out, "r1c0d1")
+    B.render_block_images.fn(scene, out, 1)
     return out, scene
 
 
