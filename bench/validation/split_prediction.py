@@ -34,10 +34,10 @@ import numpy as np
 sys.path.insert(0, str(Path(__file__).resolve().parents[2]))
 
 from bench.common import solution_again
-from core.geodesy import metres_per_degree  # noqa: E402
-from core.orientation.adjust import Solution  # noqa: E402
-from tasks.absolute.orientation import NAMES, read_checkpoints  # noqa: E402
-from tasks.io.sensors import read_model_file  # noqa: E402
+from core.geodesy import metres_per_degree
+from core.orientation.adjust import Solution
+from tasks.absolute.orientation import NAMES, read_checkpoints
+from tasks.io.sensors import read_model_file
 
 DRAWS = 4000
 LOW, HIGH = 0.5, 1.5
@@ -67,7 +67,9 @@ def right_chance(solution: Solution, k: int, lon: np.ndarray, lat: np.ndarray,
 def scene_figures(scene: Path, out: Path, rng: np.random.Generator) -> dict[str, Any]:
     rep = json.loads((out / "report.json").read_text())
     err = json.loads((scene / "truth" / "reference_errors.json").read_text())
-    errors = json.loads((scene / "truth" / "scene.json").read_text()).get("errors", "?")
+    errors = json.loads((scene / "truth" / "scene.json").read_text()).get("errors", {})
+    errors = ("realistic" if errors.get("realistic") else "simple") if isinstance(errors, dict) \
+        else str(errors)
     shift = (float(err["shift_east_m"]), float(err["shift_north_m"]))
     points = read_checkpoints(scene / "truth" / "checkpoints.json")
     solution = solution_again(scene, out)

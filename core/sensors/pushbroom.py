@@ -55,6 +55,7 @@ value of the wrong type raises :class:`~core.errors.InputError` naming the key p
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from dataclasses import dataclass, field, replace
 from typing import Literal
 
@@ -323,6 +324,27 @@ class PushbroomModel:
         shape, (c, r, h) = _flat(col, row, h_m)
         lon, lat = self._localize_flat(c, self.line_time_s(r), h)
         return lon.reshape(shape), lat.reshape(shape)
+
+    def localize_heights(
+        self, col: ArrayLike, row: ArrayLike, heights_m: Sequence[float]
+    ) -> list[tuple[FloatArray, FloatArray]]:
+        """:meth:`localize` of the same pixels at each of ``heights_m``, (lon, lat) per height:
+        the platform computed once per image line and the lines of sight once (the values of
+        ``localize``, which recomputes them for every pixel and height; a simulator casting
+        lines of sight through whole blocks of lines at several heights spent most of its
+        localisation there)."""
+        shape, (c, r) = _flat(col, row)
+        t_line, line = np.unique(self.line_time_s(r), return_inverse=True)
+        pos, cam2ecef, _, _ = self._platform(t_line)
+        pos, cam2ecef = pos[line], cam2ecef[line]
+        xi, yi = self._ideal(c)
+        u = np.einsum("mij,mj->mi", cam2ecef, np.stack([xi, yi, np.ones_like(xi)], axis=1))
+        u /= np.linalg.norm(u, axis=1, keepdims=True)
+        out = []
+        for h in heights_m:
+            lon, lat = intersect_ellipsoid(pos, u, np.full(c.size, float(h)))
+            out.append((lon.reshape(shape), lat.reshape(shape)))
+        return out
 
     def localize_on_dem(
         self, col: ArrayLike, row: ArrayLike, dem: GeoDEM, **kwargs: object

@@ -71,8 +71,12 @@ def image_rays(model: SensorModel, rows: NDArray, cols: NDArray, levels: tuple[f
     sub = np.unique(np.concatenate([cols[::col_step], cols[-1:]])).astype(np.float64)
     rr, cc = np.meshgrid(rows.astype(np.float64), sub, indexing="ij")
     xs, ys = [], []
-    for h in levels:
-        lon, lat = model.localize(cc.ravel(), rr.ravel(), np.full(cc.size, h))
+    at_heights = getattr(model, "localize_heights", None)  # a pushbroom's: once per line
+    if at_heights is not None:
+        ground = at_heights(cc.ravel(), rr.ravel(), levels)
+    else:
+        ground = [model.localize(cc.ravel(), rr.ravel(), np.full(cc.size, h)) for h in levels]
+    for lon, lat in ground:
         x, y = to_xy(lon, lat)
         x = x.reshape(rr.shape)
         y = y.reshape(rr.shape)

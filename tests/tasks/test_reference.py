@@ -14,9 +14,9 @@ from rasterio.transform import from_origin
 
 from core.errors import CoverageError, InputError
 from core.geodesy import BBox
+from tasks.io.dem_tiles import find_tiles, mosaic_grid, required_tiles
 from tasks.io.geoid import BUNDLED_SRTM_DIR, EGM96_GTX
 from tasks.io.reference import build_reference, locate_tiles
-from tasks.io.dem_tiles import find_tiles, mosaic_grid, required_tiles
 
 HGT = BUNDLED_SRTM_DIR / "N44E005.hgt"
 
