@@ -6,9 +6,8 @@ No flow, by design (as ``info``): plain functions of :mod:`tasks.io.model_points
 from __future__ import annotations
 
 import argparse
-from pathlib import Path
 
-from flows.commands.project import MODEL_HELP
+from flows.commands.project import add_points_arguments
 
 
 def add_parser(sub: argparse._SubParsersAction) -> None:
@@ -22,11 +21,7 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
             "lon,lat added (WGS84 degrees); for a SAR model also azimuth_time_utc (ISO 8601) "
             "and slant_range_time_s (two-way). Other columns are kept."),
     )
-    p.add_argument("--model", type=Path, required=True, metavar="M", help=MODEL_HELP)
-    p.add_argument("--points", type=Path, required=True, metavar="IN.csv",
-                   help="CSV with a header holding col,row,h")
-    p.add_argument("--out", type=Path, required=True, metavar="OUT.csv",
-                   help="the CSV to write (the input's columns plus lon,lat)")
+    add_points_arguments(p, reads="col,row,h", adds="lon,lat")
 
 
 def run(args: argparse.Namespace) -> int:

@@ -24,11 +24,17 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
             "pixel centres at integers); for a SAR model also azimuth_time_utc (ISO 8601) and "
             "slant_range_time_s (two-way). Other columns are kept."),
     )
+    add_points_arguments(p, reads="lon,lat,h", adds="col,row")
+
+
+def add_points_arguments(p: argparse.ArgumentParser, *, reads: str, adds: str) -> None:
+    """``--model --points --out`` of ``project`` and ``localize``: a CSV holding the columns
+    ``reads`` through the model into one with ``adds`` too."""
     p.add_argument("--model", type=Path, required=True, metavar="M", help=MODEL_HELP)
     p.add_argument("--points", type=Path, required=True, metavar="IN.csv",
-                   help="CSV with a header holding lon,lat,h")
+                   help=f"CSV with a header holding {reads}")
     p.add_argument("--out", type=Path, required=True, metavar="OUT.csv",
-                   help="the CSV to write (the input's columns plus col,row)")
+                   help=f"the CSV to write (the input's columns plus {adds})")
 
 
 def run(args: argparse.Namespace) -> int:

@@ -17,6 +17,7 @@ from __future__ import annotations
 
 import csv
 import io
+from collections.abc import Callable
 from pathlib import Path
 
 import numpy as np
@@ -113,27 +114,33 @@ def _sar_columns(model: SarModel, t: NDArray[np.float64], tau: NDArray[np.float6
     return {"azimuth_time_utc": model.utc_of_times(t), "slant_range_time_s": _fmt(tau)}
 
 
-def project_points(model: str | Path, points: str | Path, out: str | Path) -> Path:
-    """Ground points (``lon,lat,h``) -> image (adds ``col,row``, and SAR times)."""
+def _through_model(model: str | Path, points: str | Path, out: str | Path,
+                   needed: tuple[str, ...], added: tuple[str, str],
+                   convert: Callable[..., tuple[NDArray[np.float64], NDArray[np.float64]]],
+                   sar_times: Callable[..., tuple[NDArray[np.float64], NDArray[np.float64]]]
+                   ) -> Path:
+    """The ``needed`` columns of ``points`` through the model: ``convert(model, a, b, h)``
+    gives the two ``added`` columns, ``sar_times(model, a, b, h)`` a SAR model's (t, tau)."""
     points, out = Path(points), Path(out)
     _check_out(out, points)
-    header, body, (lon, lat, h) = _read_points(points, PROJECT_IN)
-    lm = load_model(model)
-    col, row = lm.model.project(lon, lat, h)
-    added = {"col": _fmt(col), "row": _fmt(row)}
-    if isinstance(lm.model, SarModel):
-        added |= _sar_columns(lm.model, *lm.model.times(lon, lat, h))
-    return _write(out, header, body, added)
+    header, body, (a, b, h) = _read_points(points, needed)
+    m = load_model(model).model
+    x, y = convert(m, a, b, h)
+    columns = {added[0]: _fmt(x), added[1]: _fmt(y)}
+    if isinstance(m, SarModel):
+        columns |= _sar_columns(m, *sar_times(m, a, b, h))
+    return _write(out, header, body, columns)
+
+
+def project_points(model: str | Path, points: str | Path, out: str | Path) -> Path:
+    """Ground points (``lon,lat,h``) -> image (adds ``col,row``, and SAR times)."""
+    return _through_model(model, points, out, PROJECT_IN, ("col", "row"),
+                          lambda m, lon, lat, h: m.project(lon, lat, h),
+                          lambda m, lon, lat, h: m.times(lon, lat, h))
 
 
 def localize_points(model: str | Path, points: str | Path, out: str | Path) -> Path:
     """Image points at heights (``col,row,h``) -> ground (adds ``lon,lat``, and SAR times)."""
-    points, out = Path(points), Path(out)
-    _check_out(out, points)
-    header, body, (col, row, h) = _read_points(points, LOCALIZE_IN)
-    lm = load_model(model)
-    lon, lat = lm.model.localize(col, row, h)
-    added = {"lon": _fmt(lon), "lat": _fmt(lat)}
-    if isinstance(lm.model, SarModel):
-        added |= _sar_columns(lm.model, *lm.model.times_of_image(col, row))
-    return _write(out, header, body, added)
+    return _through_model(model, points, out, LOCALIZE_IN, ("lon", "lat"),
+                          lambda m, col, row, h: m.localize(col, row, h),
+                          lambda m, col, row, h: m.times_of_image(col, row))
