@@ -3,13 +3,13 @@ or a block of R x C scenes over K dates of one world (``simulate-block``)."""
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 
 from prefect import flow
 
 from core.simulation.block import BlockLayout
-from core.simulation.scene import error_config
+from core.simulation.scene import ErrorConfig, error_config
 from tasks.io.geoid import BUNDLED_SRTM_DIR
 from tasks.simulate.block import (
     BlockOptions,
@@ -38,8 +38,9 @@ BUNDLED_DEM = BUNDLED_SRTM_DIR / "N44E005.hgt"
 
 
 @dataclass(frozen=True)
-class SimulationParams:
-    """Parameters of :func:`simulate_scene` (see ``gcpfree simulate --help``)."""
+class WorldParams:
+    """What a simulated pair and a simulated block share: where, over which DEM, the preset
+    and the errors of their images (see ``gcpfree simulate --help``)."""
 
     out: Path
     dem: Path = BUNDLED_DEM
@@ -51,9 +52,20 @@ class SimulationParams:
     relief_factor: float = 1.0
     bits: int = 8
     center: tuple[float, float] | None = None
-    lidar: bool = True
     dem_vertical: str = "auto"
     errors: str | None = None  # "realistic" or "simple"; None: the preset's default
+
+    def error_config(self) -> ErrorConfig:
+        """The errors the images carry: the preset's, or ``errors``, with the lens and jitter
+        asked for."""
+        return error_config(self.preset, self.errors, lens=self.lens, jitter=self.jitter)
+
+
+@dataclass(frozen=True)
+class SimulationParams(WorldParams):
+    """Parameters of :func:`simulate_scene` (see ``gcpfree simulate --help``)."""
+
+    lidar: bool = True
     sar: str | None = None  # "ers" or "s1": also a SAR product of the same world
 
 
@@ -62,8 +74,7 @@ def simulate_scene(params: SimulationParams) -> SimulationSummary:
     """Scene and models -> truth surface -> radiance and image per date -> check points, lidar
     -> (with ``sar``) the SAR product of the same world."""
     out = Path(params.out)
-    errors = error_config(params.preset, params.errors, lens=params.lens, jitter=params.jitter)
-    scene = define_scene(Path(params.dem), out, params.preset, params.seed, errors,
+    scene = define_scene(Path(params.dem), out, params.preset, params.seed, params.error_config(),
                          params.relief_factor, params.bits, params.date_change, params.center,
                          params.dem_vertical)
     write_spot_metadata(scene, out)
@@ -81,22 +92,10 @@ def simulate_scene(params: SimulationParams) -> SimulationSummary:
 
 
 @dataclass(frozen=True)
-class BlockParams:
+class BlockParams(WorldParams):
     """Parameters of :func:`simulate_block` (``gcpfree simulate --block RxC --dates K``)."""
 
-    out: Path
-    layout: BlockLayout
-    dem: Path = BUNDLED_DEM
-    preset: str = "tiny"
-    seed: int = 0
-    lens: bool = False
-    jitter: bool = False
-    date_change: float = 0.0
-    relief_factor: float = 1.0
-    bits: int = 8
-    center: tuple[float, float] | None = None
-    dem_vertical: str = "auto"
-    errors: str | None = None
+    layout: BlockLayout = field(kw_only=True)
     flat_scene: str | None = None  # "r{row}c{col}": that scene's ground too flat
 
 
@@ -107,7 +106,7 @@ def simulate_block(params: BlockParams) -> BlockSummary:
     out = Path(params.out)
     opts = BlockOptions(
         params.layout, params.preset, params.seed,
-        error_config(params.preset, params.errors, lens=params.lens, jitter=params.jitter),
+        params.error_config(),
         params.relief_factor, params.bits, params.date_change, params.center,
         params.dem_vertical, params.flat_scene)
     scene = define_block(Path(params.dem), out, opts)

@@ -7,7 +7,7 @@ from __future__ import annotations
 
 import argparse
 from pathlib import Path
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Any
 
 from flows.commands._pair import VERTICAL_HELP, VERTICALS
 
@@ -99,13 +99,8 @@ def run(args: argparse.Namespace) -> int:
         return _run_block(args, dem, layout)
     from flows.simulate_scene import SimulationParams, simulate_scene
 
-    summary = simulate_scene(SimulationParams(
-        out=args.out, dem=dem, preset=args.preset, seed=args.seed, lens=args.lens,
-        jitter=args.jitter, date_change=args.date_change, relief_factor=args.relief_factor,
-        bits=args.bits, center=tuple(args.center) if args.center else None,
-        lidar=not args.no_lidar, dem_vertical=args.dem_vertical, errors=args.errors,
-        sar=args.sar,
-    ))
+    summary = simulate_scene(SimulationParams(**_world(args, dem), lidar=not args.no_lidar,
+                                              sar=args.sar))
     print("\n".join(summary.lines()))
     if args.sar:
         from tasks.simulate.sar import sar_summary
@@ -132,14 +127,19 @@ def _block_layout(args: argparse.Namespace) -> BlockLayout | None:
     return layout
 
 
+def _world(args: argparse.Namespace, dem: Path) -> dict[str, Any]:
+    """The fields of :class:`flows.simulate_scene.WorldParams` (a pair's and a block's)."""
+    return {"out": args.out, "dem": dem, "preset": args.preset, "seed": args.seed,
+            "lens": args.lens, "jitter": args.jitter, "date_change": args.date_change,
+            "relief_factor": args.relief_factor, "bits": args.bits,
+            "center": tuple(args.center) if args.center else None,
+            "dem_vertical": args.dem_vertical, "errors": args.errors}
+
+
 def _run_block(args: argparse.Namespace, dem: Path, layout: BlockLayout) -> int:
     from flows.simulate_scene import BlockParams, simulate_block
 
-    summary = simulate_block(BlockParams(
-        out=args.out, layout=layout, dem=dem, preset=args.preset, seed=args.seed,
-        lens=args.lens, jitter=args.jitter, date_change=args.date_change,
-        relief_factor=args.relief_factor, bits=args.bits,
-        center=tuple(args.center) if args.center else None, dem_vertical=args.dem_vertical,
-        errors=args.errors, flat_scene=args.flat_scene))
+    summary = simulate_block(BlockParams(**_world(args, dem), layout=layout,
+                                         flat_scene=args.flat_scene))
     print("\n".join(summary.lines()))
     return 0
