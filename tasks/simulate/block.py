@@ -14,16 +14,14 @@ pair's. The world, its truth rasters and reference are made by the pair simulato
 from __future__ import annotations
 
 from dataclasses import dataclass, field
-from functools import partial
 from pathlib import Path
 
 import numpy as np
 from prefect import task
 
-from core.errors import InsufficientDataError
 from core.geodesy import BBox, utm_epsg
 from core.jsonio import parse_json
-from core.points import CheckPointSet, GeoPoint
+from core.points import GeoPoint
 from core.sensors.pushbroom import PushbroomModel
 from core.sensors.spot import spot_scene_from_model
 from core.sensors.viewing import image_corners_px, pair_geometry
@@ -41,7 +39,6 @@ from core.simulation.block import (
 )
 from core.simulation.checkpoints import select_block_checkpoints
 from core.simulation.hashing import derive_seed
-from core.simulation.raycast import ray_levels
 from core.simulation.realistic import metadata_scene
 from core.simulation.scene import (
     PRESETS,
@@ -61,10 +58,9 @@ from tasks.io.rasters import (
     CogOptions,
     atomic_write_json,
     atomic_write_text,
-    read_surface_window,
     write_arrays_cog,
 )
-from tasks.simulate.io import ScenePaths, products_exist, read_dem_window, surface_spec
+from tasks.simulate.io import ScenePaths, products_exist, read_dem_window
 from tasks.simulate.scene import (
     DateLight,
     RenderJob,
@@ -72,6 +68,7 @@ from tasks.simulate.scene import (
     earlier_scene,
     render_images,
     world_centre,
+    write_checkpoints,
     write_radiance,
 )
 
@@ -338,26 +335,10 @@ def render_block_images(scene: SceneDef, out: Path, date_index: int) -> list[Pat
 def make_block_checkpoints(scene: SceneDef, out: Path) -> Path:
     """Bare-soil check points seen by two images or more, each with its true position in every
     image that sees it (``truth/checkpoints.json``, keyed by image name)."""
-    paths = BlockPaths(Path(out))
-    if products_exist(paths.checkpoints):
-        return paths.checkpoints
-    models = {n: PushbroomModel.from_json(paths.truth_model(n).read_text())
-              for n in scene.image_names}
     n_scenes = len({parse_image_name(n)[:2] for n in scene.image_names})
-    proj = Projection(scene.epsg)
-    points = select_block_checkpoints(
-        surface_spec(scene), models, scene.grid,
-        np.random.default_rng(derive_seed(scene.seed, "block-checkpoints")), proj.to_lonlat,
-        proj.to_xy, partial(read_surface_window, paths.dsm), ray_levels(scene.dsm_range_m),
-        n_wanted=CHECKPOINTS_PER_SCENE * n_scenes)
-    if len(points) < 20 * n_scenes:
-        raise InsufficientDataError(
-            f"only {len(points)} visible bare-soil check points found in the block "
-            f"({20 * n_scenes} needed); the world is mostly water, forest or town: choose "
-            "another --center")
-    doc = CheckPointSet(f"EPSG:{scene.epsg}", scene.image_names, tuple(points))
-    atomic_write_json(paths.checkpoints, doc.to_dict())
-    return paths.checkpoints
+    return write_checkpoints(scene, BlockPaths(Path(out)), select_block_checkpoints,
+                             "block-checkpoints", CHECKPOINTS_PER_SCENE * n_scenes,
+                             20 * n_scenes, "in the block", "world")
 
 
 @dataclass(frozen=True)

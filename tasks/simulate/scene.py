@@ -10,6 +10,7 @@ reading of the DEM the world stands on are in :mod:`tasks.simulate.io`.
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass, replace
 from functools import lru_cache, partial
 from pathlib import Path
@@ -24,7 +25,7 @@ from rasterio.rpc import RPC
 from core.errors import InputError, InsufficientDataError
 from core.geodesy import utm_epsg
 from core.jsonio import parse_json
-from core.points import CheckPointSet, GeoPoint
+from core.points import CheckPoint, CheckPointSet, GeoPoint
 from core.sensors.pushbroom import PushbroomModel
 from core.sensors.rpcfit import fit_rpc
 from core.sensors.spot import spot_scene_from_model
@@ -395,23 +396,30 @@ def render_image(scene: SceneDef, out: Path, image_index: int) -> Path:
 @task(name="check-points")
 def make_checkpoints(scene: SceneDef, out: Path, n_wanted: int = 100) -> Path:
     """Independent check points on bare soil, visible in both images, with true image coords."""
-    paths = ScenePaths(Path(out))
+    return write_checkpoints(scene, ScenePaths(Path(out)), select_checkpoints, "checkpoints",
+                             n_wanted, 50, "in the overlap", "scene")
+
+
+def write_checkpoints(scene: SceneDef, paths: ScenePaths, select: Callable[..., list[CheckPoint]],
+                      seed_label: str, n_wanted: int, needed: int, where: str, world: str
+                      ) -> Path:
+    """``paths.checkpoints``: the points ``select`` (:mod:`core.simulation.checkpoints`) finds
+    through the truth models and DSM, drawn from the seed ``seed_label``; fewer than ``needed``
+    is an InsufficientDataError saying ``where`` they were looked for. Kept when made earlier."""
     if products_exist(paths.checkpoints):
         return paths.checkpoints
     models = {
         n: PushbroomModel.from_json(paths.truth_model(n).read_text()) for n in scene.image_names}
     proj = Projection(scene.epsg)
-    points = select_checkpoints(
-        surface_spec(scene), models, scene.grid, np.random.default_rng(derive_seed(scene.seed,
-                                                                            "checkpoints")),
-        proj.to_lonlat, proj.to_xy, partial(read_surface_window, paths.dsm),
-        ray_levels(scene.dsm_range_m), n_wanted=n_wanted,
-    )
-    if len(points) < 50:
+    points = select(
+        surface_spec(scene), models, scene.grid,
+        np.random.default_rng(derive_seed(scene.seed, seed_label)), proj.to_lonlat, proj.to_xy,
+        partial(read_surface_window, paths.dsm), ray_levels(scene.dsm_range_m),
+        n_wanted=n_wanted)
+    if len(points) < needed:
         raise InsufficientDataError(
-            f"only {len(points)} visible bare-soil check points found in the overlap (50 "
-            "needed); the scene is mostly water, forest or town: choose another --center"
-        )
+            f"only {len(points)} visible bare-soil check points found {where} ({needed} "
+            f"needed); the {world} is mostly water, forest or town: choose another --center")
     doc = CheckPointSet(f"EPSG:{scene.epsg}", scene.image_names, tuple(points))
     atomic_write_json(paths.checkpoints, doc.to_dict())
     return paths.checkpoints
