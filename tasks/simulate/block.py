@@ -85,15 +85,6 @@ class BlockPaths(ScenePaths):
     def images(self) -> Path:
         return self.root / "images"
 
-    def image(self, name: str) -> Path:
-        return self.images / f"{name}.tif"
-
-    def delivered(self, name: str) -> Path:
-        return self.images / f"{name}.json"
-
-    def dimap(self, name: str) -> Path:
-        return self.images / f"{name}.DIM"
-
     def date_radiance(self, date_index: int) -> Path:
         return self.work / f"radiance_d{date_index}.tif"
 

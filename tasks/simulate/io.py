@@ -48,14 +48,19 @@ class ScenePaths:
     def scene_json(self) -> Path:
         return self.truth / "scene.json"
 
+    @property
+    def images(self) -> Path:
+        """The folder of the images and their delivered models (a pair's: DIR itself)."""
+        return self.root
+
     def image(self, name: str) -> Path:
-        return self.root / f"{name}.tif"
+        return self.images / f"{name}.tif"
 
     def delivered(self, name: str) -> Path:
-        return self.root / f"{name}.json"
+        return self.images / f"{name}.json"
 
     def dimap(self, name: str) -> Path:
-        return self.root / f"{name}.DIM"
+        return self.images / f"{name}.DIM"
 
     def truth_model(self, name: str) -> Path:
         return self.truth / f"{name}_truth.json"
