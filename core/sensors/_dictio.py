@@ -88,6 +88,18 @@ def get_float_array(d: object, key: str, path: str, ndim: int) -> NDArray[np.flo
         raise _bad(path, key, "a rectangular nested list of numbers", v) from exc
 
 
+def get_float_arrays(d: object, path: str, **ndims: int) -> dict[str, NDArray[np.float64]]:
+    """The float arrays at the keys named, each of its number of dimensions
+    (:func:`get_float_array`), read in the order given."""
+    return {key: get_float_array(d, key, path, ndim=n) for key, n in ndims.items()}
+
+
+def float_lists(obj: object, *names: str) -> dict[str, list]:
+    """The arrays ``obj.<name>`` as (nested) lists, keyed by name: what
+    :func:`get_float_arrays` reads back."""
+    return {name: getattr(obj, name).tolist() for name in names}
+
+
 def get_str_tuple(d: object, key: str, path: str) -> tuple[str, ...]:
     v = _need(d, key, path)
     if not isinstance(v, list) or not all(isinstance(x, str) for x in v):

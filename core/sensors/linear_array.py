@@ -24,7 +24,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from core.errors import InputError
-from core.sensors._dictio import get_float, get_float_array, get_int, get_str
+from core.sensors._dictio import float_lists, get_float, get_float_arrays, get_int, get_str
 
 FloatArray = NDArray[np.float64]
 
@@ -235,15 +235,13 @@ class LookAngleTable:
     def to_dict(self) -> dict:
         return {
             "type": "table",
-            "psi_x_rad": self.psi_x_rad.tolist(),
-            "psi_y_rad": self.psi_y_rad.tolist(),
+            **float_lists(self, "psi_x_rad", "psi_y_rad"),
         }
 
     @classmethod
     def from_dict(cls, d: object, path: str = "camera") -> LookAngleTable:
         return cls(
-            psi_x_rad=get_float_array(d, "psi_x_rad", path, ndim=1),
-            psi_y_rad=get_float_array(d, "psi_y_rad", path, ndim=1),
+            **get_float_arrays(d, path, psi_x_rad=1, psi_y_rad=1),
         )
 
     @classmethod

@@ -24,7 +24,13 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from core.errors import InputError
-from core.sensors._dictio import get_float, get_float_array, get_float_tuple, get_str
+from core.sensors._dictio import (
+    float_lists,
+    get_float,
+    get_float_arrays,
+    get_float_tuple,
+    get_str,
+)
 
 FloatArray = NDArray[np.float64]
 
@@ -115,18 +121,14 @@ class Orbit:
     def to_dict(self) -> dict:
         return {
             "epoch_utc": self.epoch_utc,
-            "times_s": self.times_s.tolist(),
-            "positions_m": self.positions_m.tolist(),
-            "velocities_m_s": self.velocities_m_s.tolist(),
+            **float_lists(self, "times_s", "positions_m", "velocities_m_s"),
             **({"velocity_frame": self.velocity_frame} if self.velocity_frame != "ecef" else {}),
         }
 
     @classmethod
     def from_dict(cls, d: object, path: str = "orbit") -> Orbit:
         return cls(
-            times_s=get_float_array(d, "times_s", path, ndim=1),
-            positions_m=get_float_array(d, "positions_m", path, ndim=2),
-            velocities_m_s=get_float_array(d, "velocities_m_s", path, ndim=2),
+            **get_float_arrays(d, path, times_s=1, positions_m=2, velocities_m_s=2),
             epoch_utc=get_str(d, "epoch_utc", path, default=""),
             velocity_frame=get_str(d, "velocity_frame", path, default="ecef"),
         )
@@ -199,12 +201,18 @@ class Attitude:
             terms.append((axis, amp, freq, phase))
         object.__setattr__(self, "jitter", tuple(terms))
 
-    def angles(self, t_s: FloatArray, delta: FloatArray | None = None) -> FloatArray:
-        """(3, m) roll, pitch, yaw radians at times t (m,), with ``delta`` (3, 3) added to c0..c2."""
+    def _coeffs_at(self, t_s: FloatArray, delta: FloatArray | None
+                   ) -> tuple[FloatArray, FloatArray]:
+        """The polynomial coefficients (3, k), ``delta`` (3, 3) added to c0..c2, and the times
+        from ``t_ref_s``, s."""
         c = self._coeffs if delta is None else self._coeffs.copy()
         if delta is not None:
             c[:, :3] += delta
-        dt = np.asarray(t_s, dtype=np.float64) - self.t_ref_s
+        return c, np.asarray(t_s, dtype=np.float64) - self.t_ref_s
+
+    def angles(self, t_s: FloatArray, delta: FloatArray | None = None) -> FloatArray:
+        """(3, m) roll, pitch, yaw radians at times t (m,), with ``delta`` (3, 3) added to c0..c2."""
+        c, dt = self._coeffs_at(t_s, delta)
         out = np.zeros((3,) + dt.shape)
         for k in range(c.shape[1] - 1, -1, -1):  # Horner
             out = out * dt + c[:, k].reshape((3,) + (1,) * dt.ndim)
@@ -214,10 +222,7 @@ class Attitude:
 
     def rates(self, t_s: FloatArray, delta: FloatArray | None = None) -> FloatArray:
         """(3, m) time derivatives (rad/s) of :meth:`angles` at times t (m,)."""
-        c = self._coeffs if delta is None else self._coeffs.copy()
-        if delta is not None:
-            c[:, :3] += delta
-        dt = np.asarray(t_s, dtype=np.float64) - self.t_ref_s
+        c, dt = self._coeffs_at(t_s, delta)
         out = np.zeros((3,) + dt.shape)
         for k in range(c.shape[1] - 1, 0, -1):  # Horner on the derivative
             out = out * dt + k * c[:, k].reshape((3,) + (1,) * dt.ndim)
@@ -330,19 +335,13 @@ class SampledAttitude:
         return {
             "type": "sampled",
             "t_ref_s": self.t_ref_s,
-            "times_s": self.times_s.tolist(),
-            "roll_rad": self.roll_rad.tolist(),
-            "pitch_rad": self.pitch_rad.tolist(),
-            "yaw_rad": self.yaw_rad.tolist(),
+            **float_lists(self, "times_s", "roll_rad", "pitch_rad", "yaw_rad"),
         }
 
     @classmethod
     def from_dict(cls, d: object, path: str = "attitude") -> SampledAttitude:
         return cls(
-            times_s=get_float_array(d, "times_s", path, ndim=1),
-            roll_rad=get_float_array(d, "roll_rad", path, ndim=1),
-            pitch_rad=get_float_array(d, "pitch_rad", path, ndim=1),
-            yaw_rad=get_float_array(d, "yaw_rad", path, ndim=1),
+            **get_float_arrays(d, path, times_s=1, roll_rad=1, pitch_rad=1, yaw_rad=1),
             t_ref_s=get_float(d, "t_ref_s", path),
         )
 

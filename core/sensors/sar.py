@@ -65,7 +65,15 @@ from core.geodesy import (
     intersect_ellipsoid,
 )
 from core.jsonio import parse_json, to_json
-from core.sensors._dictio import get_dict, get_float, get_float_array, get_int, get_str
+from core.sensors._dictio import (
+    float_lists,
+    get_dict,
+    get_float,
+    get_float_array,
+    get_float_arrays,
+    get_int,
+    get_str,
+)
 from core.sensors.orbit import Orbit
 
 FloatArray = NDArray[np.float64]
@@ -424,9 +432,7 @@ class SarModel:
             "orbit": self.orbit.to_dict(),
         }
         if self.kind == "grd":
-            d["grd"] = {"srgr_times_s": self.srgr_times_s.tolist(),
-                        "srgr_sr0_m": self.srgr_sr0_m.tolist(),
-                        "srgr_coeffs": self.srgr_coeffs.tolist()}
+            d["grd"] = float_lists(self, "srgr_times_s", "srgr_sr0_m", "srgr_coeffs")
         if self.kind == "tops":
             d["tops"] = {"burst_times_s": self.burst_times_s.tolist(),
                          "lines_per_burst": self.lines_per_burst}
@@ -457,8 +463,7 @@ class SarModel:
         extra: dict = {}
         if kind == "grd":
             grd = get_dict(d, "grd")
-            extra = {k: get_float_array(grd, k, "grd", ndim=n) for k, n in
-                     (("srgr_times_s", 1), ("srgr_sr0_m", 1), ("srgr_coeffs", 2))}
+            extra = get_float_arrays(grd, "grd", srgr_times_s=1, srgr_sr0_m=1, srgr_coeffs=2)
         elif kind == "tops":
             tops = get_dict(d, "tops")
             extra = {"burst_times_s": get_float_array(tops, "burst_times_s", "tops", ndim=1),
