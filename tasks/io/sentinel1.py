@@ -10,6 +10,7 @@ The text -> model conversion is :mod:`core.sensors.sentinel1`, the geometry
 from __future__ import annotations
 
 import xml.etree.ElementTree as ET
+from collections.abc import Iterator
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -85,6 +86,17 @@ def _utc(model: SarModel, t_s: np.ndarray | float) -> list[str]:
     return [u.rstrip("Z") for u in model.utc_of_times(t_s)]
 
 
+def _timed_records(parent: ET.Element, list_tag: str, item_tag: str, times_utc: list[str]
+                   ) -> Iterator[tuple[int, ET.Element]]:
+    """``<list_tag count=n>`` under ``parent`` and in it one ``<item_tag>`` per time, each
+    opened by its ``azimuthTime``: (index, item) to fill with the rest of the record."""
+    records = ET.SubElement(parent, list_tag, count=str(len(times_utc)))
+    for i, t in enumerate(times_utc):
+        item = ET.SubElement(records, item_tag)
+        ET.SubElement(item, "azimuthTime").text = t
+        yield i, item
+
+
 def annotation_xml(model: SarModel, grid: GridPoints, head: AnnotationHeader,
                    grsr: np.ndarray | None = None) -> str:
     """A Sentinel-1 product annotation (the subset :func:`core.sensors.sentinel1.parse_annotation`
@@ -150,12 +162,8 @@ def annotation_xml(model: SarModel, grid: GridPoints, head: AnnotationHeader,
     sub(st, "linesPerBurst", "0")
     sub(st, "samplesPerBurst", "0")
     sub(st, "burstList", count="0")
-    gl = sub(sub(root, "geolocationGrid"), "geolocationGridPointList",
-             count=str(grid.line.size))
-    times = _utc(model, grid.azimuth_time_s)
-    for i in range(grid.line.size):
-        p = sub(gl, "geolocationGridPoint")
-        sub(p, "azimuthTime", times[i])
+    for i, p in _timed_records(sub(root, "geolocationGrid"), "geolocationGridPointList",
+                               "geolocationGridPoint", _utc(model, grid.azimuth_time_s)):
         sub(p, "slantRangeTime", grid.slant_range_time_s[i])
         sub(p, "line", str(int(grid.line[i])))
         sub(p, "pixel", str(int(grid.pixel[i])))
@@ -164,12 +172,9 @@ def annotation_xml(model: SarModel, grid: GridPoints, head: AnnotationHeader,
                          ("elevationAngle", grid.elevation_deg)):
             sub(p, tag, arr[i])
     if model.kind == "grd":
-        cl = sub(sub(root, "coordinateConversion"), "coordinateConversionList",
-                 count=str(model.srgr_times_s.size))
-        rec_times = _utc(model, model.srgr_times_s)
-        for k in range(model.srgr_times_s.size):
-            r = sub(cl, "coordinateConversion")
-            sub(r, "azimuthTime", rec_times[k])
+        for k, r in _timed_records(sub(root, "coordinateConversion"),
+                                   "coordinateConversionList", "coordinateConversion",
+                                   _utc(model, model.srgr_times_s)):
             sub(r, "slantRangeTime", 2.0 * model.srgr_sr0_m[k] / SPEED_OF_LIGHT_M_S)
             sub(r, "sr0", model.srgr_sr0_m[k])
             sub(r, "srgrCoefficients", " ".join(_num(c) for c in model.srgr_coeffs[k]),
