@@ -16,6 +16,8 @@ from __future__ import annotations
 
 from typing import Literal, get_args
 
+from core.errors import InputError
+
 Corrections = Literal["linear", "offset"]
 CORRECTIONS: tuple[Corrections, ...] = get_args(Corrections)
 
@@ -31,3 +33,13 @@ Measure = Literal["ncc", "orientation"]
 MEASURES: tuple[Measure, ...] = get_args(Measure)
 TieMeasure = Literal["auto", Measure]
 TIE_MEASURES: tuple[TieMeasure, ...] = get_args(TieMeasure)
+
+
+def check_vertical_choices(owner: object, *names: str, flag: str = "--") -> None:
+    """InputError unless each field ``name`` of ``owner`` is one of :data:`VERTICAL_CHOICES`,
+    named as its option (``flag`` and the name with hyphens)."""
+    for name in names:
+        value = getattr(owner, name)
+        if value not in VERTICAL_CHOICES:
+            raise InputError(f"{flag}{name.replace('_', '-')} {value!r} unknown; use one of "
+                             f"{VERTICAL_CHOICES}")

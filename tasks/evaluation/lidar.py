@@ -42,6 +42,7 @@ import pyproj
 import rasterio
 from prefect import task
 
+from core.choices import check_vertical_choices
 from core.errors import CoverageError, InputError, InsufficientDataError
 from core.evaluation.evaluation import ClassedDz, StatsConfig
 from core.evaluation.evaluation_report import (
@@ -73,9 +74,6 @@ from tasks.io.rasters_at_points import (
 )
 from tasks.io.vertical_crs import existing_file
 
-VERTICALS = ("auto", "ellipsoidal", "egm96")
-
-
 # ---------------------------------------------------------------------------- options
 
 
@@ -105,10 +103,7 @@ class EvaluationOptions:
     stats: StatsConfig = field(default_factory=StatsConfig)
 
     def __post_init__(self) -> None:
-        for name in ("lidar_vertical", "dem_vertical"):
-            if getattr(self, name) not in VERTICALS:
-                raise InputError(f"{name.replace('_', '-')} {getattr(self, name)!r} unknown; "
-                                 f"use one of {VERTICALS}")
+        check_vertical_choices(self, "lidar_vertical", "dem_vertical", flag="")
         if self.lidar_z_unit not in ("auto", *Z_UNITS):
             raise InputError(f"lidar z unit {self.lidar_z_unit!r} unknown; use auto, "
                              f"{', '.join(Z_UNITS)}")

@@ -32,6 +32,7 @@ from rasterio.enums import Resampling
 from rasterio.io import MemoryFile
 from rasterio.windows import Window
 
+from core.choices import check_vertical_choices
 from core.dem import sample_bilinear
 from core.errors import CoverageError, InputError
 from core.evaluation.evaluation_report import DemInfo
@@ -39,7 +40,7 @@ from core.evaluation.void_fill import FillConfig, FillResult, delta_surface_fill
 from core.geodesy import ARCSEC, metres_per_degree
 from core.geoid import GeoidGrid
 from core.grid_points import affine_nodes
-from core.heights import VERTICAL_CHOICES, HeightFrame
+from core.heights import HeightFrame
 from core.jsonio import to_json
 from tasks.io.crs import Projection
 from tasks.io.dem import dem_datum
@@ -48,7 +49,6 @@ from tasks.io.rasters import atomic_write_bytes, atomic_write_json, open_raster
 from tasks.io.rasters_at_points import inspect_dem
 from tasks.io.srtm import SRTM_VOID, check_tile, parse_tile_name
 
-VERTICALS = VERTICAL_CHOICES
 TIFF_SUFFIXES = (".tif", ".tiff")
 REPORT_FORMAT = "gcpfree.fill_voids"
 BLOCK_ROWS = 256  # tile node rows resampled at a time
@@ -70,10 +70,7 @@ class FillOptions:
     config: FillConfig = field(default_factory=FillConfig)
 
     def __post_init__(self) -> None:
-        for name in ("srtm_vertical", "dem_vertical"):
-            if getattr(self, name) not in VERTICALS:
-                raise InputError(f"--{name.replace('_', '-')} {getattr(self, name)!r} unknown; "
-                                 f"use one of {VERTICALS}")
+        check_vertical_choices(self, "srtm_vertical", "dem_vertical")
 
     @property
     def json_path(self) -> Path:
