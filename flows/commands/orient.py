@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import argparse
+from collections.abc import Callable
 
 from flows.commands._pair import (
     add_orientation_arguments,
@@ -31,11 +32,31 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
             "and OUT/dsm_egm96.tif, OUT/relative_dem.tif and OUT/relative/. With --sar, "
             "SAR-optical GCPs too (OUT/sar_points.json), which also orient flat terrain."),
     )
+    add_orient_arguments(p)
+
+
+def add_orient_arguments(p: argparse.ArgumentParser,
+                         more: Callable[[argparse.ArgumentParser], None] = lambda p: None
+                         ) -> None:
+    """The options of ``orient`` (and of ``pair``, whose own ``more`` adds before
+    ``--workers --no-progress --out``)."""
     add_pair_arguments(p)
     add_reference_arguments(p, use="the ground the pair is oriented to (required, or "
                                    "--dem-dir)")
     add_orientation_arguments(p)
+    more(p)
     add_run_arguments(p)
+
+
+def orient_params(args: argparse.Namespace, command: str,
+                  check_more: Callable[[argparse.Namespace], None] = lambda args: None):
+    """The orientation's parameters (:class:`flows.orient.OrientParams`) of ``orient`` and
+    ``pair``, every input checked before the flow starts: the pair (:func:`check_pair`),
+    ``check_more`` (a command's own inputs), the orientation's
+    (:func:`orientation_params`)."""
+    checked = check_pair(args)
+    check_more(args)
+    return orientation_params(args, command, checked)
 
 
 def run(args: argparse.Namespace) -> int:
@@ -43,7 +64,7 @@ def run(args: argparse.Namespace) -> int:
 
     check_reference_sigma(args)  # refused in a line, before the server boots
     with prefect_api() as api:  # a temporary Prefect server boots meanwhile
-        params = orientation_params(args, "orient", check_pair(args))
+        params = orient_params(args, "orient")
         from flows.orient import orient_flow
 
         api.ready()

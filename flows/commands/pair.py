@@ -6,16 +6,8 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
-from flows.commands._pair import (
-    add_lidar_vertical_argument,
-    add_orientation_arguments,
-    add_pair_arguments,
-    add_reference_arguments,
-    add_run_arguments,
-    check_pair,
-    check_reference_sigma,
-    orientation_params,
-)
+from flows.commands._pair import add_lidar_vertical_argument, check_reference_sigma
+from flows.commands.orient import add_orient_arguments, orient_params
 
 
 def add_parser(sub: argparse._SubParsersAction) -> None:
@@ -30,10 +22,11 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
             "and OUT/pair.json, the manifest written last. A rerun keeps every step whose "
             "products read back and redoes the rest, so an interrupted pair resumes."),
     )
-    add_pair_arguments(p)
-    add_reference_arguments(p, use="the ground the pair is oriented to (required, or "
-                                   "--dem-dir)")
-    add_orientation_arguments(p)
+    add_orient_arguments(p, _add_evaluation_arguments)
+
+
+def _add_evaluation_arguments(p: argparse.ArgumentParser) -> None:
+    """``--lidar --landcover --lidar-vertical --id``: the evaluation and the STAC items."""
     p.add_argument("--lidar", type=Path, default=None, metavar="LAS",
                    help="lidar LAS/LAZ to evaluate the final DSM against (any CRS)")
     p.add_argument("--landcover", type=Path, default=None, metavar="TIF",
@@ -41,7 +34,28 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     add_lidar_vertical_argument(p)
     p.add_argument("--id", dest="pair_id", default=None,
                    help="name of the pair in the STAC items (default: OUT's folder name)")
-    add_run_arguments(p)
+
+
+def _check_evaluation(args: argparse.Namespace) -> None:
+    """The lidar and land-cover files read and their options checked (InputError), before
+    the orientation's minutes."""
+    from core.errors import InputError
+
+    for name in ("lidar", "landcover"):
+        path = getattr(args, name)
+        if path is not None and not path.is_file():
+            raise InputError(f"--{name} {path} does not exist; give an existing file")
+    if args.landcover is not None and args.lidar is None:
+        raise InputError("--landcover classifies the lidar evaluation: give --lidar too")
+    if args.lidar is not None:  # its header now, not after the orientation's minutes
+        from tasks.io.lidar import inspect_lidar
+
+        inspect_lidar(args.lidar, vertical=args.lidar_vertical)
+    if args.landcover is not None:
+        from tasks.io.rasters import open_raster
+
+        with open_raster(args.landcover, "land cover"):
+            pass
 
 
 def run(args: argparse.Namespace) -> int:
@@ -49,25 +63,7 @@ def run(args: argparse.Namespace) -> int:
 
     check_reference_sigma(args)  # refused in a line, before the server boots
     with prefect_api() as api:  # a temporary Prefect server boots meanwhile
-        from core.errors import InputError
-
-        checked = check_pair(args)
-        for name in ("lidar", "landcover"):
-            path = getattr(args, name)
-            if path is not None and not path.is_file():
-                raise InputError(f"--{name} {path} does not exist; give an existing file")
-        if args.landcover is not None and args.lidar is None:
-            raise InputError("--landcover classifies the lidar evaluation: give --lidar too")
-        if args.lidar is not None:  # its header now, not after the orientation's minutes
-            from tasks.io.lidar import inspect_lidar
-
-            inspect_lidar(args.lidar, vertical=args.lidar_vertical)
-        if args.landcover is not None:
-            from tasks.io.rasters import open_raster
-
-            with open_raster(args.landcover, "land cover"):
-                pass
-        orient = orientation_params(args, "pair", checked)
+        orient = orient_params(args, "pair", _check_evaluation)
         from flows.pair import PairParams, pair_flow
 
         api.ready()
