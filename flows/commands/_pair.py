@@ -19,6 +19,15 @@ GEOID_HELP = ("the geoid grid the DEM's orthometric heights refer to when not EG
               "heights go through PROJ's own grid when PROJ has it, else are refused")
 
 
+def add_vertical_argument(p: argparse.ArgumentParser, flag: str, of: str = "REF", *,
+                          help: str | None = None) -> None:
+    """``flag`` (``--dem-vertical``, ``--reference-vertical``...): the heights of a DEM or
+    point cloud, ``auto`` (default) deciding them by the one datum rule; the help says it of
+    ``of`` (the file's metavar), or is ``help``."""
+    p.add_argument(flag, choices=VERTICALS, default="auto",
+                   help=VERTICAL_HELP.replace("REF", of) if help is None else help)
+
+
 class OneLineParser(argparse.ArgumentParser):
     """An argument parser whose errors are one line on stderr and exit code 2, like every
     other gcpfree error (argparse prints its usage, then the error, on two or more)."""
@@ -77,8 +86,7 @@ def add_reference_arguments(p: argparse.ArgumentParser, *, use: str) -> None:
                           "pair")
     ref.add_argument("--dem-dir", "--srtm-dir", dest="srtm_dir", type=Path, default=None,
                      metavar="DIR", help=DEM_DIR_HELP)
-    p.add_argument("--reference-vertical", choices=VERTICALS,
-                   default="auto", help=VERTICAL_HELP)
+    add_vertical_argument(p, "--reference-vertical")
     p.add_argument("--geoid", type=Path, default=None, metavar="GRID", help=GEOID_HELP)
 
 
@@ -140,8 +148,7 @@ def add_orientation_settings(p: argparse.ArgumentParser) -> None:
 
 def add_lidar_vertical_argument(p: argparse.ArgumentParser) -> None:
     """``--lidar-vertical`` (``pair``, and ``archive``/``serve`` for every pair)."""
-    p.add_argument("--lidar-vertical", choices=VERTICALS, default="auto",
-                   help="heights of the lidar (auto: from its CRS)")
+    add_vertical_argument(p, "--lidar-vertical", help="heights of the lidar (auto: from its CRS)")
 
 
 def add_run_arguments(p: argparse.ArgumentParser) -> None:

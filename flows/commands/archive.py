@@ -10,11 +10,10 @@ from typing import TYPE_CHECKING
 from flows.commands._pair import (
     DEM_DIR_HELP,
     GEOID_HELP,
-    VERTICAL_HELP,
-    VERTICALS,
     add_image_arguments,
     add_lidar_vertical_argument,
     add_orientation_settings,
+    add_vertical_argument,
 )
 
 if TYPE_CHECKING:
@@ -44,8 +43,7 @@ def add_archive_arguments(p: argparse.ArgumentParser) -> None:
     ref.add_argument("--reference", type=Path, default=None, metavar="REF",
                      help="one reference DEM in EPSG:4326 for every pair (prepare-reference "
                           "output or SRTM .hgt)")
-    p.add_argument("--reference-vertical", choices=VERTICALS, default="auto",
-                   help=VERTICAL_HELP)
+    add_vertical_argument(p, "--reference-vertical")
     p.add_argument("--geoid", type=Path, default=None, metavar="GRID", help=GEOID_HELP)
     p.add_argument("--dask-address", default=None, metavar="tcp://HOST:PORT",
                    help="scheduler of an existing Dask cluster (its workers must see the same "

@@ -8,7 +8,7 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
-from flows.commands._pair import VERTICAL_HELP, VERTICALS
+from flows.commands._pair import add_vertical_argument
 
 
 def add_parser(sub: argparse._SubParsersAction) -> None:
@@ -27,10 +27,8 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--reference", "--ref", dest="reference", type=Path, required=True,
                    metavar="REF", help="reference DEM (GeoTIFF or .hgt)")
     p.add_argument("--dem", type=Path, required=True, help="DEM to align")
-    p.add_argument("--reference-vertical", choices=VERTICALS, default="auto",
-                   help=VERTICAL_HELP)
-    p.add_argument("--dem-vertical", choices=VERTICALS, default="auto",
-                   help=VERTICAL_HELP.replace("REF", "DEM"))
+    add_vertical_argument(p, "--reference-vertical")
+    add_vertical_argument(p, "--dem-vertical", "DEM")
     p.add_argument("--out", type=Path, required=True, help="output result.json")
 
 

@@ -11,7 +11,7 @@ import argparse
 from pathlib import Path
 from typing import TYPE_CHECKING
 
-from flows.commands._pair import VERTICAL_HELP, VERTICALS
+from flows.commands._pair import add_vertical_argument
 
 if TYPE_CHECKING:
     from core.evaluation.evaluation_report import EvaluationReport
@@ -92,11 +92,11 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--landcover-names", default=None, metavar="JSON_OR_SPEC",
                    help="names of the land-cover codes: JSON {\"1\": \"bare_soil\"} or "
                         "1=bare_soil,2=forest (default: the raster's NAME=code tags)")
-    p.add_argument("--lidar-vertical", choices=VERTICALS, default="auto",
-                   help="lidar heights: auto (default) takes the compound CRS's vertical part "
-                        "(EGM96 height -> egm96) and assumes ellipsoidal without one")
-    p.add_argument("--dem-vertical", choices=VERTICALS, default="auto",
-                   help=VERTICAL_HELP.replace("REF", "DEM"))
+    add_vertical_argument(p, "--lidar-vertical",
+                          help="lidar heights: auto (default) takes the compound CRS's "
+                               "vertical part (EGM96 height -> egm96) and assumes ellipsoidal "
+                               "without one")
+    add_vertical_argument(p, "--dem-vertical", "DEM")
     p.add_argument("--lidar-crs", default=None, metavar="CRS",
                    help="CRS of the lidar when the file has none or a wrong one (e.g. "
                         "EPSG:32631+5773: UTM 31N with EGM96 heights)")

@@ -10,7 +10,7 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
-from flows.commands._pair import VERTICAL_HELP, VERTICALS
+from flows.commands._pair import add_vertical_argument
 
 
 def add_parser(sub: argparse._SubParsersAction) -> None:
@@ -48,10 +48,8 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
                    help="average the ring differences over 2N+1 cells before interpolating "
                         "them (default 0: as measured; raise it for a tile noisy from cell to "
                         "cell)")
-    p.add_argument("--dem-vertical", choices=VERTICALS, default="auto",
-                   help=VERTICAL_HELP.replace("REF", "DSM"))
-    p.add_argument("--srtm-vertical", choices=VERTICALS, default="auto",
-                   help=VERTICAL_HELP.replace("REF", "TILE"))
+    add_vertical_argument(p, "--dem-vertical", "DSM")
+    add_vertical_argument(p, "--srtm-vertical", "TILE")
     p.add_argument("--geoid", type=Path, default=None,
                    help="geoid grid in GTX format (default: bundled EGM96 15')")
 

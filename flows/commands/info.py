@@ -10,7 +10,7 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
-from flows.commands._pair import VERTICAL_HELP, VERTICALS
+from flows.commands._pair import add_vertical_argument
 
 
 def add_parser(sub: argparse._SubParsersAction) -> None:
@@ -46,8 +46,7 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--reference", type=Path, default=None, metavar="REF",
                    help="DEM in EPSG:4326 (GeoTIFF or .hgt): mean terrain height under each "
                         "footprint, corners and view at that height")
-    p.add_argument("--reference-vertical", choices=VERTICALS, default="auto",
-                   help=VERTICAL_HELP)
+    add_vertical_argument(p, "--reference-vertical")
 
 
 def run(args: argparse.Namespace) -> int:

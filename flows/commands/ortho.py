@@ -12,7 +12,7 @@ from pathlib import Path
 from typing import TYPE_CHECKING
 
 from core.choices import RESAMPLINGS
-from flows.commands._pair import VERTICAL_HELP, VERTICALS
+from flows.commands._pair import add_vertical_argument
 
 if TYPE_CHECKING:
     from tasks.ortho.orthorectify import OrthoOptions
@@ -45,8 +45,7 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--dem", type=Path, required=True, metavar="DEM",
                    help="heights: a lon/lat DEM (SRTM .hgt, prepare-reference output) or a "
                         "projected DSM (gcpfree dsm/orient output)")
-    p.add_argument("--dem-vertical", choices=VERTICALS, default="auto",
-                   help=VERTICAL_HELP.replace("REF", "DEM"))
+    add_vertical_argument(p, "--dem-vertical", "DEM")
     p.add_argument("--resolution", type=float, default=None, metavar="M",
                    help="cell size in metres (default the image's GSD, 2 digits)")
     p.add_argument("--crs", type=int, default=None, metavar="EPSG",

@@ -6,7 +6,7 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
-from flows.commands._pair import GEOID_HELP, VERTICALS
+from flows.commands._pair import GEOID_HELP, add_vertical_argument
 
 
 def add_parser(sub: argparse._SubParsersAction) -> None:
@@ -42,9 +42,9 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--allow-missing-tiles", action="store_true",
                    help="treat absent tiles (e.g. open sea) as voids instead of failing")
     p.add_argument("--geoid", type=Path, default=None, metavar="GRID", help=GEOID_HELP)
-    p.add_argument("--dem-vertical", choices=VERTICALS, default="auto",
-                   help="heights of tagged DEMs that do not say their datum (named tiles say "
-                        "their own)")
+    add_vertical_argument(p, "--dem-vertical",
+                          help="heights of tagged DEMs that do not say their datum (named "
+                               "tiles say their own)")
     p.add_argument("--max-height-error", type=float, default=10.0, metavar="M",
                    help="void Copernicus cells whose height-error mask (HEM, 1 sigma) exceeds "
                         "this, metres (default 10)")

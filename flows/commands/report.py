@@ -13,7 +13,7 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
-from flows.commands._pair import VERTICAL_HELP, VERTICALS
+from flows.commands._pair import add_vertical_argument
 
 # products of gcpfree orient, one of which a folder must hold to be reported on
 ORIENT_PRODUCTS = ("report.json", "windows.json", "relative/rel.json")
@@ -40,8 +40,7 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
                    help="the reference DEM the orientation used (profile and correlation "
                         "surface); default: the one orient made from --srtm-dir in "
                         "OUT_DIR/relative/")
-    p.add_argument("--reference-vertical", choices=VERTICALS, default="auto",
-                   help=VERTICAL_HELP)
+    add_vertical_argument(p, "--reference-vertical")
     p.add_argument("--checkpoints", type=Path, default=None, metavar="CP",
                    help="the check points given to orient (their residual vectors)")
     p.add_argument("--evaluation", type=Path, default=None, metavar="EVAL_JSON",

@@ -9,7 +9,7 @@ import argparse
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
-from flows.commands._pair import VERTICAL_HELP, VERTICALS
+from flows.commands._pair import add_vertical_argument
 
 if TYPE_CHECKING:
     from core.simulation.block import BlockLayout
@@ -30,8 +30,7 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--dem", type=Path, default=None,
                    help="DEM in EPSG:4326 (GeoTIFF or .hgt); default: the bundled SRTM tile "
                         "N44E005")
-    p.add_argument("--dem-vertical", choices=VERTICALS, default="auto",
-                   help=VERTICAL_HELP.replace("REF", "DEM"))
+    add_vertical_argument(p, "--dem-vertical", "DEM")
     p.add_argument("--out", type=Path, required=True, help="output folder DIR")
     p.add_argument("--preset", choices=("tiny", "spot", "hrs", "hrg"), default="tiny",
                    help="tiny: 600x600 px at 40 m (CI); spot: 6000x6000 px at 10 m, "
