@@ -63,6 +63,8 @@ GRID_SIDE = 9
 #: (a flat scene's handful) fit no field to trust: simulated tiny at relief x0.05, 8 windows
 #: off by 32 m east in common, fitted 0-8 m over 0.4 km in a synthetic case like it
 MIN_FIELD_BINS = 4
+#: ... and on this many windows
+MIN_FIELD_WINDOWS = 16
 
 
 @dataclass(frozen=True, eq=False)
@@ -298,44 +300,53 @@ def frames_widened(sets: Sequence[ControlSet], frames: Sequence[FramePrior],
     """Each frame's prior with what its GCPs may share beyond its producer's statement added.
     Surface-matching windows overlap and inherit the relative DEM's deformation and the
     reference's local errors: their errors are correlated across the scene, and their mean is
-    off by the mean of that correlated error over them (``errors``: frame name -> the field
-    the first solution's residuals of that set's GCPs alone show;
-    ``c_k mean_ij exp(-d_ij / L)`` per axis), whatever SRTM's registration; where that field
-    rests on fewer than :data:`MIN_FIELD_BINS` distance classes (under 16 windows: a flat
-    scene's few), by their median stated precision (``sigma_xy_m``, ``sigma_h_m``), the bound
-    of an error correlated over the whole scene. SAR points and GCP files state their
+    off, whatever SRTM's registration, by at least their median stated precision
+    (``sigma_xy_m``, ``sigma_h_m``: the bound of an error correlated over the whole scene),
+    or by the mean of the correlated error over them where that is larger (``errors``: frame
+    name -> the field the first solution's residuals of that set's GCPs alone show;
+    ``c_k mean_ij exp(-d_ij / L)`` per axis; taken from :data:`MIN_FIELD_WINDOWS` windows
+    over :data:`MIN_FIELD_BINS` distance classes). A residuals' field never sees the part
+    common to all windows (the solution absorbs it): over a flat world 23 windows fitted
+    0.1 m horizontally while they sat 20 m off in common (the stated 15 m bounds it). SAR points and GCP files state their
     own independent precision and their common error is the frame's (nothing added)."""
-    from core.geodesy import metres_per_degree
-
     out = list(frames)
     names = [f.name for f in frames]
     for c in sets:
         if c.kind != "surface":
             continue
         k = names.index(c.frame.name)
+        sxy = float(np.median([p.sigma_xy_m for p in c.points]))
+        sh = float(np.median([p.sigma_h_m for p in c.points]))
+        extra = np.array([sxy, sxy, sh])
+        why = (f"its {len(c.points)} windows' median precision {sxy:.1f} m horizontal, "
+               f"{sh:.1f} m vertical (overlapping windows share their errors)")
         error = (errors or {}).get(c.frame.name, NO_CORRELATION)
-        if any(error.variance_m2) and error.n_bins >= MIN_FIELD_BINS:
-            lon = np.array([p.lon_deg for p in c.points])
-            lat = np.array([p.lat_deg for p in c.points])
-            m_lon, m_lat = metres_per_degree(float(np.mean(lat)))
-            xy = np.stack([(lon - lon.mean()) * m_lon, (lat - lat.mean()) * m_lat], axis=1)
-            d = np.sqrt(np.sum((xy[:, None] - xy[None]) ** 2, axis=2))
-            extra = np.sqrt(np.asarray(error.variance_m2) * float(np.mean(
-                error.correlation(d))))
-            why = (f"its {len(c.points)} windows' correlated error (sigma "
-                   f"{'/'.join(f'{np.sqrt(v):.1f}' for v in error.variance_m2)} m over "
-                   f"{error.length_m / 1000.0:.1f} km) averages to "
-                   f"{'/'.join(f'{v:.1f}' for v in extra)} m over them")
-        else:
-            sxy = float(np.median([p.sigma_xy_m for p in c.points]))
-            sh = float(np.median([p.sigma_h_m for p in c.points]))
-            extra = np.array([sxy, sxy, sh])
-            why = (f"its {len(c.points)} windows' median precision {sxy:.1f} m horizontal, "
-                   f"{sh:.1f} m vertical (overlapping windows share their errors)")
+        if (any(error.variance_m2) and error.n_bins >= MIN_FIELD_BINS
+                and len(c.points) >= MIN_FIELD_WINDOWS):
+            field_mean = _field_mean_m(c.points, error)
+            if np.any(field_mean > extra):
+                why += (f", or more where their correlated error (sigma "
+                        f"{'/'.join(f'{np.sqrt(v):.1f}' for v in error.variance_m2)} m over "
+                        f"{error.length_m / 1000.0:.1f} km) averages to "
+                        f"{'/'.join(f'{v:.1f}' for v in field_mean)} m over them")
+            extra = np.maximum(extra, field_mean)
         if out[k].up_of:
             extra[2] = 0.0
         out[k] = out[k].inflated(extra, why)
     return tuple(out)
+
+
+def _field_mean_m(points: Sequence[ControlPoint], error: CorrelatedGroundError) -> FloatArray:
+    """The RMS over ``points`` of the mean of the correlated ``error`` (per axis, m):
+    ``sqrt(c_k mean_ij rho(d_ij))``."""
+    from core.geodesy import metres_per_degree
+
+    lon = np.array([p.lon_deg for p in points])
+    lat = np.array([p.lat_deg for p in points])
+    m_lon, m_lat = metres_per_degree(float(np.mean(lat)))
+    xy = np.stack([(lon - lon.mean()) * m_lon, (lat - lat.mean()) * m_lat], axis=1)
+    d = np.sqrt(np.sum((xy[:, None] - xy[None]) ** 2, axis=2))
+    return np.sqrt(np.asarray(error.variance_m2) * float(np.mean(error.correlation(d))))
 
 
 def adjust(images: Sequence[ImageToAdjust], control: Sequence[ControlSet],
