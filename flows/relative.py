@@ -121,9 +121,11 @@ def views_relative_flow(params: RelativeParams) -> ViewsOutcome:
     orientation of all images (the first fixed) -> relative.json."""
     from dataclasses import replace
 
+    from core.errors import GeometryError
     from core.matching.peaks import MEASURE_NAMES
     from tasks.relative.orientation import (
         common_cell_m,
+        each_overlapped,
         load_views,
         orient_views,
         overlapping_pairs,
@@ -142,15 +144,24 @@ def views_relative_flow(params: RelativeParams) -> ViewsOutcome:
     cfg = replace(params.tie_points, cell_m=params.cell_m,
                   search_radius_m=search_radius_m(params.search_radius_m, views[0], h_range))
     cfg = replace(cfg, cell_m=common_cell_m(views, pairs, dem, h_range, cfg))
-    ties, lines = [], []
+    ties, lines, matched = [], [], []
     for i, j in pairs:
         measure, why = tie_measure(pair.tie_measure, views[i].sun, views[j].sun)
         lines.append(f"tie points {i}-{j}       {MEASURE_NAMES[measure]} ({why})")
         print(lines[-1])
-        ties.append(find_tie_points(views[i].image or views[i].source,
-                                    views[j].image or views[j].source, views[i].model,
-                                    views[j].model, dem, replace(cfg, measure=measure),
-                                    h_range_m=h_range, num_workers=params.workers))
+        try:
+            ties.append(find_tie_points(views[i].image or views[i].source,
+                                        views[j].image or views[j].source, views[i].model,
+                                        views[j].model, dem, replace(cfg, measure=measure),
+                                        h_range_m=h_range, num_workers=params.workers))
+        except GeometryError:  # of many images, two whose footprints touch at a corner
+            if len(views) == 2:
+                raise
+            lines[-1] = f"tie points {i}-{j}       none (their footprints only touch)"
+            print(lines[-1])
+            continue
+        matched.append((i, j))
+    pairs = each_overlapped(views, matched)
     products = orient_views(views, pairs, ties, out, dem, h_range,
                             RelativeConfig(corrections=params.corrections),
                             params.reference_sigma_m, ground.used)

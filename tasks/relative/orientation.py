@@ -19,7 +19,7 @@ from core.errors import CoverageError, GeometryError, InsufficientDataError
 from core.geodesy import BBox
 from core.heights import DatumDecision
 from core.intersection import triangulate
-from core.matching.overlap import overlap_cell_m
+from core.matching.overlap import overlap_area_m2, overlap_cell_m
 from core.matching.tiepoint_results import TiePointResult, TiePointStatus
 from core.matching.tiepoints import HeightPrior, TiePointConfig
 from core.orientation.multiview import (
@@ -46,6 +46,8 @@ from tasks.io.sensors import LoadedModel
 
 FORMAT = "gcpfree.relative"
 DEFAULT_CONFIG = RelativeConfig()
+#: an overlap this fraction of the widest one or more sets the images' common tie-point cell
+WIDE_OVERLAP = 0.25
 
 
 @task(name="load-pair")
@@ -321,6 +323,12 @@ def overlapping_pairs(views: list[LoadedModel], h_m: float,
             except GeometryError:
                 continue
             pairs.append((i, j))
+    return each_overlapped(views, pairs)
+
+
+def each_overlapped(views: list[LoadedModel], pairs: list[tuple[int, int]]
+                    ) -> list[tuple[int, int]]:
+    """``pairs``, after a GeometryError when an image is in none of them."""
     alone = [v for k, v in enumerate(views) if not any(k in p for p in pairs)]
     if alone:
         raise GeometryError(
@@ -331,14 +339,24 @@ def overlapping_pairs(views: list[LoadedModel], h_m: float,
 
 def common_cell_m(views: list[LoadedModel], pairs: list[tuple[int, int]], dem: GeoDEM | None,
                   h_range: tuple[float, float], cfg: TiePointConfig) -> float:
-    """One tie-point ground cell for every pair: the smallest any pair's overlap needs
+    """One tie-point ground cell for the pairs that overlap widely (a quarter of the widest
+    overlap or more, :data:`WIDE_OVERLAP`): the smallest any of them needs
     (:func:`core.matching.overlap.overlap_cell_m`), so that the pairs sharing an image pick
     its points in the same cells and their points chain into tracks seen three times or
-    more (on the Marseille triplet, 46 of 75 against 23 with each pair's own cell)."""
+    more (on the Marseille triplet, 46 of 75 against 23 with each pair's own cell). A block's
+    narrow overlaps (adjacent scenes' strips, diagonal neighbours' corners) do not shrink it:
+    each takes the smaller cell its own overlap needs in
+    :func:`tasks.relative.tiepoints.find_tie_points` (a 2 x 2 x 2 tiny block's corners of
+    2.4 km had made every pair's cell 300 m, 44 times the stereo pairs' candidates)."""
     heights = (HeightPrior.from_dem(dem, cfg.search_radius_m, cfg.height_margin_m)
                if dem is not None else HeightPrior.from_range(*h_range))
-    return min(overlap_cell_m(views[i].model, views[j].model, views[i].size, views[j].size,
-                              heights, cfg.cell_m, cfg.min_cells_per_side) for i, j in pairs)
+    areas = [overlap_area_m2(views[i].model, views[j].model, views[i].size, views[j].size,
+                             heights) for i, j in pairs]
+    wide = max((a for a in areas if a > 0), default=0.0) * WIDE_OVERLAP
+    return min((overlap_cell_m(views[i].model, views[j].model, views[i].size, views[j].size,
+                               heights, cfg.cell_m, cfg.min_cells_per_side)
+                for (i, j), a in zip(pairs, areas, strict=True) if a >= wide),
+               default=float(cfg.cell_m))
 
 
 @dataclass(frozen=True, eq=False)
