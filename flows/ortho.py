@@ -14,7 +14,7 @@ median and 95th percentile of the discrepancy in px and m, every window) and the
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 
 from prefect import flow
@@ -46,19 +46,12 @@ class CompareOptions:
     out: Path
     map: Path | None = None
     quiver: Path | None = None
-    window_px: int = 64
-    step_px: int = 128
-    search_px: int = 8
-    min_ncc: float = 0.5
+    compare: CompareConfig = field(default_factory=CompareConfig)
     workers: int | None = None
-
-    def config(self) -> CompareConfig:
-        return CompareConfig(window_px=self.window_px, step_px=self.step_px,
-                             search_px=self.search_px, min_ncc=self.min_ncc)
 
 
 @flow(name="ortho-compare", log_prints=True)
 def ortho_compare_flow(options: CompareOptions) -> CompareSummary:
     """Plan the windows over the common area, correlate them, write the products."""
-    plan = plan_compare(options.left, options.right, options.config())
+    plan = plan_compare(options.left, options.right, options.compare)
     return compare_orthos(plan, options.out, options.map, options.quiver, options.workers)

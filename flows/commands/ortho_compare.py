@@ -51,15 +51,17 @@ def run(args: argparse.Namespace) -> int:
 
     with prefect_api() as api:  # a temporary Prefect server boots meanwhile
         from core.errors import InputError
+        from core.ortho.ortho_compare import CompareConfig
         from flows.ortho import CompareOptions, ortho_compare_flow
         from tasks.io.sensor_info import check_json_target
         from tasks.ortho.compare import plan_compare
 
         options = CompareOptions(
             left=args.left, right=args.right, out=args.out, map=args.map, quiver=args.quiver,
-            window_px=args.window, step_px=args.step, search_px=args.search,
-            min_ncc=args.min_ncc, workers=args.workers)
-        plan_compare.fn(options.left, options.right, options.config())  # bad input: one line
+            compare=CompareConfig(window_px=args.window, step_px=args.step,
+                                  search_px=args.search, min_ncc=args.min_ncc),
+            workers=args.workers)
+        plan_compare.fn(options.left, options.right, options.compare)  # bad input: one line
         check_json_target(options.out)
         for path, what in ((options.map, "--map"), (options.quiver, "--quiver")):
             if path is not None and not Path(path).resolve().parent.is_dir():
