@@ -49,7 +49,7 @@ from tasks.archive.catalog import (
     publish_summary,
     write_summary,
 )
-from tasks.archive.map import ArchiveMapper
+from tasks.archive.map_page import ArchiveMapper
 from tasks.archive.pair import complete_pairs
 from tasks.archive.runs import PairResult, failure_reason, process_pair, running_ids
 
@@ -146,7 +146,7 @@ def run_pairs(entries: list[PairEntry], root: Path, srtm_dir: Path | None = None
               ) -> tuple[list[PairResult], str | None]:
     """The pairs submitted to the flow's Dask task runner; (results in entry order, the Dask
     dashboard link). With the ``catalog`` they belong to, its map is refreshed as each pair
-    ends (:class:`tasks.archive.map.ArchiveMapper`)."""
+    ends (:class:`tasks.archive.map_page.ArchiveMapper`)."""
     from prefect.futures import as_completed
 
     link = _dashboard_link()

@@ -55,7 +55,6 @@ value of the wrong type raises :class:`~core.errors.InputError` naming the key p
 
 from __future__ import annotations
 
-from collections.abc import Sequence
 from dataclasses import dataclass, field, replace
 from typing import Literal
 
@@ -64,11 +63,7 @@ from numpy.typing import ArrayLike, NDArray
 
 from core.dem import GeoDEM
 from core.errors import ConvergenceError, GeometryError, InputError
-from core.geodesy import (
-    geodetic_to_ecef,
-    incidence_angles,
-    intersect_ellipsoid,
-)
+from core.geodesy import geodetic_to_ecef, incidence_angles, intersect_ellipsoid
 from core.jsonio import parse_json, to_json
 from core.sensors import base
 from core.sensors._dictio import get_dict, get_float, get_int, get_str, get_str_tuple
@@ -101,12 +96,7 @@ from core.sensors.linear_array import (
     ideal_from_detector,
     ideal_partials,
 )
-from core.sensors.orbit import (
-    Attitude,
-    AttitudeModel,
-    Orbit,
-    attitude_from_dict,
-)
+from core.sensors.orbit import Attitude, AttitudeModel, Orbit, attitude_from_dict
 
 FloatArray = NDArray[np.float64]
 
@@ -306,13 +296,21 @@ class PushbroomModel:
         lon, lat = self._localize_flat(col, t, h)
         return lon.reshape(shape), lat.reshape(shape)
 
-    def _localize_flat(self, col: FloatArray, t: FloatArray,
-                       h: FloatArray) -> tuple[FloatArray, ...]:
+    def lines_of_sight(self, col: FloatArray, t: FloatArray,
+                       line: NDArray[np.intp] | None = None) -> tuple[FloatArray, FloatArray]:
+        """The platform's position and each detector's unit line of sight (ECEF) at the times
+        ``t`` (``t[line]`` for each of ``col`` when ``line`` is given: the platform computed
+        once per image line, as a simulator casting rays through blocks of lines wants)."""
         pos, cam2ecef, _, _ = self._platform(t)
+        if line is not None:
+            pos, cam2ecef = pos[line], cam2ecef[line]
         xi, yi = self._ideal(col)
         u = np.einsum("mij,mj->mi", cam2ecef, np.stack([xi, yi, np.ones_like(xi)], axis=1))
-        u /= np.linalg.norm(u, axis=1, keepdims=True)
-        return intersect_ellipsoid(pos, u, h)
+        return pos, u / np.linalg.norm(u, axis=1, keepdims=True)
+
+    def _localize_flat(self, col: FloatArray, t: FloatArray,
+                       h: FloatArray) -> tuple[FloatArray, ...]:
+        return intersect_ellipsoid(*self.lines_of_sight(col, t), h)
 
     def localize(
         self, col: ArrayLike, row: ArrayLike, h_m: ArrayLike
@@ -324,27 +322,6 @@ class PushbroomModel:
         shape, (c, r, h) = _flat(col, row, h_m)
         lon, lat = self._localize_flat(c, self.line_time_s(r), h)
         return lon.reshape(shape), lat.reshape(shape)
-
-    def localize_heights(
-        self, col: ArrayLike, row: ArrayLike, heights_m: Sequence[float]
-    ) -> list[tuple[FloatArray, FloatArray]]:
-        """:meth:`localize` of the same pixels at each of ``heights_m``, (lon, lat) per height:
-        the platform computed once per image line and the lines of sight once (the values of
-        ``localize``, which recomputes them for every pixel and height; a simulator casting
-        lines of sight through whole blocks of lines at several heights spent most of its
-        localisation there)."""
-        shape, (c, r) = _flat(col, row)
-        t_line, line = np.unique(self.line_time_s(r), return_inverse=True)
-        pos, cam2ecef, _, _ = self._platform(t_line)
-        pos, cam2ecef = pos[line], cam2ecef[line]
-        xi, yi = self._ideal(c)
-        u = np.einsum("mij,mj->mi", cam2ecef, np.stack([xi, yi, np.ones_like(xi)], axis=1))
-        u /= np.linalg.norm(u, axis=1, keepdims=True)
-        out = []
-        for h in heights_m:
-            lon, lat = intersect_ellipsoid(pos, u, np.full(c.size, float(h)))
-            out.append((lon.reshape(shape), lat.reshape(shape)))
-        return out
 
     def localize_on_dem(
         self, col: ArrayLike, row: ArrayLike, dem: GeoDEM, **kwargs: object

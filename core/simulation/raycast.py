@@ -19,6 +19,7 @@ from numpy.typing import NDArray
 
 from core.dem import SurfaceGrid, march_levels
 from core.errors import InputError
+from core.geodesy import intersect_ellipsoid
 from core.sensors.base import SensorModel
 
 FloatArray = NDArray[np.float64]
@@ -71,9 +72,11 @@ def image_rays(model: SensorModel, rows: NDArray, cols: NDArray, levels: tuple[f
     sub = np.unique(np.concatenate([cols[::col_step], cols[-1:]])).astype(np.float64)
     rr, cc = np.meshgrid(rows.astype(np.float64), sub, indexing="ij")
     xs, ys = [], []
-    at_heights = getattr(model, "localize_heights", None)  # a pushbroom's: once per line
-    if at_heights is not None:
-        ground = at_heights(cc.ravel(), rr.ravel(), levels)
+    sight = getattr(model, "lines_of_sight", None)  # a pushbroom's: the platform once per line
+    if sight is not None:
+        t_line, line = np.unique(model.line_time_s(rr.ravel()), return_inverse=True)
+        pos, u = sight(cc.ravel(), t_line, line)
+        ground = [intersect_ellipsoid(pos, u, np.full(cc.size, float(h))) for h in levels]
     else:
         ground = [model.localize(cc.ravel(), rr.ravel(), np.full(cc.size, h)) for h in levels]
     for lon, lat in ground:

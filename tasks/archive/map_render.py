@@ -219,9 +219,7 @@ def counts_text(m: ArchiveMap) -> str:
 
 
 def throughput_text(m: ArchiveMap) -> str:
-    from tasks.archive.map import throughput
-
-    t = throughput(m)
+    t = m.throughput()
     if not t.ended and not t.left:
         return "No pair ran: every pair was complete from an earlier run."
     if not t.ended or t.per_hour is None:
@@ -241,10 +239,8 @@ def _table(head: list[str], rows: list[list[str]]) -> str:
 
 
 def _steps_rows(m: ArchiveMap) -> list[list[str]]:
-    from tasks.archive.map import slowest_steps
-
     return [[escape(r.step), str(r.pairs), seconds_text(r.total_s), seconds_text(r.median_s),
-             f"{seconds_text(r.max_s)} ({escape(r.slowest)})"] for r in slowest_steps(m.pairs)]
+             f"{seconds_text(r.max_s)} ({escape(r.slowest)})"] for r in m.slowest_steps()]
 
 
 STYLE = """body{font-family:sans-serif;margin:1.2em;color:#111;max-width:1110px}

@@ -44,7 +44,9 @@ from core.heights import HeightFrame
 from core.jsonio import to_json
 from tasks.io.crs import Projection
 from tasks.io.dem import dem_datum
+from tasks.io.documents import plain
 from tasks.io.geoid import load_geoid
+from tasks.io.products import EVALUATION  # noqa: F401  (registers eval.json's layouts)
 from tasks.io.rasters import atomic_write_bytes, atomic_write_json, open_raster
 from tasks.io.rasters_at_points import inspect_dem
 from tasks.io.srtm import SRTM_VOID, check_tile, parse_tile_name
@@ -435,7 +437,7 @@ def _summary(options: FillOptions, plan: FillPlan, tile: TileGrid,
         n_voids_under_dem=result.n_voids,
         n_voids_unanchored=result.n_voids_unanchored,
         n_cells_unanchored=result.n_cells_unanchored,
-        fallback_delta_m=result.fallback_delta_m, ring=result.ring.to_dict(),
+        fallback_delta_m=result.fallback_delta_m, ring=plain(result.ring),
         n_ring_rejected=result.n_ring_rejected,
         delta_min_m=float(d.min()) if d.size else None,
         delta_max_m=float(d.max()) if d.size else None,
