@@ -345,14 +345,12 @@ def _check_points(rep: _Report, checkpoints: Path | None,
     after, before = (o.check_points, o.check_points_before) if o is not None else (None, None)
     groups = [(f"GCPs {p.name} (used)", p.d_col[~p.flagged], p.d_row[~p.flagged])
               for p in gcp_panels]
-    if after is None:
+    if o is None or after is None:
         rep.lack("check points (none given to the orientation): no independent check")
     else:
         rep.add(check_point_table(after, before))
         if any(s.predicted_rms_col_px is not None for s in after.values()):
-            rep.add(prediction_table(after, o.absolute if o is not None else None,
-                                     o.reference.registration_estimate if o is not None
-                                     else None))
+            rep.add(prediction_table(after, o.absolute, o.reference.registration_estimate))
     if checkpoints is None:
         if after is not None:
             rep.lack("the check-point file (not passed to the report): no check-point vectors")
