@@ -43,8 +43,7 @@ check points, 600 x 600 px; 2 cores under a load of 11-18, so CPU seconds, wall 
   the server's start) for the first call, its runs kept in ``PREFECT_HOME``'s database (a
   dashboard started later shows them).
 
-:func:`block` waits for the block adjustment (``gcpfree block``, issue 47 item 2): it raises
-NotImplementedError until then, with the signature it will have.
+:func:`block` orients a block of a ``gcpfree scenes`` catalog as ``gcpfree block`` does.
 """
 
 from __future__ import annotations
@@ -67,6 +66,7 @@ from core.evaluation.evaluation import StatsConfig
 from core.evaluation.evaluation_report import EvaluationReport
 from core.matching.surface import SurfaceMatchConfig
 from core.orientation.absolute import AbsoluteConfig
+from flows.block import BlockOutcome, BlockParams
 from flows.dsm import DsmParams
 from flows.options import NOT_OPTIONS, OPTIONS, PAIR_OPTIONS, with_options
 from flows.orient import OrientOutcome, OrientParams
@@ -155,9 +155,11 @@ def plain_calls() -> Iterator[None]:
 def run(params: Any, *, prefect: bool = False) -> Any:
     """The flow of a parameter object run on it, plainly or as a Prefect flow run (see the
     module docstring): :class:`OrientParams` -> :class:`OrientOutcome`, :class:`PairParams` ->
-    :class:`PairOutcome`, :class:`DsmParams` -> :class:`DemSummary` (or
+    :class:`PairOutcome`, :class:`BlockParams` -> :class:`BlockOutcome`,
+    :class:`DsmParams` -> :class:`DemSummary` (or
     :class:`ViewsDemSummary`), :class:`EvaluationOptions` -> :class:`EvaluationReport`,
     :class:`SimulationParams` -> :class:`SimulationSummary`."""
+    from flows.block import block_flow
     from flows.dsm import dsm_flow
     from flows.evaluate import evaluate_flow
     from flows.orient import orient_flow
@@ -166,6 +168,7 @@ def run(params: Any, *, prefect: bool = False) -> Any:
 
     flows: dict[type, Callable[[Any], Any]] = {
         OrientParams: orient_flow, PairParams: pair_flow, DsmParams: dsm_flow,
+        BlockParams: block_flow,
         EvaluationOptions: evaluate_flow, SimulationParams: simulate_scene}
     flow = flows.get(type(params))
     if flow is None:
@@ -302,10 +305,20 @@ def evaluate(dem: PathLike, lidar: PathLike, out: PathLike | None = None, *,
 
 
 def block(catalog: PathLike, out: PathLike, *, reference: PathLike | None = None,
-          dem_dir: PathLike | None = None, prefect: bool = False, **given: Any) -> Any:
-    """Every overlapping image of a ``gcpfree scenes`` catalog oriented in one adjustment
-    (``gcpfree block``). Not built yet (issue 47, item 2): raises NotImplementedError; it will
-    return the block's outcome as :func:`orient_pair` returns a pair's."""
-    raise NotImplementedError("api.block: the block adjustment (gcpfree block, issue 47 "
-                              "item 2) is not built yet; orient each pair of the catalog with "
-                              "api.orient_pair meanwhile")
+          dem_dir: PathLike | None = None, block: str | None = None, prefect: bool = False,
+          progress: bool = False, options: Mapping[str, Any] | None = None,
+          **given: Any) -> BlockOutcome:
+    """Every overlapping image of a block of ``catalog`` (``gcpfree scenes``; ``block``: its
+    id, default the first) oriented in one adjustment into ``out`` (``gcpfree block``: tie
+    points of every overlapping pair, each stereo pair's GCPs, one adjustment, the pairs'
+    and the fused DSMs, orthos, RPC exports). ``given``: ``checkpoints`` (keyed by image
+    name), ``workers`` and the orientation's options by name, as :func:`orient_pair`.
+    Returns the flow's :class:`BlockOutcome` (``report``: :class:`BlockReport`)."""
+    from tasks.block.control import select_block
+
+    chosen = select_block(Path(catalog), block)
+    given = {"left_model": chosen.models[0], "right_model": chosen.models[1], **given}
+    params = _orient(chosen.images[0], chosen.images[1], out, reference, dem_dir, progress,
+                     given, "api.block")  # takes the files out of given: options are left
+    params = with_options(params, {**(options or {}), **given}, "api.block")
+    return run(BlockParams(Path(catalog), params, block), prefect=prefect)

@@ -15,6 +15,7 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
+from core.errors import InputError
 from core.orientation.tracks import TrackGroup, fit_group
 from core.robust import nmad
 from core.sensors.base import SensorModel
@@ -120,7 +121,9 @@ class ImageCorrection:
 
 def image_correction(left: SensorModel, right_before: SensorModel, right_after: SensorModel,
                      n_cols: int, n_rows: int, h_m: float) -> ImageCorrection:
-    """The shift ``right_after`` adds to ``right_before``'s projections at height ``h_m``."""
+    """The shift ``right_after`` adds to ``right_before``'s projections at height ``h_m``
+    (its parts along and across the epipolar line of ``left`` NaN where the two images have
+    no base)."""
     c, r = np.meshgrid(np.linspace(0, n_cols - 1, 11), np.linspace(0, n_rows - 1, 11))
     c, r = c.ravel(), r.ravel()
     lon, lat = right_before.localize(c, r, np.full(c.size, h_m))
@@ -132,8 +135,11 @@ def image_correction(left: SensorModel, right_before: SensorModel, right_after: 
     lon0, lat0 = right_before.localize(cc, rc, h_m)
     c0, r0 = right_after.project(lon0, lat0, h_m)
     lc, lr = left.project(lon0, lat0, h_m)
-    fit = epipolar_fit(left, right_before, lc, lr, cc, rc, h_m)
-    t, nrm = fit.tangent[0], fit.normal[0]
+    try:
+        fit = epipolar_fit(left, right_before, lc, lr, cc, rc, h_m)
+        t, nrm = fit.tangent[0], fit.normal[0]
+    except InputError:  # along the same lines of sight (one pass's scenes): no epipolar line
+        t = nrm = np.full(2, np.nan)
     shift = np.array([float(c0) - cc, float(r0) - rc])
     return ImageCorrection(
         col_shift_px=float(shift[0]), row_shift_px=float(shift[1]),

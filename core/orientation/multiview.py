@@ -439,9 +439,15 @@ def _pair_fits(start: Sequence[SensorModel], cur: Sequence[SensorModel], tracks:
             continue
         rms = []
         for models in (start, cur):
-            fit = epipolar_fit(models[i], models[j], tracks.col[both, i], tracks.row[both, i],
-                               tracks.col[both, j], tracks.row[both, j], h[both])
+            try:
+                fit = epipolar_fit(models[i], models[j], tracks.col[both, i],
+                                   tracks.row[both, i], tracks.col[both, j],
+                                   tracks.row[both, j], h[both])
+            except InputError:  # no base (one pass's consecutive scenes): no y-parallax
+                break
             rms.append(float(np.sqrt(np.mean(fit.parallax_px**2))))
+        if len(rms) < 2:
+            continue
         out.append(ViewPairFit((i, j), int(both.size), rms[0], rms[1]))
     return tuple(out)
 

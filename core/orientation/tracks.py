@@ -25,6 +25,8 @@ from core.sensors.base import SensorModel
 
 FloatArray = NDArray[np.float64]
 LONLAT_STEP_DEG = 1e-5  # ~1 m: the step of the projections' lon/lat derivatives
+#: a target whose epipolar curve moves less than this per metre of height sees no height
+MIN_RATE_PX_PER_M = 1e-5  # B/H 4e-4 in 40 m pixels, 1e-5 in 1 m ones
 
 
 @dataclass(frozen=True, eq=False)
@@ -243,18 +245,24 @@ def fit_group(models: Sequence[SensorModel], g: TrackGroup, col_px: FloatArray,
     col, row = col_px[g.idx, g.source], row_px[g.idx, g.source]
     obs = np.stack([col_px[g.idx][:, g.targets], row_px[g.idx][:, g.targets]], axis=2)
     h = np.broadcast_to(np.asarray(h0_m, dtype=np.float64), col.shape).copy()
-    for _ in range(max_iter):
-        e, d, _, _ = _curves(models, g, col, row, h, dh_m)
-        step = np.einsum("nki,nki->n", d, obs - e) / np.einsum("nki,nki->n", d, d)
-        h += step
-        if np.max(np.abs(step)) < tol_m:
-            break
-    e, d, lon, lat = _curves(models, g, col, row, h, dh_m)
-    speed = np.linalg.norm(d, axis=2)
-    if np.any(speed < 1e-9):
+    e, d, _, _ = _curves(models, g, col, row, h, dh_m)
+    # a target on the source's own lines of sight (one pass's consecutive scenes) sees no
+    # height: its rate is 0 and both its components are observations
+    flat = np.linalg.norm(d, axis=2) < MIN_RATE_PX_PER_M
+    if np.any(np.all(flat, axis=1)):
         raise InputError("two images look along the same direction at some tie points (no "
                          "parallax with height): they are not a stereo pair")
-    t = d / speed[:, :, None]
+    for _ in range(max_iter):
+        d = np.where(flat[..., None], 0.0, d)
+        step = np.einsum("nki,nki->n", d, obs - e) / np.einsum("nki,nki->n", d, d)
+        h += step
+        e, d, lon, lat = _curves(models, g, col, row, h, dh_m)
+        if np.max(np.abs(step)) < tol_m:
+            break
+    d = np.where(flat[..., None], 0.0, d)
+    speed = np.linalg.norm(d, axis=2)
+    t = np.where(flat[..., None], np.array([1.0, 0.0]),
+                 d / np.where(flat, 1.0, speed)[:, :, None])
     nrm = np.stack([-t[..., 1], t[..., 0]], axis=2)
     res = obs - e
     parallax = np.einsum("nki,nki->nk", nrm, res)

@@ -46,6 +46,8 @@ from tasks.io.sensors import LoadedModel
 
 FORMAT = "gcpfree.relative"
 DEFAULT_CONFIG = RelativeConfig()
+#: of three images or more, a pair under this base-to-height ratio gives no tie points
+MIN_B_OVER_H = 0.02
 #: an overlap this fraction of the widest one or more sets the images' common tie-point cell
 WIDE_OVERLAP = 0.25
 
@@ -313,8 +315,10 @@ def views_box(views: list[LoadedModel], h_range: tuple[float, float]) -> BBox:
 
 def overlapping_pairs(views: list[LoadedModel], h_m: float,
                       h_range: tuple[float, float] | None) -> list[tuple[int, int]]:
-    """The pairs (i < j) of images that overlap (:func:`check_overlap`); GeometryError when an
-    image overlaps none of the others."""
+    """The pairs (i < j) of images that overlap (:func:`check_overlap`) and, of three images
+    or more, see their overlap with a base (B/H at least :data:`MIN_B_OVER_H`: consecutive
+    scenes of one pass look along the same lines of sight, their tie points hold no height);
+    GeometryError when an image is in none of them."""
     pairs = []
     for i in range(len(views)):
         for j in range(i + 1, len(views)):
@@ -322,8 +326,20 @@ def overlapping_pairs(views: list[LoadedModel], h_m: float,
                 check_overlap(views[i], views[j], h_m, h_range)
             except GeometryError:
                 continue
+            bh = _b_over_h(views[i], views[j], h_m) if len(views) > 2 else None
+            if bh is not None and bh < MIN_B_OVER_H:
+                print(f"tie points {i}-{j}       none: B/H {bh:.3f} (one pass's consecutive "
+                      "scenes, or the same view twice)")
+                continue
             pairs.append((i, j))
     return each_overlapped(views, pairs)
+
+
+def _b_over_h(a: LoadedModel, b: LoadedModel, h_m: float) -> float | None:
+    try:
+        return float(pair_geometry(a.model, a.size, b.model, b.size, h_m).b_over_h)
+    except GeometryError:  # overlapping at another height of the range only
+        return None
 
 
 def each_overlapped(views: list[LoadedModel], pairs: list[tuple[int, int]]

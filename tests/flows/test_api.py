@@ -161,8 +161,16 @@ def test_plain_calls_refuse_what_needs_a_task_runner_and_restore_prefect():
     assert Task.__call__ is call
 
 
-def test_the_block_waits_for_its_issue():
+def test_the_block_refuses_what_gcpfree_block_refuses(tmp_path):
+    """api.block reads the catalog as gcpfree block does: one without blocks, or without
+    the block asked for, is refused in a line before anything is written."""
+    import json
+
     from flows import api
 
-    with pytest.raises(NotImplementedError, match="issue 47"):
-        api.block("scenes.json", "out", dem_dir="tiles")
+    empty = tmp_path / "scenes.json"
+    empty.write_text(json.dumps({"format": "gcpfree.scenes", "version": 1, "scenes": [],
+                                 "pairs": [], "blocks": [], "rejected": []}))
+    with pytest.raises(InputError, match="lists no blocks|catalog"):
+        api.block(empty, tmp_path / "out", dem_dir=tmp_path)
+    assert not (tmp_path / "out").exists()
