@@ -108,7 +108,7 @@ def _products(params: BlockParams, block: Any, rel: Any, datum: Any, pairs: Any,
     """Each pair's DSM, the fused DSM, each image's ortho and RPC export, report.json."""
     from tasks.block.control import block_report
     from tasks.block.pairs import final_pair
-    from tasks.block.products import export_rpc
+    from tasks.block.products import dem_height_range_m, export_rpc
     from tasks.dense.multiview import grid_views_cog
     from tasks.ortho.inputs import describe_dem
     from tasks.ortho.orthorectify import OrthoConfig, orthorectify, plan_ortho
@@ -118,7 +118,7 @@ def _products(params: BlockParams, block: Any, rel: Any, datum: Any, pairs: Any,
     fused = grid_views_cog([f[0] for f in finals], block.names, out / "dsm.tif", dense,
                            block.fusion(), extent="all")
     oriented = [r for r in _oriented(rel.views, absolute.models)]
-    dem = describe_dem(out / "dsm.tif")
+    dem, heights = describe_dem(out / "dsm.tif"), dem_height_range_m(out / "dsm.tif")
     exports, grid = {}, (None, None)
     for name, view in zip(block.names, oriented, strict=True):
         plan = plan_ortho(view, dem, *grid)
@@ -126,7 +126,7 @@ def _products(params: BlockParams, block: Any, rel: Any, datum: Any, pairs: Any,
         (out / "orthos").mkdir(exist_ok=True)
         orthorectify(plan, out / "orthos" / f"{name}.tif", OrthoConfig(), params.orient.workers)
         exports[name] = export_rpc(view.model, Path(view.image or view.source), view.size,
-                                   rel.h_range_m, out / "models" / name)
+                                   heights, out / "models" / name)
     return block_report(params, block, rel, datum, pairs, controls, absolute, finals, fused,
                         exports, checkpoints)
 

@@ -473,6 +473,19 @@ class JointAlong:
     n_points: int = 0
 
 
+def track_heights(models: Sequence[SensorModel], tracks: Tracks, h0_m: ArrayLike,
+                  fixed: int = 0) -> FloatArray:
+    """Each track's height on its source ray, closest to its targets' pixels under ``models``
+    (from ``h0_m``): the tracks' heights once the joint orientation's models have moved
+    (:func:`fix_along_joint` moves them along the heights' common direction; the heights
+    the adjustment ended with are then off by that move, hundreds of metres on a block of
+    delivered models)."""
+    h = np.array(h0_m, dtype=np.float64)
+    for g in track_groups(tracks, fixed):
+        h[g.idx] = fit_group(models, g, tracks.col, tracks.row, h[g.idx]).h_m
+    return h
+
+
 def fix_along_joint(models: Sequence[SensorModel], fixed: int, tracks: Tracks,
                     inlier: ArrayLike, steps: ArrayLike, h_reference_m: ArrayLike,
                     sizes: Sequence[tuple[int, int]], reference_sigma_m: float = 5.0

@@ -27,6 +27,7 @@ from core.orientation.multiview import (
     ViewPairFit,
     fix_along_joint,
     joint_relative_orientation,
+    track_heights,
 )
 from core.orientation.relative import (
     AlongEpipolar,
@@ -447,12 +448,13 @@ def orient_views(
         dirs = np.array([[u.step[n] for n in res.param_names] for u in res.unobservable]).T
         models, along = fix_along_joint(models, 0, tracks, res.inlier, dirs, href,
                                         [v.size for v in views], reference_sigma_m)
-    h_in = res.h_m[res.inlier]
+    h_m = track_heights(models, tracks, res.h_m) if models is not res.models else res.h_m
+    h_in = h_m[res.inlier]
     h_track = (float(np.min(h_in)), float(np.max(h_in)))
     h_ref = float(np.median(h_in))
     tracks_json = Path(out).with_suffix(".tracks.json")
     atomic_write_json(tracks_json, {
-        "col": tracks.col.tolist(), "row": tracks.row.tolist(), "h_m": res.h_m.tolist(),
+        "col": tracks.col.tolist(), "row": tracks.row.tolist(), "h_m": h_m.tolist(),
         "inlier": res.inlier.tolist(), "source": res.source.tolist(),
         "parallax_px": res.parallax_px.tolist(),
         "pairs": [{"images": [i, j], "track": w.tolist()}
