@@ -170,15 +170,15 @@ def run(params: Any, *, prefect: bool = False) -> Any:
         OrientParams: orient_flow, PairParams: pair_flow, DsmParams: dsm_flow,
         BlockParams: block_flow,
         EvaluationOptions: evaluate_flow, SimulationParams: simulate_scene}
-    flow = flows.get(type(params))
-    if flow is None:
+    chosen = flows.get(type(params))
+    if chosen is None:
         names = ", ".join(t.__name__ for t in flows)
         raise InputError(f"api.run takes the parameters of a flow ({names}), not a "
                          f"{type(params).__name__}")
     if prefect:
-        return flow(params)
+        return chosen(params)
     with plain_calls():
-        return flow(params)
+        return chosen(params)
 
 
 # ----------------------------------------------------------------------------- parameters

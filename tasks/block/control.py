@@ -72,13 +72,20 @@ def select_block(catalog: Path, block_id: str | None = None) -> BlockSelection:
 
 def block_control(controls: Sequence[PairControl], config: AbsoluteConfig,
                   min_windows: int) -> GroundControl:
-    """The GCPs of every pair whose windows have the relief, in the reference's frame; a pair
-    refused says so (its images are held by their tie points). InsufficientReliefError when
+    """The GCPs of every pair whose windows have the relief and match (``min_windows`` GCPs at
+    least, as a pair alone needs), in the reference's frame; a pair refused says so (its
+    images are held by their tie points: a flat scene's two GCPs on 41 windows would hold it
+    by two weak points). InsufficientReliefError when
     no pair has the relief, InsufficientDataError with too few GCPs in all."""
-    notes = [f"pair {c.pair.id}: {c.verdict.message()}; its images are held by their tie "
-             "points to their neighbours" for c in controls if not c.verdict.enough]
-    gcps = tuple(p for c in controls for p in c.gcps)
-    if not any(c.verdict.enough for c in controls):
+    held = [c for c in controls if c.verdict.enough and len(c.gcps) >= min_windows]
+    notes = [f"pair {c.pair.id}: "
+             + (c.verdict.message() if not c.verdict.enough else
+                f"{len(c.gcps)} of its windows matched ({min_windows} needed: "
+                f"{', '.join(f'{k} {v}' for k, v in c.windows.counts().items())})")
+             + "; its images are held by their tie points to their neighbours"
+             for c in controls if c not in held]
+    gcps = tuple(p for c in held for p in c.gcps)
+    if not held:
         flat = all(c.verdict.reason == "too_flat" for c in controls)
         raise (InsufficientReliefError if flat else InsufficientDataError)(
             f"no stereo pair of the block has the windows it needs ({min_windows}): "
