@@ -130,9 +130,14 @@ def _array(v: Any) -> np.ndarray:
 
 NUMBER_SCHEMA = {"anyOf": [{"type": "number"}, {"type": "null"}],
                  "description": "null stands for NaN"}
-Number = Annotated[float, PlainValidator(_number), WithJsonSchema(NUMBER_SCHEMA)]
-Finite = Annotated[float, PlainValidator(_finite), WithJsonSchema({"type": "number"})]
-Integer = Annotated[int, PlainValidator(_integer), WithJsonSchema({"type": "integer"})]
+# written as Python numbers: a NumPy scalar in a field (a focal length computed with NumPy)
+# made pydantic's own serialisers fail ("Unexpected Value")
+Number = Annotated[float, PlainValidator(_number), PlainSerializer(float, return_type=float),
+                   WithJsonSchema(NUMBER_SCHEMA)]
+Finite = Annotated[float, PlainValidator(_finite), PlainSerializer(float, return_type=float),
+                   WithJsonSchema({"type": "number"})]
+Integer = Annotated[int, PlainValidator(_integer), PlainSerializer(int, return_type=int),
+                    WithJsonSchema({"type": "integer"})]
 Array = Annotated[np.ndarray, PlainValidator(_array),
                   PlainSerializer(lambda a: np.asarray(a).tolist()),
                   WithJsonSchema({"type": "array", "description": "numbers, nested by axis"})]

@@ -58,9 +58,9 @@ def no_server(monkeypatch, tmp_path):
     seen = {"real_pair_flow": flows.pair.pair_flow}
     monkeypatch.setattr(flows._env, "prefect_api", lambda: contextlib.nullcontext(Api()))
     monkeypatch.chdir(tmp_path)
-    for mod in (orient_command, pair_command):
-        monkeypatch.setattr(mod, "check_pair", lambda args: (
-            PairInputs(Path("l.tif"), Path("r.tif"), reference=Path("ref.tif")), None, None))
+    # both commands check the pair through orient's orient_params
+    monkeypatch.setattr(orient_command, "check_pair", lambda args: (
+        PairInputs(Path("l.tif"), Path("r.tif"), reference=Path("ref.tif")), None, None))
     monkeypatch.setattr(flows.commands._pair, "_check_scene_size", lambda *a: None)
 
     def orient_flow(params):
