@@ -51,7 +51,7 @@ def block_inputs(n_images: int):
     from core.orientation.frames import shifted_ground
     from core.orientation.ties import TieObservations
     from core.points import CheckPoint, CheckPointSet, ControlPoint, ImagePoint
-    from core.sensors.pushbroom_synthetic import SyntheticSpec, synthetic_pushbroom
+    from core.sensors.pushbroom_synthetic import SyntheticSpec, seen_in, synthetic_pushbroom
 
     pairs = n_images // 2
     names = tuple(f"p{p:02d}{s}" for p in range(pairs) for s in "ab")
@@ -68,14 +68,7 @@ def block_inputs(n_images: int):
                 500.0 + 800.0 * rng.uniform(size=n))
 
     def seen(lon, lat, h, noise_px):
-        col = np.full((lon.size, n_images), np.nan)
-        row = np.full_like(col, np.nan)
-        for k, m in enumerate(truth):
-            c, r = m.project(lon, lat, h)
-            inside = (c >= 0) & (c <= N_PX - 1) & (r >= 0) & (r <= N_PX - 1)
-            col[inside, k] = c[inside] + rng.normal(0, noise_px, inside.sum())
-            row[inside, k] = r[inside] + rng.normal(0, noise_px, inside.sum())
-        return col, row
+        return seen_in(truth, lon, lat, h, N_PX, noise_px, rng)
 
     lon, lat, h = ground(lons[0] - 0.15, lons[-1] + 0.15, TIES_PER_PAIR * pairs)
     col, row = seen(lon, lat, h, 0.1)

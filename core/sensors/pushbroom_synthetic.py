@@ -202,3 +202,19 @@ class _Geometry:
         m = self.model(x, camera, 1e-3)
         speed = np.linalg.norm(self._centre(m, dt=0.05) - self._centre(m, dt=-0.05)) / 0.1
         return self.model(x, camera, gsd_m / speed)
+
+
+def seen_in(models: list[PushbroomModel] | tuple[PushbroomModel, ...], lon: NDArray,
+            lat: NDArray, h: NDArray, n_px: int, noise_px: float,
+            rng: np.random.Generator) -> tuple[NDArray, NDArray]:
+    """(n, N) columns and rows of the ground points in each of N square ``n_px`` images that
+    sees them, with Gaussian noise of ``noise_px`` (NaN where an image does not): the
+    observations of a synthetic block."""
+    col = np.full((np.size(lon), len(models)), np.nan)
+    row = np.full_like(col, np.nan)
+    for k, m in enumerate(models):
+        c, r = m.project(lon, lat, h)
+        inside = (c >= 0) & (c <= n_px - 1) & (r >= 0) & (r <= n_px - 1)
+        col[inside, k] = c[inside] + rng.normal(0, noise_px, inside.sum())
+        row[inside, k] = r[inside] + rng.normal(0, noise_px, inside.sum())
+    return col, row

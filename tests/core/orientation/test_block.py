@@ -47,14 +47,9 @@ def _ground(lon0, lon1, n, rng):
 
 def _seen(truth, lon, lat, h, noise_px, rng):
     """(n, 4) columns and rows in every image that sees each point (NaN elsewhere)."""
-    col = np.full((lon.size, len(truth)), np.nan)
-    row = np.full_like(col, np.nan)
-    for k, m in enumerate(truth):
-        c, r = m.project(lon, lat, h)
-        inside = (c >= 0) & (c <= N_PX - 1) & (r >= 0) & (r <= N_PX - 1)
-        col[inside, k] = c[inside] + rng.normal(0, noise_px, inside.sum())
-        row[inside, k] = r[inside] + rng.normal(0, noise_px, inside.sum())
-    return col, row
+    from core.sensors.pushbroom_synthetic import seen_in
+
+    return seen_in(truth, lon, lat, h, N_PX, noise_px, rng)
 
 
 def _inputs(truth, n_gcps_b=0):
