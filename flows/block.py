@@ -108,7 +108,7 @@ def _products(params: BlockParams, block: Any, rel: Any, datum: Any, pairs: Any,
     """Each pair's DSM, the fused DSM, each image's ortho and RPC export, report.json."""
     from tasks.block.control import block_report
     from tasks.block.pairs import final_pair
-    from tasks.block.products import dem_height_range_m, export_rpc
+    from tasks.block.products import export_rpc
     from tasks.dense.multiview import grid_views_cog
     from tasks.ortho.inputs import describe_dem
     from tasks.ortho.orthorectify import OrthoConfig, orthorectify, plan_ortho
@@ -118,7 +118,8 @@ def _products(params: BlockParams, block: Any, rel: Any, datum: Any, pairs: Any,
     fused = grid_views_cog([f[0] for f in finals], block.names, out / "dsm.tif", dense,
                            block.fusion(), extent="all")
     oriented = [r for r in _oriented(rel.views, absolute.models)]
-    dem, heights = describe_dem(out / "dsm.tif"), dem_height_range_m(out / "dsm.tif")
+    dem = describe_dem(out / "dsm.tif")
+    heights = (fused.dem.h_min_m, fused.dem.h_max_m)  # the fused DSM's, as its JSON states
     exports, grid = {}, (None, None)
     for name, view in zip(block.names, oriented, strict=True):
         plan = plan_ortho(view, dem, *grid)

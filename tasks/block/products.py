@@ -13,7 +13,6 @@ from xml.sax.saxutils import escape
 
 from rasterio.errors import NotGeoreferencedWarning
 
-from core.errors import InputError
 from core.orientation.adjust import Solution
 from core.sensors.base import SensorModel
 from core.sensors.rpcfit import fit_rpc
@@ -22,17 +21,6 @@ from tasks.io.model_files import model_document
 from tasks.io.rasters import atomic_write_json, atomic_write_text, open_raster
 
 BLOCK_FORMAT = "gcpfree.block"
-
-
-def dem_height_range_m(path: Path) -> tuple[float, float]:
-    """The lowest and highest heights of a DEM's valid cells (m; for the RPC exports'
-    height range: the tracks' heights before the absolute orientation are off by its
-    correction and carry their blunders)."""
-    with open_raster(path, "DSM", "give the block's DSM") as src:
-        h = src.read(1, masked=True)
-    if h.count() == 0:
-        raise InputError(f"{path} has no valid cell: the block's DSM is empty")
-    return float(h.min()), float(h.max())
 
 
 def export_rpc(model: SensorModel, image: Path, size: tuple[int, int],
