@@ -159,11 +159,12 @@ def correlated_ground_error(ground_jac: ArrayLike, v: ArrayLike, east_m: ArrayLi
         wa = a_ / s_[..., None] ** 2  # W A: (n, m, 2, u)
         pa = np.einsum("nlo,nou->nlu", pinv, a_.reshape(n, gf.shape[1], -1))  # P A
         # P R B_k: identity part e_i <- e_i (P_i G_i = I), less P A C A' W B_k
-        awg = np.einsum("pou,pok->puk", wa.reshape(n, gf.shape[1], -1), gf)  # A' W B_k
-        z = np.empty((3, 3, n, n))
-        for k in range(3):
-            z[:, k] = -np.einsum("nlu,uv,pv->lnp", pa, c_, awg[:, :, k])
-            z[k, k] += np.eye(n)
+        awg = np.einsum("pou,pok->kpu", wa.reshape(n, gf.shape[1], -1), gf)  # A' W B_k
+        pac = np.moveaxis(pa @ c_, 1, 0)  # (l, n, u): P A C, for (l, n, p) = (P A C)(A' W B_k)
+        # two matrix products (n u^2 + n^2 u) instead of one four-index sum (n^2 u^2): a
+        # 20-image block's 397 GCPs took 31 s here
+        z = -np.matmul(pac[:, None], np.swapaxes(awg, 1, 2)[None])  # (l, k, n, n)
+        z[np.arange(3), np.arange(3)] += np.eye(n)
     best = (np.inf, NO_CORRELATION)
     total = np.mean(e**2, axis=0)
     grid = np.geomspace(0.25 * max(edges[1], 1.0), (1.0 if few else 4.0) * dd.max(), 30)

@@ -185,6 +185,13 @@ def tie_rows(models: Sequence[SensorModel], ties: TieObservations, ground: Array
     a_parts, r_parts, p_parts = [], [], []
     # the points grouped by the images that see them (one group for a pair's tie points)
     patterns, which = np.unique(seen, axis=0, return_inverse=True)
+    jac_of: list[FloatArray] = []  # image m's Jacobian at every point it sees, one call each
+    slot_of = np.cumsum(seen, axis=0) - 1  # a point's place among those its image sees
+    if jacobian:
+        for m, model in enumerate(models):
+            gm = g[:, seen[:, m]]
+            jac_of.append(np.asarray(model.jacobian(gm[0], gm[1], gm[2]), np.float64)
+                          if gm.shape[1] else np.zeros((0, 2, offsets[m + 1] - offsets[m])))
     for q, pattern in enumerate(patterns):
         idx = np.flatnonzero(which.ravel() == q)
         images = np.flatnonzero(pattern)
@@ -199,8 +206,7 @@ def tie_rows(models: Sequence[SensorModel], ties: TieObservations, ground: Array
         if jacobian:
             a = np.zeros((idx.size, cols.size, n_par))
             for slot, m in enumerate(images):
-                gi = g[:, idx]
-                jac = np.asarray(models[m].jacobian(gi[0], gi[1], gi[2]), np.float64)
+                jac = jac_of[m][slot_of[idx, m]]
                 a[:, 2 * slot:2 * slot + 2, offsets[m]:offsets[m + 1]] = jac / ties.sigma_px
             a_parts.append(np.einsum("nck,ncp->nkp", u, a).reshape(-1, n_par))
     rr, point = np.concatenate(r_parts), np.concatenate(p_parts)

@@ -38,6 +38,7 @@ from typing import Any
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
+from scipy import sparse
 
 from core.errors import InputError
 
@@ -88,6 +89,40 @@ class ComponentSolution:
     components: VarianceComponents
 
 
+SPARSE_MIN_PARAMS = 64  # a block's design: each row holds the parameters of 2-3 images
+SPARSE_MAX_DENSITY = 0.25
+LEVERAGE_ROWS = 8192  # rows of A N^-1 formed at a time (bounded memory)
+
+
+def _sparse_when_worth_it(a: FloatArray) -> FloatArray | sparse.csr_matrix:
+    """``a`` as a CSR matrix when it has many columns and few of them non-zero in a row (a
+    block of images: the normal equations then cost the rows' non-zeros, linear in the number
+    of images, instead of rows x columns^2); else ``a`` itself."""
+    if a.shape[1] < SPARSE_MIN_PARAMS:
+        return a
+    nnz = np.count_nonzero(a)
+    return sparse.csr_matrix(a) if nnz <= SPARSE_MAX_DENSITY * a.size else a
+
+
+def _normals(a: FloatArray | sparse.csr_matrix, w: FloatArray) -> FloatArray:
+    """``A' W A`` (dense (u, u))."""
+    if sparse.issparse(a):
+        return np.asarray((a.T @ a.multiply(w[:, None]).tocsr()).toarray())
+    return a.T @ (a * w[:, None])
+
+
+def _leverages(a: FloatArray | sparse.csr_matrix, n_inv: FloatArray) -> FloatArray:
+    """``a_i N^-1 a_i'`` per row, ``LEVERAGE_ROWS`` rows at a time."""
+    out = np.empty(a.shape[0])
+    for i in range(0, a.shape[0], LEVERAGE_ROWS):
+        rows = a[i:i + LEVERAGE_ROWS]
+        if sparse.issparse(rows):
+            out[i:i + LEVERAGE_ROWS] = np.asarray(rows.multiply(rows @ n_inv).sum(axis=1)).ravel()
+        else:
+            out[i:i + LEVERAGE_ROWS] = np.sum((rows @ n_inv) * rows, axis=1)
+    return out
+
+
 def solve_with_components(a: ArrayLike, r: ArrayLike, q: ArrayLike, groups: ArrayLike,
                           names: Sequence[str], factors: ArrayLike | None = None,
                           max_iterations: int = 50, tol: float = 1e-4,
@@ -115,15 +150,16 @@ def solve_with_components(a: ArrayLike, r: ArrayLike, q: ArrayLike, groups: Arra
     scale = np.sqrt(np.sum(a**2 / q[:, None], axis=0))
     scale = np.where(scale > 0, scale, 1.0)
     a_s = a / scale  # columns of comparable size: the normal matrix stays well conditioned
+    a_s = _sparse_when_worth_it(a_s)
     n_obs = np.bincount(g, minlength=n_groups)
     red = np.zeros(n_groups)
     converged, it = False, 0
     for it in range(1, max_iterations + 1):
         w = 1.0 / (theta[g] * q)
-        n_inv = np.linalg.pinv(a_s.T @ (a_s * w[:, None]), rcond=1e-12)
+        n_inv = np.linalg.pinv(_normals(a_s, w), rcond=1e-12)
         dx_s = n_inv @ (a_s.T @ (w * r))
         v = r - a_s @ dx_s
-        lev = w * np.einsum("ij,jk,ik->i", a_s, n_inv, a_s)  # w_i a_i N^-1 a_i'
+        lev = w * _leverages(a_s, n_inv)  # w_i a_i N^-1 a_i'
         red = n_obs - np.bincount(g, weights=lev, minlength=n_groups)
         quad = np.bincount(g, weights=w * v**2, minlength=n_groups)
         ok = (red > 0.5) & ~np.isin(np.asarray(names), list(fixed))
@@ -133,7 +169,7 @@ def solve_with_components(a: ArrayLike, r: ArrayLike, q: ArrayLike, groups: Arra
             converged = True
             break
     w = 1.0 / (theta[g] * q)
-    n_inv = np.linalg.pinv(a_s.T @ (a_s * w[:, None]), rcond=1e-12)
+    n_inv = np.linalg.pinv(_normals(a_s, w), rcond=1e-12)
     dx_s = n_inv @ (a_s.T @ (w * r))
     comps = VarianceComponents(tuple(names), theta, n_obs, red, it, converged)
     return ComponentSolution(dx_s / scale, r - a_s @ dx_s, n_inv / np.outer(scale, scale), comps)
@@ -159,7 +195,7 @@ def predicted_variances(jac: ArrayLike, covariance: ArrayLike) -> FloatArray:
     c = np.asarray(covariance, dtype=np.float64)
     if j.ndim != 3 or c.shape != (j.shape[2], j.shape[2]):
         raise InputError(f"Jacobian {j.shape} and covariance {c.shape} do not agree")
-    return np.clip(np.einsum("nau,uv,nav->na", j, c, j), 0.0, None)
+    return np.clip(np.sum((j @ c) * j, axis=2), 0.0, None)
 
 
 def ground_jacobian(model: Any, lon_deg: ArrayLike, lat_deg: ArrayLike, h_m: ArrayLike,
