@@ -33,13 +33,16 @@ GROUPS = ("gcp_col", "gcp_row", "tie", "prior", "frame")
 class System:
     """Every equation of the adjustment at the current models: design ``a`` (n, n_params; empty
     when only residuals were asked), residuals ``r`` (measured - computed), a-priori variances
-    ``q`` and group (index into :data:`GROUPS`) of each row; the tie points' ground."""
+    ``q`` and group (index into :data:`GROUPS`) of each row; the tie points' ground; the frame
+    of each GCP row (``source``, -1 on the other rows: the variance components of a GCP source
+    apart from another's)."""
 
     a: FloatArray
     r: FloatArray
     q: FloatArray
     group: NDArray[np.intp]
     ground: FloatArray | None
+    source: NDArray[np.intp] | None = None  # a GCP row's frame index (-1: not a GCP's)
 
 
 class Equations:
@@ -71,6 +74,9 @@ class Equations:
         if jacobian and self.frames.n:
             a[:, n_mod:] = frame_design(models, obs, use, self.frames)
         a_parts, r_parts, q_parts, g_parts = [a], [r], [q], [axis]
+        frame = np.asarray(self.obs.frame)
+        source = np.concatenate([np.repeat(frame[use[:, m]], 2) for m in range(len(models))]
+                                + [np.zeros(0, np.intp)])
         ground = None
         if self.ties is not None and self.ties.n:
             # the rays' ground design of the first build serves every later one: the
@@ -95,8 +101,11 @@ class Equations:
             r_parts.append(-self.frames.prior_rows() @ frame_x)
             q_parts.append(np.ones(self.frames.n))
             g_parts.append(np.full(self.frames.n, 4))
+        groups = np.concatenate(g_parts).astype(np.intp)
+        rows = np.full(groups.size, -1, dtype=np.intp)
+        rows[:source.size] = source
         return System(np.vstack(a_parts), np.concatenate(r_parts), np.concatenate(q_parts),
-                       np.concatenate(g_parts).astype(np.intp), ground)
+                      groups, ground, rows)
 
     def accept(self, system: System) -> None:
         """Start the next tie-point intersections from this system's ground."""

@@ -11,7 +11,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from core.geodesy import metres_per_degree
-from core.orientation.absolute import AbsoluteConfig, observation_sigmas_px
+from core.orientation.absolute import AbsoluteConfig, gcp_factors, observation_sigmas_px
 from core.orientation.ground_field import (
     NO_CORRELATION,
     CorrelatedGroundError,
@@ -64,10 +64,9 @@ def with_gcp_errors_as_they_are(adj: AbsoluteOrientation, obs: Observations,
     comps = adj.components
     if comps is None:
         sigma = sigma * max(adj.sigma0, 1e-12)
-    elif "gcp" in comps.names:
-        sigma = sigma * np.sqrt(comps.factor_of("gcp"))
-    else:
-        sigma = sigma * np.sqrt([comps.factor_of("gcp_col"), comps.factor_of("gcp_row")])
+    else:  # each GCP's frame's factors (one pair for all when calibrated together)
+        factors = np.array([gcp_factors(comps, name) for name in adj.frame_layout.names])
+        sigma = sigma * np.sqrt(factors[np.asarray(sub.frame)])[:, None, :]
     sigma = np.where(seen[..., None], sigma, np.inf)  # a block's GCP: its own images only
     error = correlated_ground_error(ground, v, east, north,
                                     absorbed=(jac, sigma, adj.covariance))

@@ -6,6 +6,8 @@ frame of weak surface-matching windows not trusted beyond their own precision.""
 
 from __future__ import annotations
 
+from dataclasses import replace
+
 import numpy as np
 import pytest
 
@@ -210,3 +212,35 @@ def test_a_gcp_measured_in_an_image_not_adjusted_is_refused(pair):
     with pytest.raises(InputError, match="not adjusted"):
         adjust(_images(delivered)[:1], [ControlSet("surface", gcps, FramePrior(
             REFERENCE, (5.0, 5.0, 5.0)))], config=AdjustConfig(absolute=AbsoluteConfig()))
+
+
+def test_each_frames_gcps_get_their_own_variance_components(pair):
+    """60 windows that state their 2 m truly, and 200 SAR points that state 3 m but scatter by
+    15 m (a SAR product's speckle and layover beyond its stated precision): calibrated apart,
+    the SAR's factor is found far above the windows' (its true scatter over its stated, with
+    the 0.2 px of matching beside), so the SAR points weigh as they deserve and the check
+    points are no worse than with one factor for both, which lets the 200 SAR points pull."""
+    delivered, truth = pair
+    srtm = _points(truth, 60, seed=10)
+    sar = _points(truth, 200, seed=11, sxy=15.0, sh=15.0, first_id=100, source="sar")
+    sar = tuple(replace(p, sigma_xy_m=3.0, sigma_h_m=3.0) for p in sar)  # understated
+    sets = [ControlSet("surface", srtm, FramePrior(REFERENCE, (5.0, 5.0, 5.0))),
+            ControlSet("sar", sar, FramePrior("sar", (10.0, 10.0, 5.0), up_of=REFERENCE))]
+    cps = _check_points(truth)
+    apart = adjust(_images(delivered), sets, config=AdjustConfig(
+        absolute=AbsoluteConfig(components_by_frame=True)))
+    shared = adjust(_images(delivered), sets)  # the default: one set for every frame
+    comps = apart.adjustment.components
+    assert comps is not None
+    names = comps.names
+    assert any(n.endswith(":sar") for n in names) and any(n.endswith(":reference")
+                                                           for n in names), names
+    sar_factor = max(comps.factors[i] for i, n in enumerate(names) if n.endswith(":sar"))
+    ref_factor = max(comps.factors[i] for i, n in enumerate(names) if n.endswith(":reference"))
+    assert sar_factor > 5.0 * ref_factor, comps.to_dict()
+    assert not any(":" in n for n in shared.adjustment.components.names)
+    got, one = apart.check_points(cps), shared.check_points(cps)
+    assert _worst(got) < _worst(one), (got, one)  # 0.10 against 0.16 px here
+    for name in NAMES:
+        assert got[name].rms_col_px / got[name].predicted_rms_col_px <= 1.5
+        assert got[name].rms_row_px / got[name].predicted_rms_row_px <= 1.5
