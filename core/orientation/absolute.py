@@ -41,7 +41,9 @@ from core.orientation.uncertainty import (
     VarianceComponents,
     components_differ,
     neighbour_covariance,
+    normal_matrix,
     solve_with_components,
+    sparse_when_worth_it,
 )
 from core.robust import RobustAdjustment, huber_weights, nmad
 from core.sensors.base import SensorModel
@@ -221,8 +223,9 @@ def absolute_orientation(models: Sequence[SensorModel], obs: Observations,
             w[system.group == GROUPS.index("frame")] = 1.0  # a prior, not an observation
             scale = np.sqrt(np.sum(a**2 * w[:, None], axis=0))
             scale = np.where(scale > 0, scale, 1.0)
-            normal = (a / scale).T @ ((a / scale) * w[:, None])
-            grad = (a / scale).T @ (w * r)
+            a_s = sparse_when_worth_it(a / scale)  # a block's: CSR, linear in its images
+            normal = normal_matrix(a_s, w)
+            grad = a_s.T @ (w * r)
             cost = float(np.sum(w * r**2))
             for _ in range(12):  # Levenberg-Marquardt: damp until the step lowers the cost
                 damped = normal + lam * np.diag(np.diag(normal))

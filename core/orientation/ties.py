@@ -203,12 +203,17 @@ def tie_rows(models: Sequence[SensorModel], ties: TieObservations, ground: Array
         u = u_full[:, :, 3:]  # (p, 2k, 2k - 3): the left null space of the ground design
         r_parts.append(np.einsum("nck,nc->nk", u, r[np.ix_(idx, cols)]).reshape(-1))
         p_parts.append(np.repeat(idx, u.shape[2]))
-        if jacobian:
-            a = np.zeros((idx.size, cols.size, n_par))
+        if jacobian:  # on the parameters of the pattern's images only, then placed
+            local = np.concatenate([np.arange(offsets[m], offsets[m + 1]) for m in images])
+            a = np.zeros((idx.size, cols.size, local.size))
+            at = 0
             for slot, m in enumerate(images):
-                jac = jac_of[m][slot_of[idx, m]]
-                a[:, 2 * slot:2 * slot + 2, offsets[m]:offsets[m + 1]] = jac / ties.sigma_px
-            a_parts.append(np.einsum("nck,ncp->nkp", u, a).reshape(-1, n_par))
+                size = int(offsets[m + 1] - offsets[m])
+                a[:, 2 * slot:2 * slot + 2, at:at + size] = jac_of[m][slot_of[idx, m]] / ties.sigma_px
+                at += size
+            rows = np.zeros((idx.size * u.shape[2], n_par))
+            rows[:, local] = np.einsum("nck,ncp->nkp", u, a).reshape(-1, local.size)
+            a_parts.append(rows)
     rr, point = np.concatenate(r_parts), np.concatenate(p_parts)
     order = np.argsort(point, kind="stable")  # point by point, as the points were given
     rr, point = rr[order], point[order]

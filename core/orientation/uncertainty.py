@@ -94,7 +94,7 @@ SPARSE_MAX_DENSITY = 0.25
 LEVERAGE_ROWS = 8192  # rows of A N^-1 formed at a time (bounded memory)
 
 
-def _sparse_when_worth_it(a: FloatArray) -> FloatArray | sparse.csr_matrix:
+def sparse_when_worth_it(a: FloatArray) -> FloatArray | sparse.csr_matrix:
     """``a`` as a CSR matrix when it has many columns and few of them non-zero in a row (a
     block of images: the normal equations then cost the rows' non-zeros, linear in the number
     of images, instead of rows x columns^2); else ``a`` itself."""
@@ -104,7 +104,7 @@ def _sparse_when_worth_it(a: FloatArray) -> FloatArray | sparse.csr_matrix:
     return sparse.csr_matrix(a) if nnz <= SPARSE_MAX_DENSITY * a.size else a
 
 
-def _normals(a: FloatArray | sparse.csr_matrix, w: FloatArray) -> FloatArray:
+def normal_matrix(a: FloatArray | sparse.csr_matrix, w: FloatArray) -> FloatArray:
     """``A' W A`` (dense (u, u))."""
     if sparse.issparse(a):
         return np.asarray((a.T @ a.multiply(w[:, None]).tocsr()).toarray())
@@ -150,13 +150,13 @@ def solve_with_components(a: ArrayLike, r: ArrayLike, q: ArrayLike, groups: Arra
     scale = np.sqrt(np.sum(a**2 / q[:, None], axis=0))
     scale = np.where(scale > 0, scale, 1.0)
     a_s = a / scale  # columns of comparable size: the normal matrix stays well conditioned
-    a_s = _sparse_when_worth_it(a_s)
+    a_s = sparse_when_worth_it(a_s)
     n_obs = np.bincount(g, minlength=n_groups)
     red = np.zeros(n_groups)
     converged, it = False, 0
     for it in range(1, max_iterations + 1):
         w = 1.0 / (theta[g] * q)
-        n_inv = np.linalg.pinv(_normals(a_s, w), rcond=1e-12)
+        n_inv = np.linalg.pinv(normal_matrix(a_s, w), rcond=1e-12)
         dx_s = n_inv @ (a_s.T @ (w * r))
         v = r - a_s @ dx_s
         lev = w * _leverages(a_s, n_inv)  # w_i a_i N^-1 a_i'
@@ -169,7 +169,7 @@ def solve_with_components(a: ArrayLike, r: ArrayLike, q: ArrayLike, groups: Arra
             converged = True
             break
     w = 1.0 / (theta[g] * q)
-    n_inv = np.linalg.pinv(_normals(a_s, w), rcond=1e-12)
+    n_inv = np.linalg.pinv(normal_matrix(a_s, w), rcond=1e-12)
     dx_s = n_inv @ (a_s.T @ (w * r))
     comps = VarianceComponents(tuple(names), theta, n_obs, red, it, converged)
     return ComponentSolution(dx_s / scale, r - a_s @ dx_s, n_inv / np.outer(scale, scale), comps)
