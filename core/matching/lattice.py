@@ -108,7 +108,7 @@ def site(cells: WindowCells) -> int:
     m off east, which the lens terms extrapolated to the image's edges. Kept point-symmetric
     about the tie point instead (a window the edge cuts losing the cells whose reflection has
     no height: about half of them), the 168 cut windows of the eight tiny scenes of
-    ``bench/uncertainty_sweep.py`` were 11.1 m RMS off per horizontal axis (stated precision
+    ``bench/validation/uncertainty_sweep.py`` were 11.1 m RMS off per horizontal axis (stated precision
     8.5 m); matched whole and placed at the tie point, 8.4 m; placed here, 7.3 m (4.1 m
     stated). The centroid weighted by the squared slopes (the correlation's sensitivity) gave
     7.2 m."""

@@ -245,7 +245,7 @@ def geolocation_sigma_m(mission: str) -> float:
 # the matching's bias at height steps, in radar pixels of the matching grid along the range:
 # against the optical image on the reference's heights, measured 0.7-1.0 on the simulator's
 # forest edges; against the SAR image predicted from the pair's surface, 0.0-0.2 while the
-# troposphere's 2.3 m were left in the range (bench/bench_sar_gcps.py on the flat tiny and
+# troposphere's 2.3 m were left in the range (bench/validation/sar_gcps.py on the flat tiny and
 # spot scenes), which hid part of it: with the hydrostatic delay taken out
 # (core.sensors.troposphere) the SAR GCPs of the flat tiny scene (seed 3, ERS, 80.9 m radar
 # cells) sit 27 and 34 m towards the radar in the two images, 0.3-0.4 radar pixel

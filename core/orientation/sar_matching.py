@@ -12,7 +12,7 @@ at a forest edge the radar lays the canopy over the field in front of it and lea
 gap behind, in the same pixels, which no resampling undoes (an orthoimage cannot unmix a
 pixel): the radar's edges sit towards the radar, along its range, the direction of the
 height parallax, so the calibration below cannot tell them from the optical model's error.
-Measured on the simulator (``bench/bench_sar_gcps.py``, patchy forest 17.5 m tall): 0.7-1.0
+Measured on the simulator (``bench/validation/sar_gcps.py``, patchy forest 17.5 m tall): 0.7-1.0
 radar pixel on the flat ``tiny`` and ``spot`` pairs, 0.97 with the optical image resampled
 on the true surface, 0.1 with the SAR rendered from the bare terrain.
 
@@ -151,7 +151,7 @@ class SarOpticalMatches:
 def match_sar_optical(g: GroundImages, cfg: SarGcpConfig,
                       ignore: NDArray[np.bool_] | None = None) -> SarOpticalMatches:
     """Conjugate points of the optical and the SAR image on their common ground grid;
-    ``ignore``: grid cells left out of the templates' scores (``bench/bench_sar_gcps.py``
+    ``ignore``: grid cells left out of the templates' scores (``bench/validation/sar_gcps.py``
     tries the cells near height steps)."""
     da, db = mm.orientation_channels(g.optical), mm.orientation_channels(g.sar)
     va, vb = np.isfinite(g.optical), np.isfinite(g.sar)
