@@ -32,6 +32,7 @@ from typing import Any, Literal
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
+from core.choices import CORRECTIONS, Corrections
 from core.errors import InputError
 from core.orientation.absolute import AbsoluteConfig, absolute_orientation
 from core.orientation.along_track import AlongTrack, estimate_along_track
@@ -53,8 +54,6 @@ from core.sensors.base import SensorModel
 from core.sensors.pushbroom import PushbroomModel
 
 FloatArray = NDArray[np.float64]
-Corrections = Literal["linear", "offset"]
-CORRECTIONS: tuple[Corrections, ...] = ("linear", "offset")
 ControlKind = Literal["surface", "sar", "gcp"]
 #: the predicted RMS over an image: a regular grid of this many points per side
 GRID_SIDE = 9
