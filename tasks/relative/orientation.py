@@ -323,24 +323,22 @@ def overlapping_pairs(views: list[LoadedModel], h_m: float,
     pairs = []
     for i in range(len(views)):
         for j in range(i + 1, len(views)):
-            try:
-                check_overlap(views[i], views[j], h_m, h_range)
-            except GeometryError:
-                continue
-            bh = _b_over_h(views[i], views[j], h_m) if len(views) > 2 else None
+            try:  # the geometry at h_m serves the overlap and the base (computed once)
+                geom = pair_geometry(views[i].model, views[i].size, views[j].model,
+                                     views[j].size, h_m)
+                bh = float(geom.b_over_h) if len(views) > 2 else None
+            except GeometryError:  # overlapping at another height of the range only, or not
+                try:
+                    check_overlap(views[i], views[j], h_m, h_range)
+                except GeometryError:
+                    continue
+                bh = None
             if bh is not None and bh < MIN_B_OVER_H:
                 print(f"tie points {i}-{j}       none: B/H {bh:.3f} (one pass's consecutive "
                       "scenes, or the same view twice)")
                 continue
             pairs.append((i, j))
     return each_overlapped(views, pairs)
-
-
-def _b_over_h(a: LoadedModel, b: LoadedModel, h_m: float) -> float | None:
-    try:
-        return float(pair_geometry(a.model, a.size, b.model, b.size, h_m).b_over_h)
-    except GeometryError:  # overlapping at another height of the range only
-        return None
 
 
 def each_overlapped(views: list[LoadedModel], pairs: list[tuple[int, int]]
