@@ -133,7 +133,7 @@ def views_relative_flow(params: RelativeParams) -> ViewsOutcome:
         scene_height_m,
         search_radius_m,
     )
-    from tasks.relative.tiepoints import find_tie_points, tie_measure
+    from tasks.relative.tiepoints import resumed_tie_points, tie_measure
 
     out, pair = Path(params.out), params.pair
     views = load_views(pair, params.images)
@@ -150,10 +150,13 @@ def views_relative_flow(params: RelativeParams) -> ViewsOutcome:
         lines.append(f"tie points {i}-{j}       {MEASURE_NAMES[measure]} ({why})")
         print(lines[-1])
         try:
-            ties.append(find_tie_points(views[i].image or views[i].source,
-                                        views[j].image or views[j].source, views[i].model,
-                                        views[j].model, dem, replace(cfg, measure=measure),
-                                        h_range_m=h_range, num_workers=params.workers))
+            result, resumed = resumed_tie_points(
+                views[i], views[j], dem, replace(cfg, measure=measure),
+                out.parent / f"ties_{i}_{_stem(views[i])}__{j}_{_stem(views[j])}.json",
+                h_range_m=h_range, reference_path=ground.path, num_workers=params.workers)
+            ties.append(result)
+            if resumed:
+                print(f"tie points {i}-{j}       read back (the same images and settings)")
         except GeometryError:  # of many images, two whose footprints touch at a corner
             if len(views) == 2:
                 raise
@@ -171,6 +174,10 @@ def views_relative_flow(params: RelativeParams) -> ViewsOutcome:
                                                                    strict=True)),
                         tuple(views), ground.path, products.rel_json, products.h_range_m,
                         (*lines, *products.lines()))
+
+
+def _stem(view: LoadedModel) -> str:
+    return Path(view.image or view.source).stem
 
 
 @flow(name="relative-views-models")

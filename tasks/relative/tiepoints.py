@@ -10,8 +10,9 @@ windows, the reference DEM over the scene and the point arrays.
 
 from __future__ import annotations
 
-from dataclasses import dataclass, replace
+from dataclasses import asdict, dataclass, replace
 from pathlib import Path
+from typing import Any
 
 import cv2
 import dask
@@ -20,6 +21,7 @@ from prefect import task
 
 from core.dem import GeoDEM
 from core.errors import CoverageError, GeometryError, InputError
+from core.jsonio import json_ready, parse_json
 from core.matching.overlap import overlap_cell_m, overlap_cells
 from core.matching.tiepoint_match import match_points
 from core.matching.tiepoint_results import Matches, TiePointResult, tiepoint_report
@@ -41,6 +43,7 @@ from core.sensors.base import SensorModel
 from core.sensors.footprint import footprint_box, scene_height_range_m
 from tasks.io.dem import dem_datum, read_reference
 from tasks.io.rasters import atomic_write_json, open_raster, read_window
+from tasks.io.sensors import LoadedModel
 from tasks.scheduling import compute
 
 # margin (degrees) around the left footprint when reading the reference DEM: the search
@@ -217,3 +220,43 @@ def find_tie_points(
     if out is not None:
         atomic_write_json(out, result.to_dict(), indent=None)
     return result
+
+
+def _file_key(path: str | Path | None) -> list[Any] | None:
+    """A file as a resume key: its resolved path, size and modification time."""
+    if path is None or isinstance(path, GeoDEM):
+        return None
+    p = Path(path).resolve()
+    st = p.stat() if p.exists() else None
+    return [str(p), st.st_size if st else None, st.st_mtime_ns if st else None]
+
+
+def resumed_tie_points(left: LoadedModel, right: LoadedModel, reference: str | Path | GeoDEM | None,
+                       cfg: TiePointConfig, cache: Path, *,
+                       h_range_m: tuple[float, float] | None = None,
+                       reference_path: str | Path | None = None,
+                       num_workers: int | None = None) -> tuple[TiePointResult, bool]:
+    """:func:`find_tie_points` of two loaded images, kept in ``cache`` (JSON, written
+    atomically) with what made them (the images and model files by path, size and time, the
+    reference (``reference_path``: the file a GeoDEM ``reference`` was read from), the
+    configuration, the height range): a rerun with the same inputs reads them
+    back instead of matching again (``True`` beside the result), anything else changed or a
+    damaged file matches again."""
+    key = json_ready({"images": [_file_key(left.image or left.source),
+                                 _file_key(right.image or right.source)],
+                      "models": [_file_key(left.source), _file_key(right.source)],
+                      "band": [left.band, right.band],
+                      "reference": _file_key(reference_path or reference),
+                      "config": asdict(cfg), "h_range_m": h_range_m})
+    if cache.is_file():
+        try:
+            doc = parse_json(cache.read_text(encoding="utf-8"), str(cache))
+            if doc.get("key") == key:
+                return TiePointResult.from_dict(doc["result"]), True
+        except (InputError, AttributeError, TypeError, KeyError):
+            pass  # damaged or from other inputs: matched again
+    result = find_tie_points(left.image or left.source, right.image or right.source,
+                             left.model, right.model, reference, cfg, h_range_m=h_range_m,
+                             num_workers=num_workers)
+    atomic_write_json(cache, {"key": key, "result": result.to_dict()}, indent=None)
+    return result, False

@@ -29,7 +29,7 @@ from core.simulation.landcover import LandCover
 from tasks.io.geoid import BUNDLED_SRTM_DIR
 from tasks.io.reference import build_reference, locate_tiles
 from tasks.io.sensors import load_model
-from tasks.relative.tiepoints import find_tie_points, tie_measure
+from tasks.relative.tiepoints import find_tie_points, resumed_tie_points, tie_measure
 
 DATA = Path(__file__).resolve().parents[1] / "data"
 SHARED = Path(os.environ.get("GCPFREE_SHARED_DATA", "/work/shared/data"))
@@ -316,3 +316,35 @@ def test_a_reference_that_misses_the_scene_or_is_projected_is_refused(small_pair
         find_tie_points.fn(*small_pair, m, m, far, TiePointConfig())
     with pytest.raises(InputError, match="EPSG:4326"):
         find_tie_points.fn(*small_pair, m, m, utm, TiePointConfig())
+
+
+def test_tie_points_are_read_back_on_a_rerun_of_the_same_inputs_only(tmp_path, prefect_harness):
+    """``resumed_tie_points`` (the N-image flows' tie points, ``gcpfree block`` and
+    ``dsm --images``): the first call matches and keeps them beside the outputs, a rerun with
+    the same images, models, reference and settings reads them back whole; other settings, a
+    touched image or a damaged file match again."""
+    v = DATA / "pleiades_ventoux"
+    left, right = load_model(v / "left_image.tif"), load_model(v / "right_image.tif")
+    cfg = TiePointConfig(search_radius_m=15.0, cell_m=25.0, min_cells_per_side=0)
+    dem, cache = _ellipsoidal_srtm(), tmp_path / "ties.json"
+    first, resumed = resumed_tie_points(left, right, dem, cfg, cache, reference_path=SRTM)
+    assert not resumed and cache.is_file() and len(first.tie_points) >= 25
+    again, resumed = resumed_tie_points(left, right, dem, cfg, cache, reference_path=SRTM)
+    assert resumed
+    for name in ("left_col", "left_row", "right_col", "right_row", "correlation", "h_m"):
+        np.testing.assert_array_equal(getattr(again.tie_points, name),
+                                      getattr(first.tie_points, name))
+    assert again.report.to_dict() == first.report.to_dict()
+    other, resumed = resumed_tie_points(left, right, dem, replace(cfg, cell_m=30.0), cache,
+                                        reference_path=SRTM)
+    assert not resumed and other.report.cell_m == pytest.approx(30.0)
+    cache.write_text(cache.read_text()[:100])  # a writer killed mid-file (not atomic)
+    redone, resumed = resumed_tie_points(left, right, dem, replace(cfg, cell_m=30.0), cache,
+                                         reference_path=SRTM)
+    assert not resumed and len(redone.tie_points) == len(other.tie_points)
+    copy = tmp_path / "left_image.tif"  # the same pixels elsewhere: another image's key
+    copy.write_bytes((v / "left_image.tif").read_bytes())
+    moved, resumed = resumed_tie_points(replace(left, image=copy), right, dem,
+                                        replace(cfg, cell_m=30.0), cache,
+                                        reference_path=SRTM)
+    assert not resumed and len(moved.tie_points) == len(other.tie_points)
