@@ -53,7 +53,8 @@ class BlockOutcome:
     report: BlockReport
 
     def lines(self) -> list[str]:
-        return [f"report                {self.report_path}", *self.report.lines()]
+        return [(f"report                {self.report_path} and "
+                f"{self.report_path.with_suffix('.html').name}"), *self.report.lines()]
 
 
 @flow(name="block", log_prints=True)
@@ -62,9 +63,11 @@ def block_flow(params: BlockParams) -> BlockOutcome:
     adjustment -> DSMs, orthos, RPC exports, report."""
     from flows.relative import RelativeParams, views_relative_flow
     from tasks.absolute.orientation import orient_absolute, read_checkpoints, write_gcps
+    from tasks.archive.catalog import read_catalog
     from tasks.block.control import block_control, select_block
     from tasks.block.pairs import match_stereo_pairs, pair_control
     from tasks.block.products import BLOCK
+    from tasks.block.report_html import write_block_html
     from tasks.block.ties import read_tracks
     from tasks.dense.dem import DenseConfig
     from tasks.io.dem import dem_datum
@@ -97,6 +100,7 @@ def block_flow(params: BlockParams) -> BlockOutcome:
     report = _products(params, block, rel, datum, pairs, controls, absolute, dense,
                        checkpoints)
     path = BLOCK.write(out / "report.json", report)
+    write_block_html(out, read_catalog(params.catalog).scenes)
     outcome = BlockOutcome(path, report)
     for line in outcome.lines():
         print(line)

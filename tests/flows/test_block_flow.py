@@ -77,3 +77,19 @@ def test_consecutive_scenes_of_a_pass_are_tied_through_the_other_date(oriented_b
     assert len(pairs) >= 4
     assert all(np.isfinite(p["parallax_rms_after_px"]) and p["parallax_rms_after_px"] < 0.3
                for p in rel["pairs"]), rel["pairs"]
+
+
+def test_the_block_report_page_shows_every_image_and_its_figures(oriented_block):
+    """``report.html``: one page with the block's map, the check points and GCP residuals per
+    image (inline PNGs) and a row per image holding its figures from report.json."""
+    _, catalog, out, _ = oriented_block
+    page = (out / "report.html").read_text()
+    report = json.loads((out / "report.json").read_text())
+    assert page.count("data:image/png;base64,") == 3  # map, check points, GCP residuals
+    for name, c in report["check_points"].items():
+        assert f"<td>{name}</td><td>{c['n']}</td><td>{c['rms_col_px']:.3f}</td>" in page
+    held = {im["name"]: im["held_by"] for im in report["images"]}
+    for scene in json.loads(catalog.read_text())["scenes"]:  # every image: how it is held
+        assert f"<td>{scene['id']}</td><td>{held[scene['id']]}</td>" in page
+    for p in report["pairs"]:
+        assert f"<td>{p['id']}</td>" in page
