@@ -1,9 +1,9 @@
-"""``gcpfree archive`` interrupted: a worker process killed in the middle of a run of 20 pairs
-(Dask runs its pair again elsewhere: every pair ends done, the summary lists all 20, no
+"""``gcpfree archive`` interrupted: a worker process killed in the middle of a run of 8 pairs
+(Dask runs its pair again elsewhere: every pair ends done, the summary lists all 8, no
 temporary file is left and every product reads back whole), and a run stopped by Ctrl-C
 (exit 130; the rerun processes only the pairs missing and leaves the finished ones untouched).
 
-To stay lean, the pairs are one tiny scene listed under 20 ids, each pair folder already holding
+To stay lean, the pairs are one tiny scene listed under 8 ids, each pair folder already holding
 the orientation and ortho products of one real run (an earlier run interrupted after its orthos,
 as the pair flow resumes it): each pair then writes its report, STAC catalog and manifest.
 """
@@ -38,20 +38,14 @@ SEEDED = ("report.json", "left.json", "right.json", "gcps.json", "windows.json",
 
 
 @pytest.fixture(scope="module")
-def finished_pair(tiny_clean_scene, tmp_path_factory, prefect_harness):
-    """The tiny clean pair run once through the archive (one thread worker): (scene folder,
-    the finished pair folder)."""
-    from flows.reprocess_archive import reprocess_archive
-
-    scene, _ = tiny_clean_scene
-    base = tmp_path_factory.mktemp("archive_seed")
-    (base / "catalog").mkdir()
-    (base / "catalog" / "seed").symlink_to(scene)
-    outcome = reprocess_archive(catalog=base / "catalog", out=base / "root",
-                                reference=scene / "reference.tif", workers=1, processes=False,
-                                dashboard_address=":0")
-    assert [r.status for r in outcome.rows] == ["done"]
-    return scene, base / "root" / "seed"
+def finished_pair(archive):
+    """The tiny clean pair finished by a real run of the archive (its pair ``real``, oriented
+    on one thread worker: the session fixture ``archive`` of tests/flows/conftest.py):
+    (scene folder, the finished pair folder, its row of that run's summary.csv)."""
+    scene, _, root, _, csv_text, _, _ = archive
+    rows = {r["id"]: r for r in csv.DictReader(io.StringIO(csv_text))}
+    assert rows["real"]["status"] == "done"
+    return scene, root / "real", rows["real"]
 
 
 def seeded_archive(base: Path, scene: Path, finished: Path, n: int) -> tuple[Path, Path]:
@@ -146,9 +140,12 @@ def test_a_worker_killed_mid_run_loses_no_pair(finished_pair, api_for_workers, t
 
     from flows.reprocess_archive import reprocess_archive
 
-    scene, finished = finished_pair
-    cat, root = seeded_archive(tmp_path, scene, finished, 20)
-    plant_leftovers(root / "p19")
+    scene, finished, finished_row = finished_pair
+    # 8 pairs (each about 5 CPU-s: report, STAC, manifest): the kill lands after 3 are
+    # complete, while each of the two workers has a pair running and at least 3 still wait
+    n = 8
+    cat, root = seeded_archive(tmp_path, scene, finished, n)
+    plant_leftovers(root / f"p{n - 1:02d}")
     with LocalCluster(n_workers=2, threads_per_worker=1, processes=True,
                       dashboard_address=":0") as cluster:
         killer = Killer(cluster.scheduler_address, root, after=3)
@@ -159,15 +156,14 @@ def test_a_worker_killed_mid_run_loses_no_pair(finished_pair, api_for_workers, t
             pids_after = set(client.run(os.getpid).values())
     assert killer.error is None, killer.error
     assert killer.pid is not None and killer.pid not in pids_after  # that process is gone
-    assert 3 <= killer.complete_at_kill < 20  # killed in the middle of the run
-    ids = [f"p{i:02d}" for i in range(20)]
+    assert 3 <= killer.complete_at_kill < n  # killed in the middle of the run
+    ids = [f"p{i:02d}" for i in range(n)]
     assert [(r.id, r.status, r.reason) for r in outcome.rows] == [(i, "done", "") for i in ids]
     rows = summary_rows(root)
     assert list(rows) == ids and {r["status"] for r in rows.values()} == {"done"}
-    seed_gcps = summary_rows(finished.parent)["seed"]["gcps"]
-    assert {r["gcps"] for r in rows.values()} == {seed_gcps}  # figures read from the products
+    assert {r["gcps"] for r in rows.values()} == {finished_row["gcps"]}  # read from products
     # nothing half-written: every product each manifest lists reads back with its size, and no
-    # temporary name is left (those planted in p19 as a killed writer leaves them: removed)
+    # temporary name is left (those planted in p07 as a killed writer leaves them: removed)
     assert all(pair_complete(root / i) for i in ids)
     assert temporary_names(root) == []
 
@@ -177,7 +173,7 @@ def test_ctrl_c_then_a_rerun_completes_only_what_is_missing(finished_pair, api_f
     from flows.commands import archive as archive_command
     from tests.flows.test_archive import parse, snapshot
 
-    scene, finished = finished_pair
+    scene, finished, _ = finished_pair
     # 8 pairs: seeded ones have only evaluation, report and STAC left and finish in a burst,
     # and the workers go on while the command shuts down; with 4, all four were once complete
     # by the time the interrupt was counted
