@@ -33,6 +33,19 @@ def pytest_collection_modifyitems(config, items):
             item.add_marker(pytest.mark.slow)
 
 
+def pytest_collection_finish(session):
+    """The docs site's build (a minute) started as soon as the session is known to have tests
+    that look at it: it runs in a child beside the tests before them (tests/docs/test_docs.py,
+    the fixture ``site`` waits for it)."""
+    if session.config.option.collectonly:
+        return
+    if any("site" in getattr(item, "fixturenames", ()) and item.path.parent.name == "docs"
+           for item in session.items):
+        from tests.docs.test_docs import start_site_build
+
+        start_site_build()
+
+
 @pytest.fixture(scope="session")
 def prefect_harness():
     """Run flows against a temporary local Prefect server (one per test session)."""

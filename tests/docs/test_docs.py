@@ -13,11 +13,14 @@ fail: CI installs both (``make test``'s environment has ``.[test,docs]``).
 from __future__ import annotations
 
 import argparse
+import atexit
 import importlib.util
 import re
 import shlex
+import shutil
 import subprocess
 import sys
+import tempfile
 from collections.abc import Iterator
 from pathlib import Path
 from typing import Any
@@ -154,21 +157,59 @@ def test_an_executed_block_shows_its_output_and_a_raising_one_fails(tmp_path):
 # ---------------------------------------------------------------------------- the built site
 
 
+SPHINX = ("-m", "sphinx", "-W", "--keep-going", "-q", "-b", "html")  # strict, as make docs
+
+
+class SiteBuild:
+    """The site's strict build in a child Python, started apart from the test that waits for
+    it: when a session's collected tests use the site, tests/conftest.py starts it as
+    collection ends, and the build (a minute, most of it the Python API tutorial's run) goes
+    on beside the tests before these, on the second core."""
+
+    def __init__(self, out: Path) -> None:
+        self.out = out
+        self.log = out.with_name(out.name + ".log")
+        with self.log.open("w") as log:
+            self.process = subprocess.Popen([sys.executable, *SPHINX, str(DOCS), str(out)],
+                                            cwd=REPO, stdout=log, stderr=subprocess.STDOUT)
+        atexit.register(self.stop)
+
+    def wait(self) -> tuple[int, str]:
+        """The build's exit status and what it printed."""
+        return self.process.wait(), self.log.read_text()
+
+    def stop(self) -> None:
+        if self.process.poll() is None:  # the session ended before a test used the site
+            self.process.kill()
+            self.process.wait()
+        shutil.rmtree(self.out.parent, ignore_errors=True)
+
+
+_STARTED: list[SiteBuild] = []
+
+
+def docs_extra_lacking() -> list[str]:
+    return [m for m in ("sphinx", "myst_parser", "furo") if importlib.util.find_spec(m) is None]
+
+
+def start_site_build() -> None:
+    """Start the site's build now (once per session), for the fixture ``site`` to wait for."""
+    if not _STARTED and not docs_extra_lacking():
+        _STARTED.append(SiteBuild(Path(tempfile.mkdtemp(prefix="gcpfree-tests-site-")) / "site"))
+
+
 @pytest.fixture(scope="session")
-def site(tmp_path_factory) -> Path:
+def site() -> Path:
     """The site built once, strictly (``-W``), as ``make docs`` builds it."""
     from tests.browser import unavailable
 
-    lacking = [m for m in ("sphinx", "myst_parser", "furo") if importlib.util.find_spec(m) is None]
-    if lacking:
+    if lacking := docs_extra_lacking():
         unavailable(f"the docs extra is not installed ({', '.join(lacking)}): "
                     "pip install -e '.[docs]'")
-    out = tmp_path_factory.mktemp("site")
-    res = subprocess.run([sys.executable, "-m", "sphinx", "-W", "--keep-going", "-q", "-b",
-                          "html", str(DOCS), str(out)], cwd=REPO, capture_output=True, text=True,
-                         check=False)
-    assert res.returncode == 0, f"make docs fails:\n{res.stdout}\n{res.stderr}"
-    return out
+    start_site_build()  # unless collection started it
+    returncode, printed = _STARTED[0].wait()
+    assert returncode == 0, f"make docs fails:\n{printed}"
+    return _STARTED[0].out
 
 
 def pages(site: Path) -> list[Path]:
