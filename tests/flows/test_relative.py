@@ -182,12 +182,19 @@ def test_real_crops_without_reference(prefect_harness, left, right, tmp_path):
         assert 4.0 < abs(doc["right_correction"]["across_epipolar_px"]) < 5.5
 
 
-def cli(*args: str) -> subprocess.CompletedProcess:
-    return subprocess.run([sys.executable, "-m", "flows.cli", "relative", *args],
+def cli(*args: str, api: str | None = None) -> subprocess.CompletedProcess:
+    """``gcpfree relative ARGS`` in a child; with ``api``, its Prefect API (no temporary
+    server of its own: that server's start and stop on a refusal are the user's default case,
+    tested first below and in tests/flows/test_refusals.py)."""
+    env = {**os.environ, "PREFECT_API_URL": api} if api else None
+    return subprocess.run([sys.executable, "-m", "flows.cli", "relative", *args], env=env,
                           capture_output=True, text=True, timeout=300, check=False)
 
 
-def test_bad_input_is_one_line(tiny_clean_scene, tmp_path):
+def test_bad_input_is_one_line(tiny_clean_scene, prefect_harness, tmp_path):
+    from prefect.settings import PREFECT_API_URL
+
+    api = PREFECT_API_URL.value()  # the session's server: no boot per command
     scene_dir, _ = tiny_clean_scene
     left, right = scene_dir / "left.tif", scene_dir / "right.tif"
     r = cli("--left", str(left), "--right", str(tmp_path / "none.tif"), "--out",
@@ -199,7 +206,7 @@ def test_bad_input_is_one_line(tiny_clean_scene, tmp_path):
     # a model that does not belong to the image: the footprints are far apart
     r = cli("--left", str(left), "--right", str(right), "--right-model",
             str(DATA / "pleiades_gizeh" / "img1.geom"), "--reference", str(SRTM),
-            "--out", str(tmp_path / "r.json"))
+            "--out", str(tmp_path / "r.json"), api=api)
     assert r.returncode == 2 and "Traceback" not in r.stderr
     assert "do not overlap" in r.stderr or "does not cover" in r.stderr, r.stderr
     assert not (tmp_path / "r.json").exists()
@@ -219,7 +226,7 @@ def test_bad_input_is_one_line(tiny_clean_scene, tmp_path):
             dst.write(np.full(size, 230, dtype), 1)
     shutil.copy(scene_dir / "right.DIM", tmp_path / "blank.DIM")
     r = cli("--left", str(left), "--right", str(blank), "--reference", str(SRTM),
-            "--out", str(tmp_path / "r.json"))
+            "--out", str(tmp_path / "r.json"), api=api)
     assert r.returncode == 2 and "Traceback" not in r.stderr
     assert "tie points" in r.stderr and "interest points" in r.stderr, r.stderr
     assert len(r.stderr.strip().splitlines()) == 1
