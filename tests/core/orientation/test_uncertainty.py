@@ -7,6 +7,7 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+from scipy import sparse
 
 from core.errors import InputError
 from core.orientation.absolute import AbsoluteConfig, absolute_orientation
@@ -171,3 +172,33 @@ def test_absolute_orientation_calibrates_its_gcp_sigmas_and_predicts_its_check_p
     assert sig == pytest.approx([sc, sr], rel=0.15)
     ratio = np.sqrt(np.mean(measured, axis=0) / np.mean(predicted, axis=0))
     assert ratio == pytest.approx([1.0, 1.0], abs=0.15), ratio
+
+
+def test_a_blocks_sparse_normals_give_what_dense_ones_give(monkeypatch):
+    """A block-like design (40 images of 6 parameters, each row on two images' parameters: 240
+    columns, under 5 % non-zero) is solved on a CSR matrix; the same system forced dense (the
+    threshold out of reach) gives the same corrections, residuals, covariance and components."""
+    import core.orientation.uncertainty as unc
+
+    rng = np.random.default_rng(3)
+    n_img, p, n_rows = 40, 6, 4000
+    a = np.zeros((n_rows, n_img * p))
+    for i in range(n_rows):
+        k = rng.integers(0, n_img - 1)
+        for m in (k, k + 1):  # a tie between neighbours
+            a[i, m * p:(m + 1) * p] = rng.normal(0.0, 1.0, p)
+    a = np.vstack([a, np.eye(n_img * p)[:p]])  # the first image held by a prior
+    g = np.r_[rng.integers(0, 2, n_rows), np.full(p, 2)]
+    q = np.r_[np.where(g[:n_rows] == 0, 0.25, 4.0), np.ones(p)]
+    y = a @ rng.normal(0.0, 1.0, a.shape[1]) + rng.normal(0.0, np.sqrt(q) * [0.7])
+    assert sparse.issparse(unc.sparse_when_worth_it(a))
+    got = solve_with_components(a, y, q, g, ("a", "b", "prior"), fixed=("prior",))
+    monkeypatch.setattr(unc, "SPARSE_MIN_PARAMS", 10**9)
+    assert not sparse.issparse(unc.sparse_when_worth_it(a))
+    dense = solve_with_components(a, y, q, g, ("a", "b", "prior"), fixed=("prior",))
+    np.testing.assert_allclose(got.dx, dense.dx, rtol=1e-9, atol=1e-12)
+    np.testing.assert_allclose(got.v, dense.v, rtol=1e-9, atol=1e-12)
+    np.testing.assert_allclose(got.covariance, dense.covariance, rtol=1e-8, atol=1e-14)
+    np.testing.assert_allclose(got.components.factors, dense.components.factors, rtol=1e-9)
+    # and the factors are the truth's: 0.7^2 of the stated variances in both groups
+    np.testing.assert_allclose(got.components.factors[:2], 0.49, rtol=0.1)
