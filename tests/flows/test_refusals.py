@@ -14,6 +14,7 @@ from __future__ import annotations
 import os
 import re
 import subprocess
+from collections.abc import Iterator
 from pathlib import Path
 
 import pytest
@@ -22,18 +23,42 @@ REPO = Path(__file__).resolve().parents[2]
 VENTOUX = REPO / "tests" / "data" / "pleiades_ventoux"
 
 
-@pytest.mark.parametrize("command", ["orient", "pair"])
-def test_a_scene_smaller_than_a_window_is_refused_as_too_small(command, tmp_path):
-    out = tmp_path / "out"
-    env = {k: v for k, v in os.environ.items() if k != "PYTHONWARNINGS"}
-    env["PREFECT_HOME"] = str(tmp_path / "prefect")
-    proc = subprocess.run(
-        [str(REPO / ".venv" / "bin" / "gcpfree"), command,
-         "--left", str(VENTOUX / "left_image.tif"), "--right", str(VENTOUX / "right_image.tif"),
-         "--srtm-dir", str(REPO / "tasks" / "data"), "--no-progress", "--out", str(out)],
-        capture_output=True, text=True, timeout=300, cwd=REPO, env=env, check=False)
-    lines = proc.stderr.strip().splitlines()
-    assert proc.returncode == 2 and len(lines) == 1, proc.stderr
+COMMANDS = ("orient", "pair")
+
+
+@pytest.fixture(scope="module")
+def refusals(tmp_path_factory) -> Iterator[dict[str, tuple[subprocess.Popen, Path]]]:
+    """Both commands started at once on the crops, each with a Prefect home of its own (most
+    of a refusal's seconds are its start-up and its temporary Prefect server's, much of that
+    waiting): {command: (its process, its --out)}, each waited for by its test."""
+    started: dict[str, tuple[subprocess.Popen, Path]] = {}
+    try:
+        for command in COMMANDS:
+            base = tmp_path_factory.mktemp(f"refused_{command}")
+            env = {k: v for k, v in os.environ.items() if k != "PYTHONWARNINGS"}
+            env["PREFECT_HOME"] = str(base / "prefect")
+            started[command] = (subprocess.Popen(
+                [str(REPO / ".venv" / "bin" / "gcpfree"), command,
+                 "--left", str(VENTOUX / "left_image.tif"),
+                 "--right", str(VENTOUX / "right_image.tif"),
+                 "--srtm-dir", str(REPO / "tasks" / "data"), "--no-progress",
+                 "--out", str(base / "out")],
+                stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, cwd=REPO, env=env),
+                base / "out")
+        yield started
+    finally:
+        for proc, _ in started.values():
+            if proc.poll() is None:
+                proc.kill()
+            proc.communicate()
+
+
+@pytest.mark.parametrize("command", COMMANDS)
+def test_a_scene_smaller_than_a_window_is_refused_as_too_small(command, refusals):
+    proc, out = refusals[command]
+    _, stderr = proc.communicate(timeout=300)
+    lines = stderr.strip().splitlines()
+    assert proc.returncode == 2 and len(lines) == 1, stderr
     line = lines[0]
     assert line.startswith(f"gcpfree {command}: error: the scene is too small"), line
     # its figures: the overlap in km2 and in reference cells, what one window needs
