@@ -1,7 +1,9 @@
-"""``gcpfree archive`` on a catalog of four pairs: a real tiny pair oriented for real, a pair
-whose products are already complete (skipped), a pair without images and one with malformed
-metadata (each failed with its reason, the others unaffected); the summary files agree with the products; a rerun processes only the
-failed pair."""
+"""``gcpfree archive`` on a catalog of four pairs: a real tiny pair (oriented for real by the
+session's run on a separately started Dask cluster, its folder left with the products up to
+its orthos, as an interrupted run leaves it), a pair whose products are already complete
+(skipped), a pair without images and one with malformed metadata (each failed with its
+reason, the others unaffected); the summary files agree with the products; a rerun processes
+only the failed pair. The runs are the session fixtures of tests/flows/conftest.py."""
 
 from __future__ import annotations
 
@@ -10,7 +12,6 @@ import csv
 import io
 import json
 import os
-from dataclasses import dataclass
 from pathlib import Path
 
 import pytest
@@ -182,96 +183,34 @@ def test_bad_arguments_are_one_line_before_prefect(tmp_path: Path):
         parse("--catalog", str(tmp_path / "cat.csv"), "--out", str(tmp_path / "o"))
 
 
-@dataclass(frozen=True)
-class ExternalCluster:
-    """A Dask cluster started apart from the test process: the scheduler's address, its
-    dashboard port and the process id of its only worker."""
-
-    address: str
-    dashboard_port: int
-    worker_pid: int
+# the run on a separately started cluster: the session fixture ``external_archive`` of
+# tests/flows/conftest.py
 
 
-@pytest.fixture()
-def dask_cluster(tmp_path: Path, prefect_harness):
-    """A separately started ``dask scheduler`` and one ``dask worker`` process (no nanny: the
-    process started here is the worker) on 127.0.0.1, the worker pointed at the test's Prefect
-    API; the scheduler records its task stream from the start."""
-    import subprocess
-    import sys
-    import time
-
-    from prefect.settings import PREFECT_API_URL
-
-    dask = Path(sys.executable).parent / "dask"
-    info = tmp_path / "scheduler.json"
-    env = {**os.environ, "PREFECT_API_URL": PREFECT_API_URL.value()}
-    log = (tmp_path / "dask.log").open("w")
-    procs = [subprocess.Popen([str(dask), "scheduler", "--host", "127.0.0.1", "--port", "0",
-                               "--dashboard-address", "127.0.0.1:0", "--scheduler-file",
-                               str(info)], env=env, stdout=log, stderr=subprocess.STDOUT)]
-    try:
-        end = time.monotonic() + 120
-        while not info.exists() and time.monotonic() < end and procs[0].poll() is None:
-            time.sleep(0.2)
-        assert info.exists(), (tmp_path / "dask.log").read_text()
-        procs.append(subprocess.Popen(
-            [str(dask), "worker", "--scheduler-file", str(info), "--nthreads", "1",
-             "--no-nanny", "--no-dashboard", "--host", "127.0.0.1"],
-            env=env, stdout=log, stderr=subprocess.STDOUT))
-        address = json.loads(info.read_text())["address"]
-        from distributed import Client
-
-        with Client(address, timeout=60) as client:
-            client.wait_for_workers(1, timeout=120)
-            client.get_task_stream()  # installs the scheduler's task-stream recorder
-            port = client.scheduler_info()["services"]["dashboard"]
-        yield ExternalCluster(address, port, procs[1].pid)
-    finally:
-        for p in reversed(procs):
-            p.terminate()
-            try:
-                p.wait(timeout=30)
-            except subprocess.TimeoutExpired:
-                p.kill()
-                p.wait()
-        log.close()
-
-
-def test_archive_on_a_separately_started_dask_cluster(tiny_clean_scene, dask_cluster,
-                                                      tmp_path: Path):
+def test_archive_on_a_separately_started_dask_cluster(external_archive):
     """The pairs run on the external cluster, not on a LocalCluster the flow might start
     instead (a link on 127.0.0.1 proves nothing: a LocalCluster can serve its dashboard there
     too): the external scheduler's task stream holds both pairs' tasks, run by the worker
     process the fixture started, the real pair's for the seconds an orientation takes; the
     dashboard link is the external scheduler's."""
     from dask.utils import key_split
-    from distributed import Client
 
-    from flows.reprocess_archive import reprocess_archive
     from tasks.archive.pair import pair_complete
 
-    scene, _ = tiny_clean_scene
-    cat, root = tmp_path / "catalog", tmp_path / "root"
-    cat.mkdir()
-    (cat / "real").symlink_to(scene)
-    (cat / "broken").mkdir()
-    outcome = reprocess_archive(catalog=cat, out=root, reference=scene / "reference.tif",
-                                dask_address=dask_cluster.address)
+    run = external_archive
+    root, outcome, cluster, stream, pids = (run.root, run.outcome, run.cluster, run.stream,
+                                            run.pids)
     assert {r.id: r.status for r in outcome.rows} == {"broken": "failed", "real": "done"}
     assert pair_complete(root / "real")
     assert outcome.dashboard and outcome.dashboard.startswith(
-        f"http://127.0.0.1:{dask_cluster.dashboard_port}/")
+        f"http://127.0.0.1:{cluster.dashboard_port}/")
     report = json.loads((root / "real" / "report.json").read_text())
     assert outcome.rows[1].gcps == report["gcps"]["used"] >= 8
-    with Client(dask_cluster.address, timeout=60) as client:
-        stream = client.get_task_stream()
-        pids = client.run(os.getpid)  # each worker's process id, asked of the worker
-    assert list(pids.values()) == [dask_cluster.worker_pid] != [os.getpid()]
+    assert list(pids.values()) == [cluster.worker_pid] != [os.getpid()]
     # one task per pair (both end "memory": a failing pair returns its reason), on that worker
     assert len(stream) == 2, stream
     assert {key_split(t["key"]) for t in stream} == {"process_pair"}
-    assert {pids[t["worker"]] for t in stream} == {dask_cluster.worker_pid}
+    assert {pids[t["worker"]] for t in stream} == {cluster.worker_pid}
     seconds = sorted(sum(s["stop"] - s["start"] for s in t["startstops"]
                          if s["action"] == "compute") for t in stream)
     # the broken pair, the real orientation (measured 0.2 s and 23 s)

@@ -13,7 +13,6 @@ from __future__ import annotations
 import csv
 import io
 import os
-import shutil
 import signal
 import subprocess
 import sys
@@ -25,27 +24,18 @@ from pathlib import Path
 import pytest
 
 from tasks.archive.pair import pair_complete
+from tests.flows.conftest import finished_row, seed_pair
 
 pytestmark = pytest.mark.slow
 
-# what a finished pair holds up to its orthos (the report, the STAC catalog and the manifest
-# are left to the run under test)
-SEEDED = ("report.json", "left.json", "right.json", "gcps.json", "windows.json", "dsm.tif",
-          "dsm.json", "dsm_mask.tif", "dsm_egm96.tif", "dsm_egm96.json", "dsm_egm96_mask.tif",
-          "relative_dem.tif", "relative_dem.json", "relative_dem_mask.tif", "relative",
-          "ortho_left.tif", "ortho_left.json", "ortho_right.tif", "ortho_right.json",
-          "ortho_compare.json", "ortho_discrepancy.tif", "ortho_discrepancy.png")
-
 
 @pytest.fixture(scope="module")
-def finished_pair(archive):
+def finished_pair(tiny_clean_scene, external_archive):
     """The tiny clean pair finished by a real run of the archive (its pair ``real``, oriented
-    on one thread worker: the session fixture ``archive`` of tests/flows/conftest.py):
-    (scene folder, the finished pair folder, its row of that run's summary.csv)."""
-    scene, _, root, _, csv_text, _, _ = archive
-    rows = {r["id"]: r for r in csv.DictReader(io.StringIO(csv_text))}
-    assert rows["real"]["status"] == "done"
-    return scene, root / "real", rows["real"]
+    on an external cluster's worker: the session fixture ``external_archive`` of
+    tests/flows/conftest.py): (scene folder, the finished pair folder, its summary.csv row)."""
+    scene, _ = tiny_clean_scene
+    return scene, external_archive.root / "real", finished_row(external_archive)
 
 
 def seeded_archive(base: Path, scene: Path, finished: Path, n: int) -> tuple[Path, Path]:
@@ -55,14 +45,7 @@ def seeded_archive(base: Path, scene: Path, finished: Path, n: int) -> tuple[Pat
     cat.mkdir(parents=True)
     for i in range(n):
         (cat / f"p{i:02d}").symlink_to(scene)
-        out = root / f"p{i:02d}"
-        out.mkdir(parents=True)
-        for name in SEEDED:
-            src = finished / name
-            if src.is_dir():
-                shutil.copytree(src, out / name)
-            else:
-                shutil.copy2(src, out / name)
+        seed_pair(finished, root / f"p{i:02d}")
     return cat, root
 
 
