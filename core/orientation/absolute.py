@@ -88,7 +88,7 @@ class AbsoluteConfig(RobustAdjustment):
     matching_sigma_px: float = 0.3
     min_gcps: int = 4
     variance_components: bool = True
-    components_by_frame: bool = False
+    components_by_frame: bool | None = None  # None (unset, as before the option): off
     split_alpha: float = 0.01
     reference_sigma_m: tuple[float, float, float] = (5.0, 5.0, 5.0)
     prior_px: float = 2.0
@@ -324,7 +324,7 @@ def _calibrated(models: list[SensorModel], frame_x: FloatArray, eqs: Equations,
     use = inlier[:, None] & seen
     taken = inlier & seen.any(axis=1)
     sources = np.unique(np.asarray(obs.frame)[taken])
-    per_source = sources.size > 1 and config.components_by_frame
+    per_source = sources.size > 1 and bool(config.components_by_frame)
     frame_names = eqs.frames.names
     tags = [f":{frame_names[int(f)]}" for f in sources] if per_source else [""]
     # the other groups there are rows of: tie points, priors and frames if given

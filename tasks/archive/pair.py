@@ -114,8 +114,16 @@ def settings_changes(had: Mapping[str, Any] | None,
     default)."""
     if not had:
         return tuple(settings)
-    return tuple(k for k in settings
-                 if (had[k] != settings[k] if k in had else settings[k] is not None))
+    return tuple(k for k in settings if not _same(had.get(k), settings[k]))
+
+
+def _same(had: Any, now: Any) -> bool:
+    """A recorded value against today's: equal, or, for mappings (``absolute``, ``surface``),
+    equal key by key where a key the record lacks is unchanged when it is unset now (null:
+    an option added since, at its default)."""
+    if isinstance(had, Mapping) and isinstance(now, Mapping):
+        return all(_same(had.get(k), v) for k, v in now.items())
+    return had == now or (had is None and now is None)
 
 
 def param_changes(had: Mapping[str, Any], params: Mapping[str, Any],
@@ -127,8 +135,8 @@ def param_changes(had: Mapping[str, Any], params: Mapping[str, Any],
     it) compares as its value in ``defaults`` (:func:`flows.pair.manifest_defaults`; None
     without)."""
     defaults = defaults or {}
-    return tuple(k for k, v in params.items() if k not in RUN_ONLY_PARAMS and v != (
-        had[k] if had.get(k) is not None else defaults.get(k)))
+    return tuple(k for k, v in params.items() if k not in RUN_ONLY_PARAMS and not _same(
+        had[k] if had.get(k) is not None else defaults.get(k), v))
 
 
 def pair_complete(out: str | Path, params: Mapping[str, Any] | None = None,

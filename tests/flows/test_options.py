@@ -207,3 +207,19 @@ def test_the_archive_page_lists_every_option():
     text = (REPO / "docs" / "reference" / "notes" / "archive.md").read_text()
     missing = [n for n in OPTIONS if f"`{n}`" not in text]
     assert not missing, missing
+
+
+def test_an_option_added_inside_a_nested_setting_is_unchanged_only_while_unset():
+    """``absolute.components_by_frame`` came after products that record ``absolute`` without
+    it: unset now (null), they are kept; set, the orientation is redone, by that setting's
+    name; a recorded value that differs is a change as before."""
+    had = {"absolute": {"huber_k": 1.5}, "surface": {"radius": 4000.0}}
+    now = {"absolute": {"huber_k": 1.5, "components_by_frame": None},
+           "surface": {"radius": 4000.0}}
+    assert settings_changes(had, now) == ()
+    assert param_changes(had, now) == ()
+    on = {**now, "absolute": {"huber_k": 1.5, "components_by_frame": True}}
+    assert settings_changes(had, on) == ("absolute",)
+    assert param_changes(had, on) == ("absolute",)
+    other = {**now, "absolute": {"huber_k": 2.0, "components_by_frame": None}}
+    assert settings_changes(had, other) == ("absolute",)
