@@ -204,9 +204,9 @@ def own_variance(covariance: ArrayLike, param_jac: ArrayLike, sigma_px: ArrayLik
     against 0.083-0.035 for the weights less the field's whole variance, which the sandwich took
     before. Its effect on the check points' spread is small where the field's off-diagonal part
     dominates (4000 draws: measured / predicted 0.98-1.03, and 1.01-1.04 before), larger beyond
-    the GCPs' common error: on the eight tiny scenes of ``bench/validation/uncertainty_sweep.py``
-    (``bench/validation/prediction_check.py``), measured / predicted pooled 1.79 / 1.35 before, 1.58 / 1.25
-    with this."""
+    the GCPs' common error: on the eight tiny scenes of
+    ``bench/validation/uncertainty_sweep.py`` (``bench/validation/prediction_check.py``),
+    measured / predicted pooled 1.79 / 1.35 before, 1.58 / 1.25 with this."""
     c = np.asarray(covariance, dtype=np.float64)
     a = np.asarray(param_jac, dtype=np.float64)
     s2 = np.asarray(sigma_px, dtype=np.float64) ** 2

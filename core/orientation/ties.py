@@ -186,8 +186,8 @@ def tie_rows(models: Sequence[SensorModel], ties: TieObservations, ground: Array
     # the points grouped by the images that see them (one group for a pair's tie points)
     patterns, which = np.unique(seen, axis=0, return_inverse=True)
     jac_of: list[FloatArray] = []  # image m's Jacobian at every point it sees, one call each
-    slot_of = np.cumsum(seen, axis=0) - 1  # a point's place among those its image sees
     if jacobian:
+        slot_of = np.cumsum(seen, axis=0) - 1  # a point's place among those its image sees
         for m, model in enumerate(models):
             gm = g[:, seen[:, m]]
             jac_of.append(np.asarray(model.jacobian(gm[0], gm[1], gm[2]), np.float64)

@@ -123,7 +123,7 @@ def _same(had: Any, now: Any) -> bool:
     an option added since, at its default)."""
     if isinstance(had, Mapping) and isinstance(now, Mapping):
         return all(_same(had.get(k), v) for k, v in now.items())
-    return had == now or (had is None and now is None)
+    return had == now
 
 
 def param_changes(had: Mapping[str, Any], params: Mapping[str, Any],
