@@ -12,50 +12,32 @@ computes nothing.
 from __future__ import annotations
 
 import base64
-import html
 from collections.abc import Mapping, Sequence
 from pathlib import Path
 from typing import Any
 
 import numpy as np
-from matplotlib.figure import Figure
+from matplotlib.figure import Figure as MplFigure
 from prefect import task
 from prefect.cache_policies import NO_CACHE
 
 from core.jsonio import parse_json
 from tasks.archive.scene_catalog import SceneEntry
 from tasks.io.rasters import atomic_write_text
+from tasks.report.doc import Block, Figure, Heading, Para, Table, fmt, to_html
 from tasks.report.figures import png_bytes
 
 DATE_COLOURS = ("#1f77b4", "#d55e00", "#2a9d2a", "#9467bd", "#e69f00", "#56b4e9")
-CSS = ("body{font-family:sans-serif;max-width:1100px;margin:1em auto;padding:0 1em;color:#222}"
-       "table{border-collapse:collapse;margin:.5em 0 1.5em}td,th{border:1px solid #ccc;"
-       "padding:.2em .5em;text-align:right}th{background:#f2f2f2}td:first-child{text-align:left}"
-       "img{max-width:100%}h1{font-size:1.5em}h2{font-size:1.2em;margin-top:1.5em}"
-       ".note{color:#555}")
-
-
-def _fmt(v: Any, digits: int = 3) -> str:
-    if v is None:
-        return "-"
-    if isinstance(v, float):
-        return "-" if not np.isfinite(v) else f"{v:.{digits}f}"
-    return html.escape(str(v))
 
 
 def _triple(v: Sequence[float] | None) -> str:
-    return "-" if not v else ", ".join(f"{x:.1f}" for x in v)
+    return "–" if not v else ", ".join(f"{x:.1f}" for x in v)
 
 
-def _table(header: Sequence[str], rows: Sequence[Sequence[Any]]) -> str:
-    head = "".join(f"<th>{html.escape(h)}</th>" for h in header)
-    body = "".join("<tr>" + "".join(f"<td>{_fmt(c)}</td>" for c in r) + "</tr>" for r in rows)
-    return f"<table><tr>{head}</tr>{body}</table>"
-
-
-def _img(fig: Figure, alt: str) -> str:
+def _figure(fig: MplFigure, caption: str) -> Figure:
+    """The figure inline (a data URI): the page needs no file beside it."""
     data = base64.b64encode(png_bytes(fig)).decode("ascii")
-    return f'<p><img alt="{html.escape(alt)}" src="data:image/png;base64,{data}"></p>'
+    return Figure(f"data:image/png;base64,{data}", caption)
 
 
 def _date_of(name: str, names: Sequence[str]) -> int:
@@ -66,10 +48,10 @@ def _date_of(name: str, names: Sequence[str]) -> int:
 
 
 def block_map(report: Mapping[str, Any], scenes: Mapping[str, SceneEntry],
-              gcps: Sequence[Mapping[str, Any]]) -> Figure:
+              gcps: Sequence[Mapping[str, Any]]) -> MplFigure:
     """Footprints, tie-point graph (a line between two images' centres, as wide as their tie
     points are many), GCPs used and rejected, lon / lat."""
-    fig = Figure(figsize=(7.5, 6.5))
+    fig = MplFigure(figsize=(7.5, 6.5))
     ax = fig.add_subplot()
     names = [im["name"] for im in report["images"]]
     centre = {}
@@ -111,9 +93,9 @@ def block_map(report: Mapping[str, Any], scenes: Mapping[str, SceneEntry],
 
 
 def per_image_bars(rows: Sequence[tuple[str, float, float, float, float]], title: str,
-                   predicted: bool) -> Figure:
+                   predicted: bool) -> MplFigure:
     """Columns and rows per image (px), with the predicted RMS as ticks when ``predicted``."""
-    fig = Figure(figsize=(7.5, 3.2))
+    fig = MplFigure(figsize=(7.5, 3.2))
     ax = fig.add_subplot()
     x = np.arange(len(rows))
     col = [r[1] for r in rows]
@@ -132,68 +114,66 @@ def per_image_bars(rows: Sequence[tuple[str, float, float, float, float]], title
 
 def block_html(report: Mapping[str, Any], scenes: Mapping[str, SceneEntry],
                gcps: Sequence[Mapping[str, Any]]) -> str:
-    """The page's HTML."""
+    """The page's HTML (:func:`tasks.report.doc.to_html`, as the pair's report)."""
     images, pairs = report["images"], report["pairs"]
     checks = report.get("check_points") or {}
     adj = report.get("adjustment", {})
-    parts = [(f"<!doctype html><html><head><meta charset='utf-8'><title>gcpfree block</title>"
-             f"<style>{CSS}</style></head><body><h1>Block: {len(images)} images, "
-             f"{len(pairs)} stereo pairs</h1>"),
-             (f"<p>GCPs {report.get('gcps', {}).get('used')} used of "
-             f"{report.get('gcps', {}).get('given')}; tie points "
-             f"{report.get('tie_points', {}).get('n')} (parallax "
-             f"{_fmt(report.get('tie_points', {}).get('rms_px'))} px RMS); sigma0 "
-             f"{_fmt(adj.get('sigma0'))}; fused DSM "
-             f"{_fmt(report.get('dsm', {}).get('completeness_pct'), 1)} % complete.</p>"),
-             "<h2>Map</h2>", _img(block_map(report, scenes, gcps), "block map")]
+    g, t = report.get("gcps", {}), report.get("tie_points", {})
+    blocks: list[Block] = [
+        Para(f"GCPs {fmt(g.get('used'))} used of {fmt(g.get('given'))}; tie points "
+             f"{fmt(t.get('n'))} (parallax {fmt(t.get('rms_px'))} px RMS); sigma0 "
+             f"{fmt(adj.get('sigma0'))}; fused DSM "
+             f"{fmt(report.get('dsm', {}).get('completeness_pct'))} % complete."),
+        Heading("Map"), _figure(block_map(report, scenes, gcps),
+                                "footprints, tie-point graph, GCPs used and rejected")]
     if checks:
         rows = [(n, c["rms_col_px"], c["rms_row_px"], c.get("predicted_rms_col_px", np.nan),
                  c.get("predicted_rms_row_px", np.nan)) for n, c in checks.items()]
-        parts += ["<h2>Check points</h2>",
-                  _img(per_image_bars(rows, "check points: measured RMS and predicted", True),
-                       "check points per image"),
-                  _table(["image", "n", "RMS col px", "RMS row px", "predicted col",
-                          "predicted row"],
-                         [(n, c["n"], c["rms_col_px"], c["rms_row_px"],
-                           c.get("predicted_rms_col_px"), c.get("predicted_rms_row_px"))
-                          for n, c in checks.items()])]
+        blocks += [Heading("Check points"),
+                   _figure(per_image_bars(rows, "check points: measured RMS and predicted", True),
+                           "check points per image: measured RMS, predicted as ticks"),
+                   Table.of(["image", "n", "RMS col px", "RMS row px", "predicted col",
+                             "predicted row"],
+                            [(n, c["n"], c["rms_col_px"], c["rms_row_px"],
+                              c.get("predicted_rms_col_px"), c.get("predicted_rms_row_px"))
+                             for n, c in checks.items()])]
     res = [(im["name"], *(im.get("residual_rms_px") or (np.nan, np.nan)), np.nan, np.nan)
            for im in images]
-    parts += ["<h2>Images</h2>",
-              _img(per_image_bars(res, "GCP residuals per image (RMS)", False),
-                   "GCP residuals per image"),
-              _table(["image", "held by", "GCPs", "tie points", "GCP RMS col px",
-                      "GCP RMS row px", "predicted col px", "predicted row px", "RPC fit px"],
-                     [(im["name"], im.get("held_by"), im.get("gcps"), im.get("tie_points"),
-                       *(im.get("residual_rms_px") or (None, None)),
-                       (im.get("predicted") or {}).get("predicted_rms_col_px"),
-                       (im.get("predicted") or {}).get("predicted_rms_row_px"),
-                       (im.get("rpc_export") or {}).get("fit_rms_px")) for im in images]),
-              "<h2>Stereo pairs</h2>",
-              _table(["pair", "images", "B/H", "windows OK", "GCPs", "relief m", "DSM"],
-                     [(p["id"], " / ".join(p["images"]), p.get("b_over_h"),
-                       (p.get("windows") or {}).get("OK"), p.get("gcps"),
-                       (p.get("verdict") or {}).get("relief_found_m"), p.get("dsm"))
-                      for p in pairs])]
-    comps = (adj.get("variance_components") or {}).get("groups", {})
-    if comps:
-        parts += ["<h2>Variance components</h2>",
-                  _table(["group", "n", "factor", "sigma scale", "redundancy"],
-                         [(g, c["n"], c["factor"], c["sigma_scale"], c["redundancy"])
-                          for g, c in comps.items()]),
-                  (f"<p class='note'>{_fmt((adj.get('variance_components') or {}).get('split'))}"
-                  "</p>")]
+    blocks += [Heading("Images"),
+               _figure(per_image_bars(res, "GCP residuals per image (RMS)", False),
+                       "GCP residuals per image"),
+               Table.of(["image", "held by", "GCPs", "tie points", "GCP RMS col px",
+                         "GCP RMS row px", "predicted col px", "predicted row px",
+                         "RPC fit px"],
+                        [(im["name"], im.get("held_by"), im.get("gcps"), im.get("tie_points"),
+                          *(im.get("residual_rms_px") or (None, None)),
+                          (im.get("predicted") or {}).get("predicted_rms_col_px"),
+                          (im.get("predicted") or {}).get("predicted_rms_row_px"),
+                          (im.get("rpc_export") or {}).get("fit_rms_px")) for im in images]),
+               Heading("Stereo pairs"),
+               Table.of(["pair", "images", "B/H", "windows OK", "GCPs", "relief m", "DSM"],
+                        [(p["id"], " / ".join(p["images"]), p.get("b_over_h"),
+                          (p.get("windows") or {}).get("OK"), p.get("gcps"),
+                          (p.get("verdict") or {}).get("relief_found_m"), p.get("dsm"))
+                         for p in pairs])]
+    vc = adj.get("variance_components") or {}
+    if vc.get("groups"):
+        blocks += [Heading("Variance components"),
+                   Table.of(["group", "n", "factor", "sigma scale", "redundancy"],
+                            [(k, c["n"], c["factor"], c["sigma_scale"], c["redundancy"])
+                             for k, c in vc["groups"].items()]),
+                   Para(str(vc.get("split", "")))]
     frames = report.get("frames") or []
     if frames:
-        parts += ["<h2>Frames</h2>",
-                  _table(["frame", "prior sigma m (E, N, U)", "shift m (E, N, U)",
-                          "sigma m (E, N, U)", "observed", "source"],
-                         [(f.get("name"), _triple(f.get("prior_sigma_m")),
-                           _triple(f.get("shift_m")), _triple(f.get("sigma_m")),
-                           f.get("observed"), f.get("source")) for f in frames])]
-    parts.append("<p class='note'>All figures from report.json, gcps.json and the catalog's "
-                 "footprints (gcpfree block).</p></body></html>")
-    return "".join(parts)
+        blocks += [Heading("Frames"),
+                   Table.of(["frame", "prior sigma m (E, N, U)", "shift m (E, N, U)",
+                             "sigma m (E, N, U)", "observed", "source"],
+                            [(f.get("name"), _triple(f.get("prior_sigma_m")),
+                              _triple(f.get("shift_m")), _triple(f.get("sigma_m")),
+                              f.get("observed"), f.get("source")) for f in frames])]
+    blocks.append(Para("All figures from report.json, gcps.json and the catalog's footprints "
+                       "(gcpfree block)."))
+    return to_html(f"Block: {len(images)} images, {len(pairs)} stereo pairs", blocks)
 
 
 @task(name="write-block-html", cache_policy=NO_CACHE)

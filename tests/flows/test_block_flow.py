@@ -11,6 +11,8 @@ import json
 import numpy as np
 import pytest
 
+from tasks.report.doc import fmt
+
 pytestmark = pytest.mark.slow
 
 
@@ -87,7 +89,7 @@ def test_the_block_report_page_shows_every_image_and_its_figures(oriented_block)
     report = json.loads((out / "report.json").read_text())
     assert page.count("data:image/png;base64,") == 3  # map, check points, GCP residuals
     for name, c in report["check_points"].items():
-        assert f"<td>{name}</td><td>{c['n']}</td><td>{c['rms_col_px']:.3f}</td>" in page
+        assert f"<td>{name}</td><td>{c['n']}</td><td>{fmt(c['rms_col_px'])}</td>" in page
     held = {im["name"]: im["held_by"] for im in report["images"]}
     for scene in json.loads(catalog.read_text())["scenes"]:  # every image: how it is held
         assert f"<td>{scene['id']}</td><td>{held[scene['id']]}</td>" in page
