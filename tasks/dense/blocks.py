@@ -171,6 +171,22 @@ def retriangulate_block(stats: TileStats, work_in: str, work_out: str, left: Sen
     return replace(stats, bounds_m=bounds, miss_median_m=miss)
 
 
+def geoid_block(z: np.ndarray, spec: GridSpec, epsg: int, geoid: GeoidGrid,
+                block_info: dict | None = None) -> np.ndarray:
+    """float32 orthometric heights ``H = h - N`` of a block of an ellipsoidal DEM grid ``z``
+    (its position in ``block_info``), N interpolated (:meth:`GeoidGrid.undulation_m`) at each
+    cell's centre; NaN stays NaN."""
+    (r0, r1), (c0, c1) = block_info[0]["array-location"][-2:]
+    out = np.full(z.shape, np.nan, dtype=np.float32)
+    rows, cols = np.nonzero(np.isfinite(z))
+    if rows.size:
+        x = spec.x0_m + (cols + c0 + 0.5) * spec.res_m
+        y = spec.y0_m - (rows + r0 + 0.5) * spec.res_m
+        lon, lat = Projection(epsg).to_lonlat(x, y)
+        out[rows, cols] = geoid.ellipsoidal_to_orthometric(lon, lat, z[rows, cols])
+    return out
+
+
 def _points_in(bounds: tuple[float, float, float, float], stats: tuple[TileStats, ...],
                work: str, origin_m: tuple[float, float]) -> dict[str, np.ndarray]:
     """The points (x, y, h, status) of the tiles in ``work`` that fall in ``bounds``."""

@@ -52,6 +52,7 @@ from tasks.dense.blocks import (
     SensorImage,
     check_roi,
     dense_block,
+    geoid_block,
     grid_block,
     retriangulate_block,
     tile_boxes,
@@ -343,10 +344,21 @@ def grid_spec(plan: DensePlan, stats: tuple[TileStats, ...]) -> GridSpec:
 
 @task(name="grid-dem", cache_policy=NO_CACHE)
 def grid_dem_cog(plan: DensePlan, stats: tuple[TileStats, ...], work: Path, out: Path,
-                 cfg: DenseConfig = DenseConfig(), keep_work: bool = False) -> DemSummary:
+                 cfg: DenseConfig = DenseConfig(), keep_work: bool = False,
+                 egm96_out: Path | None = None) -> DemSummary:
     """Grid the tiles' points into ``out`` (heights) and ``<out>_mask.tif``, write
-    ``<out>.json``; remove the work folder unless ``keep_work``."""
+    ``<out>.json``; remove the work folder unless ``keep_work``.
+
+    With ``egm96_out`` (ellipsoidal points only), the same DEM in EGM96 heights too, in the
+    same pass: ``egm96_out``, its mask and JSON, each cell's ``H = h - N`` with the bundled
+    geoid at the cell's centre (:func:`tasks.dense.blocks.geoid_block`), instead of a second
+    triangulation and gridding of the points; the mask is the same. Returns the summary of
+    ``out``.
+    """
     out = Path(out)
+    if egm96_out is not None and cfg.vertical != "ellipsoidal":
+        raise InputError(f"an EGM96 twin is made from ellipsoidal heights; the points are "
+                         f"{cfg.vertical}")
     spec = grid_spec(plan, stats)
     halo = cfg.halo_cells
     base = darr.zeros(spec.shape, chunks=CHUNK, dtype=np.float32)
@@ -359,13 +371,26 @@ def grid_dem_cog(plan: DensePlan, stats: tuple[TileStats, ...], work: Path, out:
     mask_path = out.with_name(out.stem + "_mask.tif")
     georef = grid_georef(plan.epsg, spec, cfg.vertical)
     counts = [(mask == v).sum() for v in (MASK_VALID, MASK_MISMATCH)] + [overlap.sum()]
+    items = dem_items(z, mask, out, mask_path, georef, cfg.vertical)
+    extra = [*counts, darr.nanmin(z), darr.nanmax(z)]
+    if egm96_out is not None:
+        egm96_out = Path(egm96_out)
+        big_h = darr.map_blocks(geoid_block, z, spec=spec, epsg=plan.epsg, geoid=load_geoid(),
+                                dtype=np.float32)
+        egm96_mask = egm96_out.with_name(egm96_out.stem + "_mask.tif")
+        items += dem_items(big_h, mask, egm96_out, egm96_mask,
+                           grid_georef(plan.epsg, spec, "egm96"), "egm96")
+        extra += [darr.nanmin(big_h), darr.nanmax(big_h)]
     with threads(cfg.num_workers):
-        n_ok, n_mis, n_overlap, zmin, zmax = write_arrays_cog(
-            dem_items(z, mask, out, mask_path, georef, cfg.vertical),
-            extra=[*counts, darr.nanmin(z), darr.nanmax(z)])
+        n_ok, n_mis, n_overlap, zmin, zmax, *h_range = write_arrays_cog(items, extra=extra)
     n_cells = spec.n_rows * spec.n_cols
-    summary = dem_summary(plan, stats, spec, out, mask_path, cfg.vertical, n_cells,
-                       (int(n_ok), int(n_mis), int(n_overlap)), (float(zmin), float(zmax)))
+    cells = (int(n_ok), int(n_mis), int(n_overlap))
+    summary = dem_summary(plan, stats, spec, out, mask_path, cfg.vertical, n_cells, cells,
+                          (float(zmin), float(zmax)))
+    if egm96_out is not None:
+        twin = dem_summary(plan, stats, spec, egm96_out, egm96_mask, "egm96", n_cells, cells,
+                           (float(h_range[0]), float(h_range[1])))
+        atomic_write_json(egm96_out.with_suffix(".json"), twin.to_dict())
     atomic_write_json(out.with_suffix(".json"), summary.to_dict())
     if not keep_work:
         shutil.rmtree(work, ignore_errors=True)

@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import json
 import warnings
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
@@ -219,3 +220,58 @@ def test_saved_matches_are_triangulated_again_with_other_models(tiny_clean_scene
             assert np.allclose(c["h"][pick], t.h_m, atol=0.05)
             # and the points did move: the roll change is ~60 m on the ground
             assert np.median(np.abs(c["h"][pick] - a["h"][pick])) > 5.0
+
+
+def test_the_egm96_twin_is_the_ellipsoidal_dem_less_the_geoid(tiny_clean_scene, tmp_path):
+    """``grid_dem_cog(egm96_out=...)``: one triangulation, the EGM96 DEM made from the
+    ellipsoidal grid cell by cell. Against an oracle independent of core.geoid and of the
+    GTX reader (PROJ's inverse UTM and vgridshift on the bundled grid, at each cell's centre)
+    within 0.2 mm (float32 heights); against the DEM the points triangulated with the geoid
+    make (the former way: N per point, fitted by each tile's polynomials, then gridded)
+    within 5 mm, with the same mask. A geoid of the wrong sign, at swapped coordinates or at
+    cell corners fails the first."""
+    import pyproj
+
+    from tasks.dense.dem import retriangulate_tiles
+    from tasks.io.geoid import EGM96_GTX
+
+    scene_dir, _ = tiny_clean_scene
+    left, right = truth_pair(scene_dir)
+    plan = plan_dense.fn(left, right, (0, 0, 600, 600), SRTM, (0.0, 3000.0), "auto", CFG)
+    stats = match_tiles.fn(plan, left, right, tmp_path / "m", CFG)
+    ell = retriangulate_tiles.fn(plan, stats, tmp_path / "m", tmp_path / "e", left.model,
+                                 right.model, CFG)
+    grid_dem_cog.fn(plan, ell, tmp_path / "e", tmp_path / "dsm.tif", CFG,
+                    egm96_out=tmp_path / "dsm_egm96.tif")
+    egm = replace(CFG, vertical="egm96")
+    old = retriangulate_tiles.fn(plan, stats, tmp_path / "m", tmp_path / "g", left.model,
+                                 right.model, egm)
+    grid_dem_cog.fn(plan, old, tmp_path / "g", tmp_path / "old_egm96.tif", egm)
+
+    def read(name: str) -> tuple[np.ndarray, ...]:
+        with rasterio.open(tmp_path / name) as src:
+            return src.read(1), src.transform, src.crs, src.tags()
+
+    h, t, crs, _ = read("dsm.tif")
+    big_h, t2, crs2, tags = read("dsm_egm96.tif")
+    former, _, crs3, _ = read("old_egm96.tif")
+    assert t2 == t and crs.to_epsg() == plan.epsg and crs2 == crs3 and "5773" in crs2.to_wkt()
+    assert "EGM96" in tags["vertical_datum"]
+    for name in ("dsm_egm96_mask.tif", "old_egm96_mask.tif"):
+        assert np.array_equal(read(name)[0], read("dsm_mask.tif")[0])
+    ok = np.isfinite(h)
+    assert ok.sum() > 0.5 * h.size and np.array_equal(ok, np.isfinite(big_h))
+    assert np.array_equal(ok, np.isfinite(former))
+    rows, cols = np.nonzero(ok)
+    zone = plan.epsg % 100
+    proj = pyproj.Transformer.from_pipeline(
+        f"+proj=pipeline +step +inv +proj=utm +zone={zone} +ellps=WGS84 "
+        f"+step +proj=vgridshift +grids={EGM96_GTX} +multiplier=-1")
+    _, _, oracle = proj.transform(t.c + (cols + 0.5) * t.a, t.f + (rows + 0.5) * t.e,
+                                  h[ok].astype(np.float64))
+    assert np.abs(big_h[ok] - oracle).max() < 2e-4
+    assert np.ptp(h[ok] - big_h[ok]) > 0.05  # the geoid varies over the scene
+    assert np.abs(big_h[ok] - former[ok]).max() < 5e-3
+    summary = json.loads((tmp_path / "dsm_egm96.json").read_text())
+    assert summary["vertical"] == "egm96"
+    assert summary["h_max_m"] == pytest.approx(float(big_h[ok].max()), abs=1e-3)
