@@ -79,18 +79,41 @@ class GridSpec:
 def median_per_cell(x_m: ArrayLike, y_m: ArrayLike, h_m: ArrayLike, x0_m: float, y0_m: float,
                     res_m: float, shape: tuple[int, int]) -> NDArray[np.float32]:
     """Median height of the finite points in each cell of the grid (NaN where none)."""
-    ix, iy, inside = _cells(x_m, y_m, x0_m, y0_m, res_m, shape)
-    h = np.asarray(h_m, dtype=np.float64).ravel()
+    return _median(*_cells(x_m, y_m, x0_m, y0_m, res_m, shape), h_m, shape)
+
+
+def _median(ix: NDArray[np.int64], iy: NDArray[np.int64], inside: NDArray[np.bool_],
+            h_m: ArrayLike, shape: tuple[int, int]) -> NDArray[np.float32]:
+    """:func:`median_per_cell` of points already in cells (:func:`_cells`)."""
+    h = np.asarray(h_m).ravel()
+    if h.dtype != np.float32:
+        h = h.astype(np.float64)
     keep = inside & np.isfinite(h)
     cell = iy[keep] * shape[1] + ix[keep]
-    hv = h[keep]
     out = np.full(shape[0] * shape[1], np.nan, dtype=np.float32)
     if cell.size:
-        order = np.lexsort((hv, cell))
-        cs, hs = cell[order], hv[order]
-        ids, start, count = np.unique(cs, return_index=True, return_counts=True)
-        out[ids] = 0.5 * (hs[start + (count - 1) // 2] + hs[start + count // 2])
+        cs, hs = _sorted_by_cell(cell, h[keep])
+        start = np.flatnonzero(np.r_[True, cs[1:] != cs[:-1]])
+        count = np.diff(np.r_[start, cs.size])
+        out[cs[start]] = 0.5 * (hs[start + (count - 1) // 2] + hs[start + count // 2])
     return out.reshape(shape)
+
+
+def _sorted_by_cell(cell: NDArray[np.int64], h: NDArray) -> tuple[NDArray[np.int64], FloatArray]:
+    """The points ordered by cell, then height: (cells, heights as float64). float32 heights
+    (the point files') are sorted as one 64-bit key, the cell above the height's bits made
+    monotonic (a quarter of the time of ``np.lexsort``); others by ``np.lexsort``."""
+    if h.dtype != np.float32:
+        order = np.lexsort((h, cell))
+        return cell[order], h[order]
+    bits = h.view(np.uint32)
+    neg = bits >> np.uint32(31) == 1
+    ordered = np.where(neg, ~bits, bits | np.uint32(0x80000000))
+    key = (cell.astype(np.uint64) << np.uint64(32)) | ordered.astype(np.uint64)
+    key.sort()
+    low = (key & np.uint64(0xFFFFFFFF)).astype(np.uint32)
+    back = np.where(low >> np.uint32(31) == 1, low & np.uint32(0x7FFFFFFF), ~low)
+    return (key >> np.uint64(32)).astype(np.int64), back.view(np.float32).astype(np.float64)
 
 
 def _cells(x_m: ArrayLike, y_m: ArrayLike, x0_m: float, y0_m: float, res_m: float,
@@ -179,9 +202,9 @@ def grid_dem(x_m: ArrayLike, y_m: ArrayLike, h_m: ArrayLike, status: ArrayLike, 
     next to those outside the pair are blanked (:func:`without_rim`)."""
     if not res_m > 0 or min(shape) < 1:
         raise InputError(f"grid_dem needs res_m > 0 and a non-empty shape, got {res_m}, {shape}")
-    z = (median_per_cell(x_m, y_m, h_m, x0_m, y0_m, res_m, shape) if z_m is None
-         else np.asarray(z_m, dtype=np.float32).reshape(shape))
     ix, iy, inside = _cells(x_m, y_m, x0_m, y0_m, res_m, shape)
+    z = (_median(ix, iy, inside, h_m, shape) if z_m is None
+         else np.asarray(z_m, dtype=np.float32).reshape(shape))
     st = np.asarray(status).ravel()
     cell = iy * shape[1] + ix
     n_cells = shape[0] * shape[1]
