@@ -26,6 +26,7 @@ from collections.abc import Callable
 from dataclasses import dataclass
 from typing import Any
 
+import numba
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
@@ -33,12 +34,12 @@ from core.errors import GeometryError, InputError
 from core.geoid import GeoidGrid
 from core.intersection import triangulate
 from core.matching.rectify import TileRectification
+from core.parallel import run_split
 from core.sensors.base import SensorModel
 
 FloatArray = NDArray[np.float64]
 ToXY = Callable[[FloatArray, FloatArray], tuple[FloatArray, FloatArray]]
 MAX_DEGREE = 5
-EVAL_CHUNK = 1 << 18  # points per evaluation chunk: bounded temporary memory
 
 
 def _exponents(degree: int) -> NDArray[np.int64]:
@@ -78,19 +79,10 @@ class DisparityToGround:
 
     def __call__(self, u: ArrayLike, v: ArrayLike, d: ArrayLike) -> GroundPoints:
         u, v, d = (np.ravel(np.asarray(a, dtype=np.float64)) for a in np.broadcast_arrays(u, v, d))
-        out = np.empty((u.size, 4))
-        deg = self.degree
-        for s in range(0, u.size, EVAL_CHUNK):
-            q = [(a[s:s + EVAL_CHUNK] - c) / k
-                 for a, c, k in zip((u, v, d), self.centre, self.scale, strict=True)]
-            powers = [[np.ones_like(q[0])] for _ in range(3)]
-            for axis in range(3):
-                for _ in range(deg):
-                    powers[axis].append(powers[axis][-1] * q[axis])
-            acc = np.zeros((q[0].size, 4))
-            for (i, j, k), c in zip(self.exponents, self.coef, strict=True):
-                acc += (powers[0][i] * powers[1][j] * powers[2][k])[:, None] * c
-            out[s:s + EVAL_CHUNK] = acc
+        out = np.zeros((u.size, 4))
+        run_split(_evaluate, u.size, u, v, d, np.asarray(self.centre, np.float64),
+                  np.asarray(self.scale, np.float64), np.ascontiguousarray(self.exponents),
+                  np.ascontiguousarray(self.coef, dtype=np.float64), self.degree, out)
         return GroundPoints(out[:, 0], out[:, 1], out[:, 2], out[:, 3])
 
     def to_dict(self) -> dict[str, Any]:
@@ -177,3 +169,28 @@ def fit_disparity_to_ground(
         if err <= tol_m:
             break
     return model
+
+
+@numba.njit(cache=True, nogil=True, error_model="numpy")
+def _evaluate(u: FloatArray, v: FloatArray, d: FloatArray, centre: FloatArray,
+              scale: FloatArray, exponents: NDArray[np.int64], coef: FloatArray, degree: int,
+              out: FloatArray, start: int, stop: int) -> None:
+    """:class:`DisparityToGround`'s polynomials at the points ``start:stop`` into ``out``
+    (zeros): per point the powers of the normalised ``(u, v, d)``, then the monomials' terms
+    added in the order of ``exponents``, as NumPy added them over arrays (same products, same
+    order: the same floats). A compiled loop: a degree-5 tile (56 monomials) of 1 M points
+    took 0.49 CPU-s over arrays, most of it temporaries."""
+    pw = np.empty((3, degree + 1))
+    for n in range(start, stop):
+        q0 = (u[n] - centre[0]) / scale[0]
+        q1 = (v[n] - centre[1]) / scale[1]
+        q2 = (d[n] - centre[2]) / scale[2]
+        pw[0, 0] = pw[1, 0] = pw[2, 0] = 1.0
+        for e in range(degree):
+            pw[0, e + 1] = pw[0, e] * q0
+            pw[1, e + 1] = pw[1, e] * q1
+            pw[2, e + 1] = pw[2, e] * q2
+        for t in range(exponents.shape[0]):
+            m = pw[0, exponents[t, 0]] * pw[1, exponents[t, 1]] * pw[2, exponents[t, 2]]
+            for o in range(4):
+                out[n, o] += m * coef[t, o]
