@@ -10,6 +10,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass, replace
 
+import numba
 import numpy as np
 from numpy.lib.stride_tricks import sliding_window_view
 from numpy.typing import ArrayLike, NDArray
@@ -180,39 +181,79 @@ def basis_at(x_m: ArrayLike, y_m: ArrayLike, detrend: int) -> FloatArray:
 
 
 def correlations(cells: WindowCells, reference: GeoDEM, shifts_deg: FloatArray,
-                 detrend: bool | int = True, chunk: int = 128) -> tuple[FloatArray, FloatArray]:
+                 detrend: bool | int = True) -> tuple[FloatArray, FloatArray]:
     """Correlation coefficient (partial: about the best :func:`surface_basis` of ``detrend``,
     of each set over the pairs valid at that shift) and valid-pair count for each (dlon, dlat)
-    shift (n, 2)."""
+    shift (n, 2).
+
+    The sums over the pairs valid at each shift come from one compiled pass over the shifts
+    and cells (:func:`_pair_sums`, the reference sampled bilinearly as
+    :func:`core.dem.sample_bilinear` samples it: NaN outside or next to a void), the small
+    normal equations of each shift are then solved together."""
     ok = np.isfinite(cells.h_m)
     lon, lat = cells.lon_deg[ok], cells.lat_deg[ok]
     h0 = float(np.mean(cells.h_m[ok]))  # near the reference's heights: conditioning only
     h = cells.h_m[ok] - h0
-    b = surface_basis(cells, ok, detrend)
-    bb = b[:, :, None] * b[:, None, :]  # (n, k, k)
-    rho = np.full(len(shifts_deg), np.nan)
-    count = np.zeros(len(shifts_deg))
-    for s in range(0, len(shifts_deg), chunk):
-        sh = shifts_deg[s:s + chunk]
-        ref = reference.height_m(lon[None, :] + sh[:, :1], lat[None, :] + sh[:, 1:])
-        valid = np.isfinite(ref)
-        v = valid.astype(np.float64)
-        r = np.where(valid, ref - h0, 0.0)  # the basis holds a constant: any offset does
-        gram = (v @ bb.reshape(len(h), -1)).reshape(len(sh), *bb.shape[1:])
-        bh = v @ (b * h[:, None])
-        br = r @ b
-        with np.errstate(invalid="ignore", divide="ignore"):
-            try:
-                sol_h = np.linalg.solve(gram, bh[:, :, None])[:, :, 0]
-                sol_r = np.linalg.solve(gram, br[:, :, None])[:, :, 0]
-            except np.linalg.LinAlgError:  # a shift with too few pairs: solve one by one
-                sol_h, sol_r = _lstsq_each(gram, bh), _lstsq_each(gram, br)
-            hh = v @ (h * h) - np.sum(bh * sol_h, axis=1)
-            rr = np.sum(r * r, axis=1) - np.sum(br * sol_r, axis=1)
-            hr = r @ h - np.sum(bh * sol_r, axis=1)
-            rho[s:s + chunk] = hr / np.sqrt(hh * rr)
-        count[s:s + chunk] = v.sum(axis=1)
-    return rho, count
+    b = np.ascontiguousarray(surface_basis(cells, ok, detrend))
+    n, k = len(shifts_deg), b.shape[1]
+    gram, bh, br = np.zeros((n, k, k)), np.zeros((n, k)), np.zeros((n, k))
+    sums = np.zeros((n, 4))  # h h, r r, r h, count
+    x0, y0, dx, dy = (float(a) for a in reference.axes)
+    _pair_sums(np.ascontiguousarray(lon), np.ascontiguousarray(lat), np.ascontiguousarray(h),
+               b, np.ascontiguousarray(reference.values), x0, y0, dx, dy, h0,
+               np.ascontiguousarray(shifts_deg, dtype=np.float64), gram, bh, br, sums)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        try:
+            sol_h = np.linalg.solve(gram, bh[:, :, None])[:, :, 0]
+            sol_r = np.linalg.solve(gram, br[:, :, None])[:, :, 0]
+        except np.linalg.LinAlgError:  # a shift with too few pairs: solve one by one
+            sol_h, sol_r = _lstsq_each(gram, bh), _lstsq_each(gram, br)
+        hh = sums[:, 0] - np.sum(bh * sol_h, axis=1)
+        rr = sums[:, 1] - np.sum(br * sol_r, axis=1)
+        hr = sums[:, 2] - np.sum(bh * sol_r, axis=1)
+        rho = hr / np.sqrt(hh * rr)
+    return rho, sums[:, 3]
+
+
+@numba.njit(cache=True, nogil=True, error_model="numpy")
+def _pair_sums(lon: FloatArray, lat: FloatArray, h: FloatArray, b: FloatArray,
+               z: NDArray[np.floating], x0: float, y0: float, dx: float, dy: float, h0: float,
+               shifts: FloatArray, gram: FloatArray, bh: FloatArray, br: FloatArray,
+               sums: FloatArray) -> None:
+    """For each shift ``s`` (dlon, dlat degrees), over the cells whose shifted position has a
+    reference height ``r`` (bilinear in ``z``, its node ``(x0, y0)``, steps ``dx``, ``dy``;
+    ``r - h0``): sum of ``b b'`` into ``gram[s]``, of ``b h`` into ``bh[s]``, of ``b r`` into
+    ``br[s]``, and of ``h h``, ``r r``, ``r h`` and the count into ``sums[s]``."""
+    nr, nc = z.shape
+    k = b.shape[1]
+    for s in range(shifts.shape[0]):
+        for c in range(lon.size):
+            fi = (lat[c] + shifts[s, 1] - y0) / dy
+            fj = (lon[c] + shifts[s, 0] - x0) / dx
+            if not (fi >= 0 and fi <= nr - 1 and fj >= 0 and fj <= nc - 1):
+                continue
+            i0, j0 = int(np.floor(fi)), int(np.floor(fj))
+            i1, j1 = min(i0 + 1, nr - 1), min(j0 + 1, nc - 1)
+            wi, wj = fi - i0, fj - j0
+            r = ((1.0 - wi) * ((1.0 - wj) * z[i0, j0] + wj * z[i0, j1])
+                 + wi * ((1.0 - wj) * z[i1, j0] + wj * z[i1, j1]))
+            if not np.isfinite(r):
+                continue
+            r -= h0
+            hc = h[c]
+            for p in range(k):
+                bp = b[c, p]
+                bh[s, p] += bp * hc
+                br[s, p] += bp * r
+                for q in range(p, k):  # the upper triangle; mirrored below
+                    gram[s, p, q] += bp * b[c, q]
+            sums[s, 0] += hc * hc
+            sums[s, 1] += r * r
+            sums[s, 2] += r * hc
+            sums[s, 3] += 1.0
+        for p in range(k):
+            for q in range(p):
+                gram[s, p, q] = gram[s, q, p]
 
 
 def _lstsq_each(gram: FloatArray, rhs: FloatArray) -> FloatArray:
