@@ -44,7 +44,7 @@ from core.sensors.footprint import footprint_box, scene_height_range_m
 from tasks.io.dem import dem_datum, read_reference
 from tasks.io.rasters import atomic_write_json, open_raster, read_window
 from tasks.io.sensors import LoadedModel
-from tasks.scheduling import compute
+from tasks.scheduling import compute, schedule
 
 # margin (degrees) around the left footprint when reading the reference DEM: the search
 # radius and the parallax of the height range stay well inside it
@@ -143,6 +143,36 @@ def block_matches(block: Block, left_path: str, right_path: str, left_model: Sen
     return match_points(left, lw[:2], right, rw[:2], col, row, prior, cfg)
 
 
+def run_matches(run: list[Block], left_path: str, right_path: str, left_model: SensorModel,
+                right_model: SensorModel, heights: HeightPrior, cfg: TiePointConfig,
+                saturation: float | None) -> Matches:
+    """The matches of a run of blocks (:func:`block_matches`), in their order: one worker's
+    task."""
+    return Matches.concat([block_matches(b, left_path, right_path, left_model, right_model,
+                                         heights, cfg, saturation) for b in run])
+
+
+#: runs of blocks per worker process (:func:`block_runs`): enough for the load to even out
+RUNS_PER_WORKER = 3
+
+
+def block_runs(all_blocks: list[Block], workers: int | None
+               ) -> tuple[list[list[Block]], bool]:
+    """The blocks as the workers take them, and whether in processes: one per task in
+    threads; in processes (from
+    :data:`tasks.scheduling.PROCESS_MIN_TASKS` blocks on, more than one worker),
+    :data:`RUNS_PER_WORKER` contiguous runs per worker, so that the models and the reference
+    heights are sent to a process a few times, not once per block. The matching's loop over
+    points holds Python's lock (thousands of small OpenCV calls and their NumPy
+    bookkeeping): threads gave 1.4-1.6 CPU per second of wall on 2 cores."""
+    s = schedule(len(all_blocks), workers, processes=None)
+    if s.scheduler != "processes":
+        return [[b] for b in all_blocks], False
+    n = min(len(all_blocks), RUNS_PER_WORKER * s.workers)
+    cut = np.linspace(0, len(all_blocks), n + 1).round().astype(int)
+    return [all_blocks[a:b] for a, b in zip(cut[:-1], cut[1:], strict=True)], True
+
+
 # ---------------------------------------------------------------------------- task
 
 
@@ -178,9 +208,10 @@ def find_tie_points(
 
     ``reference`` is the ellipsoidal reference DEM (the COG of ``gcpfree prepare-reference``,
     or a :class:`GeoDEM`); without one, ``h_range_m`` (ellipsoidal metres) bounds the scene's
-    heights. The left image is processed in ``cfg.tile_px`` blocks by Dask threads
-    (``num_workers``, default one per core). With ``out``, the result is also written there as
-    JSON.
+    heights. The left image is processed in ``cfg.tile_px`` blocks by ``num_workers`` (default
+    one per core): worker processes of the command's shared pool from 8 blocks on, in runs of
+    blocks (:func:`block_runs`), else threads. With ``out``, the result is also written there
+    as JSON.
     """
     left_size, saturation = raster_info(left_image)
     right_size, _ = raster_info(right_image)
@@ -207,10 +238,10 @@ def find_tie_points(
         raise GeometryError(
             f"{Path(left_image).name} and {Path(right_image).name} do not overlap under their "
             "sensor models; check that each model file belongs to its image")
-    parts = [dask.delayed(block_matches)(b, str(left_image), str(right_image), left_model,
-                                         right_model, heights, cfg, saturation)
-             for b in blocks(left_size, cfg.tile_px)]
-    matches = Matches.concat(compute(parts, workers=num_workers))
+    runs, in_processes = block_runs(blocks(left_size, cfg.tile_px), num_workers)
+    parts = [dask.delayed(run_matches)(run, str(left_image), str(right_image), left_model,
+                                       right_model, heights, cfg, saturation) for run in runs]
+    matches = Matches.concat(compute(parts, workers=num_workers, processes=in_processes))
     x, y = ground_xy_m(left_model, matches.left_col, matches.left_row, matches.h_m, origin)
     matches = check_consistency(matches, x, y, cfg, heights_known=reference is not None)
     tie_points = select_tie_points(matches, x, y, cfg.cell_m)
