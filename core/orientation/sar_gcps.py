@@ -37,7 +37,7 @@ prior, as the reference DEM's misregistration is for SRTM GCPs.
 from __future__ import annotations
 
 from collections.abc import Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from typing import Any
 
 import numpy as np
@@ -52,8 +52,10 @@ from core.orientation.sar_matching import (
     SarGcpConfig,
     SarOpticalMatches,
     Surface,
+    LookedModel,
     ground_images,
     ground_spacing_m,
+    looked,
     match_sar_optical,
     reliable_reference,
 )
@@ -177,7 +179,10 @@ class SarImageResult:
     """One optical image against the SAR scene: its conjugate points, their heights and the
     GCPs made of them; ``refused``: why there are none (too few conjugate points or too
     little altimetric control; ``heights`` is then None); ``prediction``: how the SAR image
-    was predicted from the pair's surface (None: matched on the reference's heights)."""
+    was predicted from the pair's surface (None: matched on the reference's heights);
+    ``looks``: the SAR pixels averaged per matched pixel (rows, cols; :func:`looked`: a scene
+    whose grids would not fit in memory otherwise); the SAR pixels recorded are the
+    product's own."""
 
     name: str
     matches: SarOpticalMatches
@@ -185,6 +190,7 @@ class SarImageResult:
     gcps: tuple[ControlPoint, ...]
     refused: str = ""
     prediction: Prediction | None = None
+    looks: tuple[int, int] = (1, 1)
 
     def counts(self) -> dict[str, int]:
         c = self.matches.matches.counts()
@@ -205,26 +211,36 @@ def sar_gcps_of_image(name: str, optical: SensorModel, optical_image: NDArray,
     :data:`MIN_POINTS` places or too few of them lie on reliable reference heights (steep
     terrain, where the radar's and the sun's shading differ most)."""
     prediction = None
+    looks = (1, 1)
+    if cfg.cell_m is None:  # a grid too large for memory: matched on multilooked pixels
+        used, sar_image, looks = looked(sar, sar_image, reference, corners)
+    else:
+        used = sar
     if surface is None:
-        g = ground_images(optical, optical_image, sar, sar_image, reference, corners,
-                          cfg.cell_m or ground_spacing_m(sar, np.shape(sar_image), reference))
+        g = ground_images(optical, optical_image, used, sar_image, reference, corners,
+                          cfg.cell_m or ground_spacing_m(used, np.shape(sar_image), reference))
         m = match_sar_optical(g, cfg)
     else:
-        m, prediction = predicted_sar_matches(optical, optical_image, sar, sar_image,
+        m, prediction = predicted_sar_matches(optical, optical_image, used, sar_image,
                                               reference, surface, corners, cfg)
+    if isinstance(used, LookedModel):  # the SAR pixels of the product itself from here on
+        m = replace(m, **dict(zip(("sar_col", "sar_row"), used.to_full(m.sar_col, m.sar_row),
+                                  strict=True)))
     ok = m.matches.ok
     if ok.sum() < MIN_POINTS:
         return SarImageResult(name, m, None, (), f"{int(ok.sum())} conjugate points "
-                              f"({MIN_POINTS} needed): {m.matches.counts()}", prediction)
+                              f"({MIN_POINTS} needed): {m.matches.counts()}", prediction,
+                              looks)
     reliable = reliable_reference(reference, m.lon_deg[ok], m.lat_deg[ok], cfg.max_slope)
     if reliable.sum() < MIN_POINTS:
         return SarImageResult(name, m, None, (), f"{int(reliable.sum())} of {int(ok.sum())} "
                               f"conjugate points on reliable reference heights (slope under "
-                              f"{cfg.max_slope:g}, no void; {MIN_POINTS} needed)", prediction)
+                              f"{cfg.max_slope:g}, no void; {MIN_POINTS} needed)", prediction,
+                              looks)
     hts = parallax_heights(optical, sar, (m.optical_col[ok], m.optical_row[ok]),
                            (m.sar_col[ok], m.sar_row[ok]), m.h_ref_m[ok], reliable, cfg)
     return SarImageResult(name, m, hts, sar_control_points(name, sar, m, hts, cfg, first_id),
-                          prediction=prediction)
+                          prediction=prediction, looks=looks)
 
 
 # the delivered geolocation of a SAR product, 1 sigma horizontal (m): Sentinel-1 a few

@@ -27,7 +27,7 @@ from typing import Protocol
 
 import cv2
 import numpy as np
-from numpy.typing import NDArray
+from numpy.typing import ArrayLike, NDArray
 
 from core.dem import GeoDEM, sample_bilinear
 from core.errors import InputError
@@ -98,12 +98,79 @@ def ground_spacing_m(model: SensorModel, shape: tuple[int, ...], reference: GeoD
                      coarser: bool = True) -> float:
     """The coarser (else the finer) of an image's two ground pixel sizes (m) at its centre,
     at the reference's median height."""
+    steps = axis_spacing_m(model, shape, reference)
+    return max(steps) if coarser else min(steps)
+
+
+#: the ground grids of the matching hold at most this many cells (the render grid at the SAR's
+#: finer spacing, the matching grid at its coarser): a grid of 36 M cells (a Sentinel-1 GRD's
+#: 10 m over a 60 km SPOT scene) took 14 GB for the two images of a pair; past it the SAR image
+#: is multilooked (:func:`looked`) until the grid fits
+MAX_GRID_CELLS = 10_000_000
+
+
+@dataclass(frozen=True)
+class LookedModel:
+    """A SAR model in the pixels of its image averaged over blocks of ``looks`` (rows, cols):
+    pixel ``i`` of the looked image covers the pixels ``k i .. k i + k - 1``, its centre
+    ``k i + (k - 1) / 2``."""
+
+    base: SensorModel
+    looks: tuple[int, int]
+
+    def to_full(self, col: ArrayLike, row: ArrayLike) -> tuple[FloatArray, FloatArray]:
+        kr, kc = self.looks
+        return (np.asarray(col, float) * kc + 0.5 * (kc - 1),
+                np.asarray(row, float) * kr + 0.5 * (kr - 1))
+
+    def project(self, lon_deg: ArrayLike, lat_deg: ArrayLike, h_m: ArrayLike
+                ) -> tuple[FloatArray, FloatArray]:
+        kr, kc = self.looks
+        c, r = self.base.project(lon_deg, lat_deg, h_m)
+        return ((np.asarray(c, float) - 0.5 * (kc - 1)) / kc,
+                (np.asarray(r, float) - 0.5 * (kr - 1)) / kr)
+
+    def localize(self, col: ArrayLike, row: ArrayLike, h_m: ArrayLike
+                 ) -> tuple[FloatArray, FloatArray]:
+        return self.base.localize(*self.to_full(col, row), h_m)
+
+
+def axis_spacing_m(model: SensorModel, shape: tuple[int, ...], reference: GeoDEM
+                   ) -> tuple[float, float]:
+    """An image's ground pixel size (m) along its rows and along its columns (one row step,
+    one column step) at its centre, at the reference's median height."""
     c, r = 0.5 * (shape[1] - 1), 0.5 * (shape[0] - 1)
     h = np.full(3, float(np.nanmedian(reference.h_m)))
     lon, lat = model.localize(np.array([c, c + 1, c]), np.array([r, r, r + 1]), h)
     mx, my = metres_per_degree(lat[0])
     step = np.hypot((lon[1:] - lon[0]) * mx, (lat[1:] - lat[0]) * my)
-    return float(step.max() if coarser else step.min())
+    return float(step[1]), float(step[0])
+
+
+def looked(sar: SensorModel, sar_image: NDArray, reference: GeoDEM,
+           corners: tuple[FloatArray, FloatArray], max_cells: int | None = None
+           ) -> tuple[SensorModel, NDArray[np.float32], tuple[int, int]]:
+    """The SAR model and image (amplitude) multilooked, the intensity averaged over blocks of
+    whole pixels (the mean of the squared amplitudes, then its root), so that a ground grid
+    of the looked image's finer spacing over the lon/lat ``corners`` holds at most
+    ``max_cells`` cells (default :data:`MAX_GRID_CELLS`); unchanged (looks (1, 1)) where it
+    already does."""
+    max_cells = max_cells or MAX_GRID_CELLS
+    row_m, col_m = axis_spacing_m(sar, np.shape(sar_image), reference)
+    lon, lat = np.asarray(corners[0], float), np.asarray(corners[1], float)
+    mx, my = metres_per_degree(float(np.mean(lat)))
+    area = (np.ptp(lon) * mx) * (np.ptp(lat) * my)
+    need = float(np.sqrt(area / max_cells))
+    if min(row_m, col_m) >= need:
+        return sar, np.asarray(sar_image), (1, 1)
+    kr, kc = max(1, int(np.ceil(need / row_m))), max(1, int(np.ceil(need / col_m)))
+    z = np.asarray(sar_image, dtype=np.float32)
+    nr, nc = z.shape[0] // kr, z.shape[1] // kc
+    if min(nr, nc) < 2:
+        return sar, z, (1, 1)
+    power = np.square(z[:nr * kr, :nc * kc], dtype=np.float32)
+    mean = power.reshape(nr, kr, nc, kc).mean(axis=(1, 3), dtype=np.float64)
+    return LookedModel(sar, (kr, kc)), np.sqrt(mean).astype(np.float32), (kr, kc)
 
 
 def ground_images(optical: SensorModel, optical_image: NDArray, sar: SensorModel,

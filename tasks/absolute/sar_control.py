@@ -124,6 +124,8 @@ def _image_head(r: SarImageResult) -> dict[str, Any]:
     are none when refused."""
     head: dict[str, Any] = {"templates": int(r.matches.matches.status.size),
                             "counts": r.counts(), "gcps": len(r.gcps)}
+    if r.looks != (1, 1):
+        head["looks"] = list(r.looks)
     if r.heights is None:
         head["refused"] = r.refused
     return head

@@ -314,3 +314,47 @@ def test_offset_field_recovers_an_affine_offset_and_moves_a_projection():
     c2, r2 = sar.project(lon + f.at(lon, lat)[0], lat + f.at(lon, lat)[1], np.full(lon.size,
                                                                                     100.0))
     assert np.allclose(c, c2) and np.allclose(r, r2)
+
+
+def test_looked_model_and_image_agree_on_where_a_looked_pixel_lies():
+    """A SAR image whose intensity is a known plane of the ground: each looked pixel (the mean
+    intensity of its block) is the plane at the ground its looked model localizes, so the
+    looked model's pixel centres are the blocks' centres; project inverts localize."""
+    sar = Ground(10.0, 1.0 / np.tan(np.radians(38.0)))
+    nr, nc = 301, 402  # not multiples of the looks: the last partial block is left out
+    r, c = np.mgrid[0:nr, 0:nc].astype(float)
+    intensity = 5.0 + 0.02 * c + 0.03 * r  # linear in the pixel: a block's mean is its centre's
+    ref = GeoDEM(np.full((50, 50), 700.0), LON0 - 0.05, LAT0 + 0.05, 0.01, -0.01)
+    corners = sar.localize(np.array([0.0, nc - 1, 0, nc - 1]), np.array([0.0, 0, nr - 1, nr - 1]),
+                           np.full(4, 700.0))
+    used, img, looks = sgm.looked(sar, np.sqrt(intensity), ref, corners, max_cells=5000)
+    # ~12 km2 over 5000 cells: 49 m cells at least, on 10 m pixels: 5 x 5 looks
+    assert looks == (5, 5) and img.shape == (nr // 5, nc // 5)
+    i, j = np.mgrid[0:img.shape[0], 0:img.shape[1]].astype(float)
+    lon, lat = used.localize(j, i, np.full(i.shape, 700.0))
+    fc, fr = sar.project(lon, lat, np.full(i.shape, 700.0))  # the product's own pixels
+    np.testing.assert_allclose(img**2, 5.0 + 0.02 * fc + 0.03 * fr, rtol=1e-5)
+    back = used.project(lon, lat, np.full(i.shape, 700.0))
+    np.testing.assert_allclose(back[0], j, atol=1e-6)
+    np.testing.assert_allclose(back[1], i, atol=1e-6)
+    # a grid that fits is left alone
+    same, img1, looks1 = sgm.looked(sar, np.sqrt(intensity), ref, corners)
+    assert looks1 == (1, 1) and same is sar and img1.shape == (nr, nc)
+
+
+def test_a_scene_too_large_for_memory_is_matched_on_looked_pixels(forest_scene, monkeypatch):
+    """The forest scene with the grids' budget cut so that the radar image is looked 2 x 2:
+    the GCPs' SAR pixels are still the product's own (unbiased against the true model, as on
+    the full pixels) and the optical side as good."""
+    sar, optical, optical_true, sar_img, opt_img, reference, surface, corners = forest_scene
+    heights, _ = _forest_world()
+    monkeypatch.setattr(sgm, "MAX_GRID_CELLS", 40_000)  # 6 km x 6 km: cells of 30 m
+    # the first search on cells of 80 m: over the small world, +-500 m (the model is 160 m off)
+    cfg = sgm.SarGcpConfig(geolocation_sigma_m=3.0, max_offset_m=500.0)
+    res = sg.sar_gcps_of_image("left", optical, opt_img, sar, sar_img, reference, corners,
+                               cfg, surface=surface)
+    assert res.looks == (2, 2) and len(res.gcps) >= 40
+    sc, sr = _sar_errors_px(res.gcps, sar, optical_true, heights)  # in the product's pixels
+    assert abs(np.median(sc)) < 0.3 and abs(np.median(sr)) < 0.3
+    ec, er = _gcp_errors_px(res.gcps, optical_true)
+    assert abs(np.median(ec)) < 0.7 and abs(np.median(er)) < 0.5
