@@ -212,18 +212,18 @@ def _sar_scene(params: OrientParams) -> Any:
 
 def _final_dsm(matched: Any, models: Any, dense_cfg: Any, out: Path) -> Any:
     """The relative DEM's matches intersected again with the oriented models: the final DSM,
-    ellipsoidal and EGM96 (``dsm.tif``, ``dsm_egm96.tif``); the ellipsoidal one's summary."""
+    ellipsoidal (``dsm.tif``) and its EGM96 twin (``dsm_egm96.tif``, each cell ``h - N``, in
+    the same pass); the ellipsoidal one's summary."""
     from tasks.dense.dem import grid_dem_cog, retriangulate_tiles
 
-    final = {}
-    for vert, name in (("ellipsoidal", "dsm.tif"), ("egm96", "dsm_egm96.tif")):
-        vcfg = replace(dense_cfg, vertical=vert)
-        work = out / f".{name}.work"
-        stats = retriangulate_tiles(matched.plan, matched.stats, matched.work, work,
-                                    models[0], models[1], vcfg)
-        final[vert] = grid_dem_cog(matched.plan, stats, work, out / name, vcfg)
+    vcfg = replace(dense_cfg, vertical="ellipsoidal")
+    work = out / ".dsm.tif.work"
+    stats = retriangulate_tiles(matched.plan, matched.stats, matched.work, work,
+                                models[0], models[1], vcfg)
+    final = grid_dem_cog(matched.plan, stats, work, out / "dsm.tif", vcfg,
+                         egm96_out=out / "dsm_egm96.tif")
     shutil.rmtree(matched.work, ignore_errors=True)
-    return final["ellipsoidal"]
+    return final
 
 
 def _report(params: OrientParams, rel: Any, dem: Any, windows: Any, verdict: Any,
