@@ -49,10 +49,10 @@ from core.geodesy import metres_per_degree
 from core.orientation.frames import REFERENCE, FramePrior
 from core.orientation.sar_matching import (
     MIN_POINTS,
+    LookedModel,
     SarGcpConfig,
     SarOpticalMatches,
     Surface,
-    LookedModel,
     ground_images,
     ground_spacing_m,
     looked,
