@@ -64,8 +64,11 @@ class Schedule:
         return "processes" if self.processes and self.workers > 1 else "threads"
 
     def compute_kwargs(self) -> dict[str, Any]:
+        """``dask.compute``'s arguments: in processes, one task per process call (Dask's
+        default batches 6 ready tasks per call, which sent a step's 6 runs to one worker)."""
         if self.scheduler == "processes":
-            return {"scheduler": "processes", "pool": process_pool(self.workers)}
+            return {"scheduler": "processes", "pool": process_pool(self.workers),
+                    "chunksize": 1}
         return {"scheduler": self.scheduler, "num_workers": self.workers}
 
 

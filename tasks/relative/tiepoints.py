@@ -241,8 +241,7 @@ def find_tie_points(
     runs, in_processes = block_runs(blocks(left_size, cfg.tile_px), num_workers)
     parts = [dask.delayed(run_matches)(run, str(left_image), str(right_image), left_model,
                                        right_model, heights, cfg, saturation) for run in runs]
-    with dask.config.set(chunksize=1):  # a run per process call (Dask's default batches 6)
-        matches = Matches.concat(compute(parts, workers=num_workers, processes=in_processes))
+    matches = Matches.concat(compute(parts, workers=num_workers, processes=in_processes))
     x, y = ground_xy_m(left_model, matches.left_col, matches.left_row, matches.h_m, origin)
     matches = check_consistency(matches, x, y, cfg, heights_known=reference is not None)
     tie_points = select_tie_points(matches, x, y, cfg.cell_m)

@@ -97,3 +97,19 @@ def test_worker_processes_serve_every_step_and_a_lost_one_is_replaced():
         assert time.monotonic() < deadline, "the lost worker was never noticed"
         time.sleep(0.05)
     assert pids().isdisjoint(first)  # a new pool, new processes
+
+
+def _pid_after(seconds: float) -> int:
+    time.sleep(seconds)
+    return os.getpid()
+
+
+def test_two_runs_on_two_worker_processes_go_to_both():
+    """One task per process call: Dask's default sends ready tasks in batches of 6, which put
+    a step's runs all in one worker (the tie points' runs at 2 workers took 1.00 CPU/s)."""
+    deadline = time.monotonic() + 60.0
+    while len(set(compute([dask.delayed(_pid_after)(0.2) for _ in range(4)], workers=2,
+                          processes=True))) < 2:  # until both processes of the pool are up
+        assert time.monotonic() < deadline, "the pool never started its second process"
+    assert len(set(compute([dask.delayed(_pid_after)(1.0) for _ in range(2)], workers=2,
+                           processes=True))) == 2
