@@ -50,6 +50,7 @@ from core.orientation import sar_matching as sgm
 from core.orientation import sar_prediction as sgp
 from core.robust import nmad
 from core.sensors.sar import SarModel
+from core.sensors.troposphere import with_standard_troposphere
 from tasks.io.dem import dem_datum, read_reference
 from tasks.io.sensors import load_model, read_model_file
 
@@ -71,6 +72,10 @@ def main() -> None:
                     help="leave out of the scores the cells near height steps of a DSM "
                          "(truth: the truth DSM, to see what a perfect mask gives)")
     ap.add_argument("--step-m", type=float, default=3.0)
+    ap.add_argument("--looks", type=int, default=1,
+                    help="match the SAR image multilooked KxK (what orient does where the grid "
+                         "of the product's own pixels would not fit: a Sentinel-1 GRD over a "
+                         "spot scene); errors still in the product's pixels")
     ap.add_argument("--orient", type=Path, default=None,
                     help="a gcpfree orient output of the scene: match against the SAR image "
                          "predicted from its relative DEM")
@@ -79,6 +84,13 @@ def main() -> None:
     rec = json.loads((d / "truth" / "sar.json").read_text())
     cell = a.cell or max(rec["figures"]["ground_spacing_m"])
     opt, sar = load_model(d / f"{a.image}.tif"), load_model(d / "sar.tif")
+    sar_image = _read(d / "sar.tif")
+    if a.looks > 1:  # the product's pixels averaged in intensity, as sgm.looked does
+        k = a.looks
+        nr, nc = sar_image.shape[0] // k, sar_image.shape[1] // k
+        power = np.square(sar_image[:nr * k, :nc * k].astype(np.float32))
+        sar_image = np.sqrt(power.reshape(nr, k, nc, k).mean(axis=(1, 3))).astype(np.float32)
+        cell = a.cell or k * max(rec["figures"]["ground_spacing_m"])
     if a.orient is not None and a.image == "right":  # the relative DEM's frame
         from core.sensors.pushbroom import PushbroomModel
 
@@ -93,9 +105,14 @@ def main() -> None:
                          BBox(lon.min(), lat.min(), lon.max(), lat.max()).expanded(0.05), datum)
     h_mid = float(np.nanmedian(ref.h_m))
     lon, lat = opt.model.localize(c, r, np.full(4, h_mid))
+    # as orient does: the standard atmosphere's hydrostatic delay out of the range timing
+    base, delay_m = with_standard_troposphere(sar.model, float(np.mean(lon)),
+                                              float(np.mean(lat)), h_mid)
+    sar = replace(sar, model=base if a.looks == 1 else sgm.LookedModel(base, (a.looks,) * 2))
+    print(f"troposphere {delay_m:.2f} m taken out of the range; looks {a.looks}x{a.looks}")
     cfg = sgm.SarGcpConfig(cell_m=a.cell)  # None: the grid may coarsen (speckle)
     g = sgm.ground_images(opt.model, _read(d / f"{a.image}.tif"), sar.model,
-                         _read(d / "sar.tif"), ref, (lon, lat), cell)
+                         sar_image, ref, (lon, lat), cell)
     ignore = None
     if a.ignore_steps == "truth":
         from scipy.ndimage import maximum_filter, minimum_filter
@@ -134,6 +151,9 @@ def main() -> None:
     def truth_of(sm):
         """The matched optical and SAR pixels, the true heights and the SAR pixel error."""
         ok = sm.matches.ok
+        if isinstance(sar.model, sgm.LookedModel):  # in the product's own pixels
+            sm = replace(sm, **dict(zip(("sar_col", "sar_row"),
+                                        sar.model.to_full(sm.sar_col, sm.sar_row), strict=True)))
         if ok.sum() < sgm.MIN_POINTS:
             raise SystemExit(f"{int(ok.sum())} matches ({sgm.MIN_POINTS} needed): nothing to "
                              "measure")
@@ -158,8 +178,7 @@ def main() -> None:
         t0 = time.perf_counter()
         surface = read_surface(a.orient / "relative_dem.tif")
         sm, pred = sgp.predicted_sar_matches(opt.model, _read(d / f"{a.image}.tif"), sar.model,
-                                            _read(d / "sar.tif"), ref, surface, (lon, lat),
-                                            cfg)
+                                            sar_image, ref, surface, (lon, lat), cfg)
         e = pred.elevated
         print(f"SAR image predicted from the relative DEM (render cells {pred.cell_m:.1f} m): "
               f"vertical datum {pred.vertical_plane_m[0]:+.2f} m; elevated class "
@@ -174,15 +193,16 @@ def main() -> None:
 
     # Goncalves: the product's heights (parallax calibrated on the reliable reference)
     reliable = sgm.reliable_reference(ref, sm.lon_deg[ok], sm.lat_deg[ok], cfg.max_slope)
-    hts = sg.parallax_heights(opt.model, sar.model, po, ps, href, reliable, cfg)
+    product = sar.model.base if isinstance(sar.model, sgm.LookedModel) else sar.model
+    hts = sg.parallax_heights(opt.model, product, po, ps, href, reliable, cfg)
     h_par = hts.h_parallax_m
     e = h_par - ht
     print(f"heights: parallax - truth median {np.nanmedian(e):+.2f} m NMAD "
           f"{nmad(e[np.isfinite(e)]):.2f}; control - truth median "
           f"{np.nanmedian(href - ht):+.2f} NMAD {nmad((href - ht)[np.isfinite(ht)]):.2f}; "
           f"{np.median(hts.m_per_m):.2f} m of parallax per m")
-    for label, model, h in (("parallax heights", sar.model, h_par),
-                            ("control heights", sar.model, href),
+    for label, model, h in (("parallax heights", product, h_par),
+                            ("control heights", product, href),
                             ("true SAR model, true heights", sar_t, ht)):
         gc, gr = opt_t.project(*model.localize(*ps, h), h)
         ec, er = po[0] - gc, po[1] - gr

@@ -84,7 +84,10 @@ class SarGcpConfig:
 @dataclass(frozen=True, eq=False)
 class GroundImages:
     """Both images on one ground grid: values (NaN outside an image) and each grid node's
-    image position (col, row) in each, at the reference heights ``h_m``."""
+    image position (col, row) in each, at the reference heights ``h_m``; ``holes``: cells
+    inside the optical side's image where its value is unknown (NaN there too: the SAR
+    image predicted from the pair's surface, where that surface has a gap), which templates
+    may hold where they are scattered, their scores leaving them out (:func:`template_cells`)."""
 
     grid: mm.GroundGrid
     h_m: FloatArray
@@ -92,6 +95,39 @@ class GroundImages:
     optical_pos: tuple[FloatArray, FloatArray]
     sar: FloatArray
     sar_pos: tuple[FloatArray, FloatArray]
+    holes: NDArray[np.bool_] | None = None
+
+
+#: the largest share of a template's cells that may be holes of the prediction
+MAX_HOLE_SHARE = 0.25
+
+
+def template_cells(g: GroundImages, half_cells: int, spacing_cells: int,
+                   ignore: NDArray[np.bool_] | None = None
+                   ) -> tuple[tuple[NDArray[np.intp], NDArray[np.intp]], NDArray[np.bool_],
+                              NDArray[np.bool_] | None]:
+    """The templates' centres on ``g`` (:func:`core.matching.multimodal.template_centres`),
+    the cells taken as data and those the scores leave out (``ignore``). Templates lie whole
+    on data; where the optical side has holes (``g.holes``) that would leave fewer than half
+    the templates that holes in at most :data:`MAX_HOLE_SHARE` of their cells give, those
+    are taken, the holes (grown by the two cells
+    :func:`core.matching.multimodal.orientation_channels` describes as 0 around a no-data
+    cell) left out of their scores: a relative DEM's gaps (shadows, changed ground, water)
+    are scattered over a whole scene, and a spot scene's prediction on the Sentinel-1's
+    30 m looked cells held one whole template of 25 on the first, coarse grid."""
+    valid = np.isfinite(g.optical)
+    whole = mm.template_centres(valid, half_cells, spacing_cells)
+    if g.holes is None or not g.holes.any():
+        return whole, valid, ignore
+    ci, cj = mm.template_centres(valid | g.holes, half_cells, spacing_cells)
+    n = 2 * half_cells + 1
+    share = cv2.boxFilter(g.holes.astype(np.float32), -1, (n, n), normalize=True,
+                          borderType=cv2.BORDER_CONSTANT)
+    keep = share[ci, cj] <= MAX_HOLE_SHARE
+    if whole[0].size >= 0.25 * keep.sum():
+        return whole, valid, ignore
+    grown = cv2.dilate(g.holes.astype(np.uint8), np.ones((5, 5), np.uint8)).astype(bool)
+    return (ci[keep], cj[keep]), valid | g.holes, grown if ignore is None else (grown | ignore)
 
 
 def ground_spacing_m(model: SensorModel, shape: tuple[int, ...], reference: GeoDEM,
@@ -221,7 +257,7 @@ def match_sar_optical(g: GroundImages, cfg: SarGcpConfig,
     ``ignore``: grid cells left out of the templates' scores (``bench/validation/sar_gcps.py``
     tries the cells near height steps)."""
     da, db = mm.orientation_channels(g.optical), mm.orientation_channels(g.sar)
-    va, vb = np.isfinite(g.optical), np.isfinite(g.sar)
+    vb = np.isfinite(g.sar)
     structure = mm.gradient_energy(g.optical)
     cell = g.grid.cell_m
     half = max(min(g.grid.shape) // 6, cfg.matching.half_cells)
@@ -229,12 +265,13 @@ def match_sar_optical(g: GroundImages, cfg: SarGcpConfig,
         orientations=cfg.matching.orientations, sigma_cells=cfg.matching.sigma_cells,
         half_cells=half, radius_cells=max(int(np.ceil(cfg.max_offset_m / cell)), 2),
         min_score=min(cfg.matching.min_score, 0.15), min_structure=0.0)
-    ci, cj = mm.template_centres(va, half, half)
+    (ci, cj), va, ignore_all = template_cells(g, half, half, ignore)
     while ci.size == 0 and half > cfg.matching.half_cells:  # an image known in part only
         half = max(int(0.7 * half), cfg.matching.half_cells)
         coarse = replace(coarse, half_cells=half)
-        ci, cj = mm.template_centres(va, half, half)
-    mc = mm.match_points(da, db, va, vb, structure, (ci, cj), (0.0, 0.0), coarse)
+        (ci, cj), va, ignore_all = template_cells(g, half, half, ignore)
+    mc = mm.match_points(da, db, va, vb, structure, (ci, cj), (0.0, 0.0), coarse,
+                         ignore_a=None if ignore_all is ignore else ignore_all)  # holes only
     if not mc.ok.any():
         raise InputError(
             f"the SAR and the optical image do not match anywhere over the +-"
@@ -249,10 +286,11 @@ def template_matches(g: GroundImages, desc: tuple[NDArray[np.float32], NDArray[n
                       ignore: NDArray[np.bool_] | None = None) -> SarOpticalMatches:
     """A template every ``spacing`` cells of ``g.optical`` (at most ``cfg.max_points``)
     searched in ``g.sar`` around the offset ``prior`` (cells)."""
-    va, vb = np.isfinite(g.optical), np.isfinite(g.sar)
+    vb = np.isfinite(g.sar)
     hw = cfg.matching.half_cells
-    spacing = max(cfg.min_spacing_cells, int(np.ceil(np.sqrt(va.sum() / cfg.max_points))))
-    ci, cj = mm.template_centres(va, hw, spacing)
+    spacing = max(cfg.min_spacing_cells,
+                  int(np.ceil(np.sqrt(np.isfinite(g.optical).sum() / cfg.max_points))))
+    (ci, cj), va, ignore = template_cells(g, hw, spacing, ignore)
     m = mm.match_points(desc[0], desc[1], va, vb, structure, (ci, cj), prior, cfg.matching,
                         ignore_a=ignore)
     oc, orow = g.optical_pos

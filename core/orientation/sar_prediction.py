@@ -247,16 +247,19 @@ def _predicted_images(grid: mm.GroundGrid, sc_: _Scene, sar: SensorModel,
                       h_render: FloatArray, field: OffsetField) -> GroundImages:
     """The predicted (as ``optical``) and the real SAR image on ``grid`` (the optical
     model's frame) through the same SAR positions (both as ``sar_pos``: the optical pixels
-    are wanted at the matched templates' centres only, :func:`_match_predicted`)."""
-    lon, lat = grid.nodes()
-    h = sample_bilinear(h_render, *sc_.render.indices(lon, lat))
-    del lon, lat
+    are wanted at the matched templates' centres only, :func:`_match_predicted`); the
+    prediction's holes: where the optical image is but its surface is not known."""
+    at = sc_.render.indices(*grid.nodes())
+    h = sample_bilinear(h_render, *at)
+    inside = sample_bilinear(np.isfinite(sc_.ortho).astype(np.float32), *at) > 0.5
+    del at
     col, row = mm.image_positions(field.through(sar.project), grid,
                                   np.where(np.isfinite(h), h, np.nanmedian(h_render)))
     sigma = 0.5 * grid.cell_m / mm.pixel_size_m(col, row, grid.cell_m)
     sar_g = mm.remap_lowpass(log_sar, col, row, sigma)
     pred_g = np.where(np.isfinite(sar_g), mm.remap_lowpass(log_pred, col, row, sigma), np.nan)
-    return GroundImages(grid, h, pred_g, (col, row), sar_g, (col, row))
+    holes = np.isfinite(sar_g) & ~np.isfinite(pred_g) & inside  # the surface's gaps
+    return GroundImages(grid, h, pred_g, (col, row), sar_g, (col, row), holes)
 
 
 def _match_predicted(g: GroundImages, optical: SensorModel, surface: Surface,

@@ -358,3 +358,32 @@ def test_a_scene_too_large_for_memory_is_matched_on_looked_pixels(forest_scene, 
     assert abs(np.median(sc)) < 0.3 and abs(np.median(sr)) < 0.3
     ec, er = _gcp_errors_px(res.gcps, optical_true)
     assert abs(np.median(ec)) < 0.7 and abs(np.median(er)) < 0.5
+
+
+def test_a_surface_with_scattered_gaps_still_gives_unbiased_gcps(forest_scene, monkeypatch):
+    """The pair's DSM with gaps of 150-300 m over 15 % of the scene (shadows, changed ground,
+    water: a spot scene's relative DEM on the Sentinel-1's 30 m looked cells left one whole
+    template of 25): templates may hold a quarter of holes, left out of their scores, and
+    the GCPs are as unbiased as on the whole surface; with none allowed, too few remain."""
+    from scipy.ndimage import gaussian_filter
+
+    sar, optical, optical_true, sar_img, opt_img, reference, surface, corners = forest_scene
+    heights, _ = _forest_world()
+    blobs = gaussian_filter(np.random.default_rng(5).standard_normal(surface.h_m.shape), 4.0)
+    gaps = blobs > np.quantile(blobs, 0.85)
+    holed = GeoDEM(np.where(gaps, np.nan, surface.h_m), *surface.axes)
+    cfg = sgm.SarGcpConfig(geolocation_sigma_m=3.0)
+    res = sg.sar_gcps_of_image("left", optical, opt_img, sar, sar_img, reference, corners,
+                               cfg, surface=holed)
+    assert len(res.gcps) >= 40
+    sc, sr = _sar_errors_px(res.gcps, sar, optical_true, heights)
+    assert abs(np.median(sc)) < 0.3 and abs(np.median(sr)) < 0.3
+    ec, er = _gcp_errors_px(res.gcps, optical_true)
+    assert abs(np.median(ec)) < 0.7 and abs(np.median(er)) < 0.5
+    monkeypatch.setattr(sgm, "MAX_HOLE_SHARE", 0.0)  # whole templates only: few are left
+    try:
+        n_few = len(sg.sar_gcps_of_image("left", optical, opt_img, sar, sar_img, reference,
+                                         corners, cfg, surface=holed).gcps)
+    except InputError:  # no whole template on the first, coarse grid
+        n_few = 0
+    assert n_few < 0.5 * len(res.gcps)
