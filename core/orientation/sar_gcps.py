@@ -266,6 +266,13 @@ def geolocation_sigma_m(mission: str) -> float:
 # (core.sensors.troposphere) the SAR GCPs of the flat tiny scene (seed 3, ERS, 80.9 m radar
 # cells) sit 27 and 34 m towards the radar in the two images, 0.3-0.4 radar pixel
 MATCHING_BIAS_PX = {False: 1.0, True: 0.4}
+# and along the azimuth: against the predicted SAR image of the spot scene (seed 2, Sentinel-1
+# IW GRD of 10 m multilooked 3x3 and 5x5, 30 and 50 m cells), the matched SAR pixels sit 0.24
+# and 0.33 product pixel (2.4-3.3 m, 0.08 and 0.07 cell) along the azimuth from the true SAR
+# model's, beside 1.05-1.26 pixel (0.35 and 0.25 cell) along the range
+# (bench/validation/sar_gcps.py --orient --looks 3 / 5, 2026-12-02); the reference-height
+# matching is not measured along the azimuth: the same share is taken
+MATCHING_AZIMUTH_BIAS_PX = 0.1
 
 
 #: the frame of SAR-optical GCPs (:mod:`core.orientation.frames`)
@@ -287,7 +294,8 @@ def sar_frame(results: Sequence[SarImageResult], geolocation_sigma_m: float,
     return FramePrior(SAR_FRAME, (e, n, u), up_of,
                       f"SAR geolocation {geolocation_sigma_m:g} m and the matching's bias at "
                       f"height steps ({MATCHING_BIAS_PX[ok.prediction is not None]:g} radar "
-                      f"pixel of {ok.matches.cell_m:.1f} m along the range)")
+                      f"pixel of {ok.matches.cell_m:.1f} m along the range, "
+                      f"{MATCHING_AZIMUTH_BIAS_PX:g} along the azimuth)")
 
 
 def registration_sigma_m(geolocation_sigma_m: float, radar_pixel_m: float,
@@ -297,9 +305,11 @@ def registration_sigma_m(geolocation_sigma_m: float, radar_pixel_m: float,
     sigma (east, north, up; m) its predicted uncertainty adds: the SAR product's geolocation
     error, and the matching's bias at height steps along the ground direction of the range
     (:data:`MATCHING_BIAS_PX` radar pixels of ``radar_pixel_m``, ``predicted``: matched
-    against the SAR image predicted from the surface), split over east and north; ``up_m``
-    as given."""
+    against the SAR image predicted from the surface) and across it, along the azimuth
+    (:data:`MATCHING_AZIMUTH_BIAS_PX`), split over east and north; ``up_m`` as given."""
     e, n = (abs(float(v)) for v in range_direction_en)
-    bias = MATCHING_BIAS_PX[predicted] * radar_pixel_m
-    return (float(np.hypot(geolocation_sigma_m, bias * e)),
-            float(np.hypot(geolocation_sigma_m, bias * n)), float(up_m))
+    along = MATCHING_BIAS_PX[predicted] * radar_pixel_m
+    across = MATCHING_AZIMUTH_BIAS_PX * radar_pixel_m  # the azimuth: (n, e) on the ground
+    return (float(np.sqrt(geolocation_sigma_m ** 2 + (along * e) ** 2 + (across * n) ** 2)),
+            float(np.sqrt(geolocation_sigma_m ** 2 + (along * n) ** 2 + (across * e) ** 2)),
+            float(up_m))
