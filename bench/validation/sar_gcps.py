@@ -85,12 +85,9 @@ def main() -> None:
     cell = a.cell or max(rec["figures"]["ground_spacing_m"])
     opt, sar = load_model(d / f"{a.image}.tif"), load_model(d / "sar.tif")
     sar_image = _read(d / "sar.tif")
-    if a.looks > 1:  # the product's pixels averaged in intensity, as sgm.looked does
-        k = a.looks
-        nr, nc = sar_image.shape[0] // k, sar_image.shape[1] // k
-        power = np.square(sar_image[:nr * k, :nc * k].astype(np.float32))
-        sar_image = np.sqrt(power.reshape(nr, k, nc, k).mean(axis=(1, 3))).astype(np.float32)
-        cell = a.cell or k * max(rec["figures"]["ground_spacing_m"])
+    if a.looks > 1:  # the product's pixels averaged in intensity, as orient does
+        sar_image = sgm.multilooked(sar_image, (a.looks, a.looks))
+        cell = a.cell or a.looks * max(rec["figures"]["ground_spacing_m"])
     if a.orient is not None and a.image == "right":  # the relative DEM's frame
         from core.sensors.pushbroom import PushbroomModel
 

@@ -108,9 +108,9 @@ def template_cells(g: GroundImages, half_cells: int, spacing_cells: int,
                               NDArray[np.bool_] | None]:
     """The templates' centres on ``g`` (:func:`core.matching.multimodal.template_centres`),
     the cells taken as data and those the scores leave out (``ignore``). Templates lie whole
-    on data; where the optical side has holes (``g.holes``) that would leave fewer than half
-    the templates that holes in at most :data:`MAX_HOLE_SHARE` of their cells give, those
-    are taken, the holes (grown by the two cells
+    on data; where the optical side has holes (``g.holes``) that would leave fewer than a
+    quarter of the templates that holes in at most :data:`MAX_HOLE_SHARE` of their cells
+    give, those are taken, the holes (grown by the two cells
     :func:`core.matching.multimodal.orientation_channels` describes as 0 around a no-data
     cell) left out of their scores: a relative DEM's gaps (shadows, changed ground, water)
     are scattered over a whole scene, and a spot scene's prediction on the Sentinel-1's
@@ -204,9 +204,19 @@ def looked(sar: SensorModel, sar_image: NDArray, reference: GeoDEM,
     nr, nc = z.shape[0] // kr, z.shape[1] // kc
     if min(nr, nc) < 2:
         return sar, z, (1, 1)
+    return LookedModel(sar, (kr, kc)), multilooked(z, (kr, kc)), (kr, kc)
+
+
+def multilooked(sar_image: NDArray, looks: tuple[int, int]) -> NDArray[np.float32]:
+    """An amplitude image averaged in intensity over blocks of ``looks`` (rows, cols) whole
+    pixels (the mean of the squared amplitudes, then its root; the last partial blocks
+    dropped): the image of :class:`LookedModel`."""
+    kr, kc = looks
+    z = np.asarray(sar_image, dtype=np.float32)
+    nr, nc = z.shape[0] // kr, z.shape[1] // kc
     power = np.square(z[:nr * kr, :nc * kc], dtype=np.float32)
     mean = power.reshape(nr, kr, nc, kc).mean(axis=(1, 3), dtype=np.float64)
-    return LookedModel(sar, (kr, kc)), np.sqrt(mean).astype(np.float32), (kr, kc)
+    return np.sqrt(mean).astype(np.float32)
 
 
 def ground_images(optical: SensorModel, optical_image: NDArray, sar: SensorModel,
